@@ -1,0 +1,278 @@
+//! The project's own simulation config (TOML or JSON, chosen by file extension).
+//!
+//! ```toml
+//! [domain]
+//! grid_lim = 1.0          # the grid covers [0, grid_lim]^3 (m)
+//! n_grid = 32             # nodes per axis, at i * dx with dx = grid_lim / n_grid
+//!
+//! [time]
+//! substep_dt = 2e-4       # s
+//! frame_dt = 0.02         # s; or substeps_per_frame = 100
+//! frames = 25
+//!
+//! [solver]
+//! gravity = [0.0, 0.0, -9.8]
+//! force = "mls"           # or "classic" (PhysGaussian's weight-gradient force)
+//!
+//! [[parts]]
+//! material = "jelly"
+//! youngs_modulus_pa = 5e4
+//! poisson_ratio = 0.25
+//! density_kg_m3 = 800.0
+//!
+//! [[shapes]]
+//! kind = "box"
+//! min = [0.4375, 0.4375, 0.375]
+//! max = [0.59375, 0.59375, 0.53125]
+//!
+//! [[boundary]]
+//! type = "bounding_box"
+//! ```
+//!
+//! `configs/` in the repository has one example per material.
+
+use crate::boundary::BoundaryCondition;
+use crate::error::{Error, Result};
+use crate::kernels::{FORCE_CLASSIC, FORCE_MLS, OUT_OF_DOMAIN_CLAMP, OUT_OF_DOMAIN_ERROR};
+use crate::material::PartParams;
+use crate::scene::Shape;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The simulation grid: `n_grid` nodes per axis at `i dx`, `dx = grid_lim / n_grid`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Domain {
+    /// Edge of the cubic domain `[0, grid_lim]^3` (m). Default 1.
+    pub grid_lim: f64,
+    /// Nodes per axis. Default 64.
+    pub n_grid: usize,
+}
+impl Default for Domain {
+    fn default() -> Self {
+        Domain {
+            grid_lim: 1.0,
+            n_grid: 64,
+        }
+    }
+}
+impl Domain {
+    /// Grid spacing (m).
+    pub fn dx(&self) -> f64 {
+        self.grid_lim / self.n_grid as f64
+    }
+}
+
+/// Time stepping.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeConfig {
+    /// Substep length (s).
+    pub substep_dt: f64,
+    /// Frame length (s); the frame has `round(frame_dt / substep_dt)` substeps.
+    #[serde(default)]
+    pub frame_dt: Option<f64>,
+    /// Substeps per frame (overrides `frame_dt`).
+    #[serde(default)]
+    pub substeps_per_frame: Option<u32>,
+    /// Number of frames to simulate (frame 0, the initial state, is extra).
+    pub frames: usize,
+}
+impl TimeConfig {
+    /// Substeps per frame.
+    pub fn substeps(&self) -> u32 {
+        match (self.substeps_per_frame, self.frame_dt) {
+            (Some(n), _) => n,
+            (None, Some(f)) => (f / self.substep_dt).round().max(1.0) as u32,
+            (None, None) => 1,
+        }
+    }
+}
+
+/// Which stress force the transfer uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ForceForm {
+    /// MLS-MPM (Hu et al. 2018): the stress enters the affine momentum, `-dt V0 (4/dx^2) tau w dpos`.
+    #[default]
+    Mls,
+    /// Gradient of the B-spline weights, `-dt V0 tau grad w` (PhysGaussian's solver).
+    Classic,
+}
+
+/// What happens when a particle leaves the grid interior.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum OutOfDomain {
+    /// Stop with [`Error::OutOfDomain`].
+    #[default]
+    Error,
+    /// Clamp the position back inside.
+    Clamp,
+}
+
+/// Solver options.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SolverConfig {
+    /// Gravity (m/s^2). Default (0, 0, -9.8).
+    pub gravity: [f64; 3],
+    /// Stress force form. Default MLS.
+    pub force: ForceForm,
+    /// RPIC damping (0 = APIC).
+    pub rpic_damping: f64,
+    /// Grid velocity damping factor per substep; only values < 1 damp. Default 1.
+    pub grid_v_damping: f64,
+    /// Out-of-domain policy. Default error.
+    pub out_of_domain: OutOfDomain,
+    /// CFL number: substep_dt must be <= max_cfl dx / c_p up front, and a particle faster than
+    /// max_cfl dx / substep_dt stops the run. Default 1.
+    pub max_cfl: f64,
+}
+impl Default for SolverConfig {
+    fn default() -> Self {
+        SolverConfig {
+            gravity: [0.0, 0.0, -9.8],
+            force: ForceForm::Mls,
+            rpic_damping: 0.0,
+            grid_v_damping: 1.0,
+            out_of_domain: OutOfDomain::Error,
+            max_cfl: 1.0,
+        }
+    }
+}
+impl SolverConfig {
+    /// Device code of the force form.
+    pub fn force_code(&self) -> u32 {
+        match self.force {
+            ForceForm::Mls => FORCE_MLS,
+            ForceForm::Classic => FORCE_CLASSIC,
+        }
+    }
+    /// Device code of the out-of-domain policy.
+    pub fn out_of_domain_code(&self) -> u32 {
+        match self.out_of_domain {
+            OutOfDomain::Error => OUT_OF_DOMAIN_ERROR,
+            OutOfDomain::Clamp => OUT_OF_DOMAIN_CLAMP,
+        }
+    }
+}
+
+/// A complete simulation description.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimConfig {
+    /// Grid.
+    #[serde(default)]
+    pub domain: Domain,
+    /// Time stepping.
+    pub time: TimeConfig,
+    /// Solver options.
+    #[serde(default)]
+    pub solver: SolverConfig,
+    /// Parts; particle part ids index this list.
+    pub parts: Vec<PartParams>,
+    /// Built-in shapes that generate particles (used when no particle file is given).
+    #[serde(default)]
+    pub shapes: Vec<Shape>,
+    /// A PLY particle file (relative paths are relative to the config file).
+    #[serde(default)]
+    pub particles: Option<PathBuf>,
+    /// Boundary conditions, applied in order.
+    #[serde(default)]
+    pub boundary: Vec<BoundaryCondition>,
+}
+
+impl SimConfig {
+    /// Reads a config (`.toml` or `.json`) and validates it. A relative `particles` path is
+    /// resolved against the config's folder.
+    pub fn load(path: &Path) -> Result<SimConfig> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut cfg = Self::parse(&text, path)?;
+        if let Some(p) = &cfg.particles {
+            if p.is_relative() {
+                cfg.particles = Some(path.parent().unwrap_or(Path::new(".")).join(p));
+            }
+        }
+        cfg.validate(&file)?;
+        Ok(cfg)
+    }
+
+    /// Parses config text; the extension of `path` picks the format (JSON for `.json`, TOML
+    /// otherwise).
+    pub fn parse(text: &str, path: &Path) -> Result<SimConfig> {
+        let file = path.display().to_string();
+        if path.extension().and_then(|e| e.to_str()) == Some("json") {
+            serde_json::from_str(text).map_err(|e| Error::config(&file, e.to_string()))
+        } else {
+            toml::from_str(text).map_err(|e| Error::config(&file, e.to_string()))
+        }
+    }
+
+    /// Checks every value; `file` names the source in errors.
+    pub fn validate(&self, file: &str) -> Result<()> {
+        let bad = |field: &str, value: f64, reason: &str| Error::InvalidParameter {
+            what: file.to_string(),
+            field: field.to_string(),
+            value,
+            reason: reason.to_string(),
+        };
+        let d = &self.domain;
+        if !(d.grid_lim.is_finite() && d.grid_lim > 0.0) {
+            return Err(bad("domain.grid_lim", d.grid_lim, "must be > 0"));
+        }
+        if d.n_grid < 8 || d.n_grid > 1024 {
+            return Err(bad("domain.n_grid", d.n_grid as f64, "must lie in [8, 1024]"));
+        }
+        let t = &self.time;
+        if !(t.substep_dt.is_finite() && t.substep_dt > 0.0) {
+            return Err(bad("time.substep_dt", t.substep_dt, "must be > 0"));
+        }
+        if let Some(f) = t.frame_dt {
+            if !(f.is_finite() && f >= t.substep_dt) {
+                return Err(bad("time.frame_dt", f, "must be >= substep_dt"));
+            }
+        }
+        if t.substeps_per_frame == Some(0) {
+            return Err(bad("time.substeps_per_frame", 0.0, "must be >= 1"));
+        }
+        let s = &self.solver;
+        for (a, g) in s.gravity.iter().enumerate() {
+            if !g.is_finite() {
+                return Err(bad(&format!("solver.gravity[{a}]"), *g, "must be finite"));
+            }
+        }
+        if !(s.max_cfl.is_finite() && s.max_cfl > 0.0) {
+            return Err(bad("solver.max_cfl", s.max_cfl, "must be > 0"));
+        }
+        if !(s.grid_v_damping.is_finite() && s.grid_v_damping > 0.0) {
+            return Err(bad("solver.grid_v_damping", s.grid_v_damping, "must be > 0"));
+        }
+        if !s.rpic_damping.is_finite() || s.rpic_damping > 1.0 {
+            return Err(bad("solver.rpic_damping", s.rpic_damping, "must be <= 1"));
+        }
+        if self.parts.is_empty() {
+            return Err(Error::config(file, "parts: at least one part is required"));
+        }
+        for (i, p) in self.parts.iter().enumerate() {
+            p.validate(&format!("{file}: parts[{i}]"))?;
+        }
+        for (i, sh) in self.shapes.iter().enumerate() {
+            sh.validate(&format!("{file}: shapes[{i}]"), self.parts.len())?;
+        }
+        if self.shapes.is_empty() && self.particles.is_none() {
+            return Err(Error::config(
+                file,
+                "no particles: give [[shapes]] or particles = \"file.ply\" (or --particles)",
+            ));
+        }
+        for (i, b) in self.boundary.iter().enumerate() {
+            b.validate(&format!("{file}: boundary[{i}]"))?;
+        }
+        Ok(())
+    }
+}

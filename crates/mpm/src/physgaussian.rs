@@ -1,0 +1,1 @@
+//! PhysGaussian import (in progress).
