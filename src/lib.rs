@@ -1,1 +1,8 @@
-//! x
+//! # resonance4d
+//!
+//! Physically simulated 4D Gaussian scenes from video: a differentiable MLS-MPM simulator
+//! ([`mpm`]) with backends behind traits ([`backend_cpu`] today; wgpu and Vulkan later).
+//! The binary `r4d` wires everything up; this facade re-exports the crates for embedding.
+
+pub use r4d_backend_cpu as backend_cpu;
+pub use r4d_mpm as mpm;

@@ -1,1 +1,327 @@
-//! x
+//! # r4d-backend-cpu: the fast CPU backend (rayon)
+//!
+//! Implements [`r4d_mpm::MpmKernels`] on host `Vec`s. It calls the same per-particle and
+//! per-node functions as [`r4d_mpm::reference`] (the math lives once, in `r4d_mpm::transfer`
+//! and `r4d_mpm::constitutive`) and adds only scheduling and memory layout:
+//!
+//! * **Deterministic parallel P2G without atomics.** Each substep the particles are ordered by
+//!   the x index of their stencil base (a stable counting sort). Node layers are stored
+//!   x-major, so the particles whose base lies in a slab of [`SLAB`] layers write only to a
+//!   contiguous range of `SLAB + 2` layers. Even slabs are scattered in parallel, then odd
+//!   slabs: same-colour slabs never share a node, so each thread owns a disjoint `&mut` range
+//!   of the grid (safe Rust, no atomics). The summation order of every node is fixed by the
+//!   scheme, so results are bitwise identical for any thread count.
+//! * **Active blocks only.** The grid tracks which blocks of 4^3 nodes were touched; clearing
+//!   and the grid update visit only those.
+//! * [`Par::Seq`] runs the same code on one thread (tests use it to check determinism).
+//!
+//! Memory: buffers are plain `Vec`s; host memory is measured by the benches' counting
+//! allocator, so [`MpmKernels::memory_usage`] reports zero here.
+
+use r4d_mpm::kernels::{
+    blocks_per_axis, Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts,
+    BLOCK, HEALTH_OUT_OF_DOMAIN,
+};
+use r4d_mpm::transfer::{
+    damped_affine, g2p_finish, gather, grid_node_update, in_domain, particle_bcs,
+    particle_stress, record, scatter, stencil,
+};
+use r4d_mpm::PartConsts;
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Width (in node layers along x) of the slabs scattered in parallel; must be >= 2.
+pub const SLAB: usize = 2;
+
+/// Parallelism of the CPU backend.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Par {
+    /// One thread.
+    Seq,
+    /// Rayon's global pool (all cores).
+    #[default]
+    Rayon,
+    /// A dedicated pool of this many threads.
+    Threads(usize),
+}
+
+/// The CPU backend.
+#[derive(Clone, Debug)]
+pub struct CpuBackend {
+    pool: Option<Arc<rayon::ThreadPool>>,
+    par: Par,
+}
+
+impl Default for CpuBackend {
+    fn default() -> Self {
+        Self::new(Par::Rayon)
+    }
+}
+
+/// The CPU backend never fails.
+#[derive(Debug, thiserror::Error)]
+#[error("unreachable")]
+pub enum Never {}
+
+impl CpuBackend {
+    /// A backend with the given parallelism.
+    pub fn new(par: Par) -> Self {
+        let threads = match par {
+            Par::Seq => Some(1),
+            Par::Threads(n) => Some(n.max(1)),
+            Par::Rayon => None,
+        };
+        let pool = threads.map(|t| {
+            Arc::new(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(t)
+                    .build()
+                    .expect("thread pool creation"),
+            )
+        });
+        CpuBackend { pool, par }
+    }
+    /// The parallelism.
+    pub fn par(&self) -> Par {
+        self.par
+    }
+    fn run<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        match &self.pool {
+            Some(p) => p.install(f),
+            None => f(),
+        }
+    }
+}
+
+/// Node index range `[lo, hi)` (in x layers) written by slab `s`.
+fn slab_layers(s: usize, n: usize) -> (usize, usize) {
+    (s * SLAB, (s * SLAB + SLAB + 2).min(n))
+}
+
+/// Calls `f(bx, by, bz, block_nodes)` for each active block of an x-block slab.
+fn for_active_blocks(
+    nodes: &mut [[f32; 4]],
+    active: &[u32],
+    n: usize,
+    f: impl Fn([usize; 3], &mut [f32; 4]) + Sync,
+) {
+    let nb = blocks_per_axis(n);
+    let plane = BLOCK * n * n;
+    nodes
+        .par_chunks_mut(plane)
+        .enumerate()
+        .for_each(|(bx, slab)| {
+            let i0 = bx * BLOCK;
+            let i1 = (i0 + BLOCK).min(n);
+            for by in 0..nb {
+                for bz in 0..nb {
+                    if active[(bx * nb + by) * nb + bz] == 0 {
+                        continue;
+                    }
+                    let (j0, j1) = (by * BLOCK, (by * BLOCK + BLOCK).min(n));
+                    let (k0, k1) = (bz * BLOCK, (bz * BLOCK + BLOCK).min(n));
+                    for i in i0..i1 {
+                        for j in j0..j1 {
+                            let row = ((i - i0) * n + j) * n;
+                            for (k, node) in slab[row + k0..row + k1].iter_mut().enumerate() {
+                                f([i, j, k0 + k], node);
+                            }
+                        }
+                    }
+                }
+            }
+        });
+}
+
+impl MpmKernels for CpuBackend {
+    type Buf<T: bytemuck::Pod + Send + Sync> = Vec<T>;
+    type Error = Never;
+
+    fn name(&self) -> &'static str {
+        "cpu"
+    }
+    fn upload<T: bytemuck::Pod + Send + Sync>(&self, data: &[T]) -> Result<Vec<T>, Never> {
+        Ok(data.to_vec())
+    }
+    fn zeros<T: bytemuck::Pod + Send + Sync>(&self, len: usize) -> Result<Vec<T>, Never> {
+        Ok(vec![T::zeroed(); len])
+    }
+    fn download<T: bytemuck::Pod + Send + Sync>(&self, buf: &Vec<T>) -> Result<Vec<T>, Never> {
+        Ok(buf.clone())
+    }
+    fn write<T: bytemuck::Pod + Send + Sync>(
+        &self,
+        buf: &mut Vec<T>,
+        data: &[T],
+    ) -> Result<(), Never> {
+        buf.copy_from_slice(data);
+        Ok(())
+    }
+
+    fn particle_bcs(
+        &self,
+        p: &mut Particles<Self>,
+        bcs: &Vec<ParticleBc>,
+        c: &StepConsts,
+    ) -> Result<(), Never> {
+        let bcs = &bcs[..c.n_particle_bcs as usize];
+        let (x0, mass) = (&p.x0, &p.mass);
+        self.run(|| {
+            p.v.par_iter_mut().enumerate().for_each(|(i, v)| {
+                particle_bcs(x0[i], v, mass[i], bcs, c);
+            })
+        });
+        Ok(())
+    }
+
+    fn p2g(
+        &self,
+        p: &mut Particles<Self>,
+        parts: &Vec<PartConsts>,
+        g: &mut Grid<Self>,
+        c: &StepConsts,
+    ) -> Result<(), Never> {
+        let n = g.n;
+        let np = p.count;
+        let nb = blocks_per_axis(n);
+        let n_slabs = n.div_ceil(SLAB);
+        if g.scratch.len() != 2 * np + n_slabs + 1 {
+            g.scratch = vec![0; 2 * np + n_slabs + 1];
+        }
+        self.run(|| {
+            // 1. Clear the blocks touched last substep (every other node is zero).
+            for_active_blocks(&mut g.nodes, &g.active, n, |_, node| *node = [0.0; 4]);
+
+            // 2. Particle stage: return mapping + stress; key = stencil base cell.
+            let (keys, rest) = g.scratch.split_at_mut(np);
+            let (order, starts) = rest.split_at_mut(np);
+            let (x, cm, vol0, part) = (&p.x, &p.c, &p.vol0, &p.part);
+            p.f.par_iter_mut()
+                .zip(p.plastic.par_iter_mut())
+                .zip(p.stress.par_iter_mut())
+                .zip(keys.par_iter_mut())
+                .enumerate()
+                .for_each(|(i, (((f, pl), s), key))| {
+                    let pc = &parts[part[i] as usize];
+                    *s = particle_stress(f, pl, &cm[i], vol0[i], pc, c);
+                    *key = if in_domain(x[i], c.inv_dx, n) {
+                        let b = stencil(x[i], c.inv_dx).base;
+                        ((b[0] as usize * n + b[1] as usize) * n + b[2] as usize) as u32
+                    } else {
+                        u32::MAX
+                    };
+                });
+
+            // 3. Stable counting sort by slab of the base x index; mark active blocks.
+            g.active.fill(0);
+            starts.fill(0);
+            for &k in keys.iter() {
+                if k == u32::MAX {
+                    continue;
+                }
+                let k = k as usize;
+                let (bx, by, bz) = (k / (n * n), (k / n) % n, k % n);
+                starts[bx / SLAB + 1] += 1;
+                for ix in bx / BLOCK..=(bx + 2) / BLOCK {
+                    for iy in by / BLOCK..=(by + 2) / BLOCK {
+                        for iz in bz / BLOCK..=(bz + 2) / BLOCK {
+                            g.active[(ix * nb + iy) * nb + iz] = 1;
+                        }
+                    }
+                }
+            }
+            for s in 0..n_slabs {
+                starts[s + 1] += starts[s];
+            }
+            let mut fill: Vec<u32> = starts[..n_slabs].to_vec();
+            for (i, &k) in keys.iter().enumerate() {
+                if k == u32::MAX {
+                    continue;
+                }
+                let s = k as usize / (n * n) / SLAB;
+                order[fill[s] as usize] = i as u32;
+                fill[s] += 1;
+            }
+
+            // 4. Scatter: even slabs in parallel, then odd slabs.
+            let (v, mass, stress) = (&p.v, &p.mass, &p.stress);
+            let layer = n * n;
+            for colour in 0..2 {
+                let mut tasks: Vec<(usize, &[u32], &mut [[f32; 4]])> = Vec::new();
+                let mut rest: &mut [[f32; 4]] = &mut g.nodes;
+                let mut rest_lo = 0usize;
+                for s in (colour..n_slabs).step_by(2) {
+                    let ids = &order[starts[s] as usize..starts[s + 1] as usize];
+                    let (lo, hi) = slab_layers(s, n);
+                    let tail = std::mem::take(&mut rest);
+                    let (_, tail) = tail.split_at_mut((lo - rest_lo) * layer);
+                    let (mine, tail) = tail.split_at_mut((hi - lo) * layer);
+                    rest = tail;
+                    rest_lo = hi;
+                    if !ids.is_empty() {
+                        tasks.push((lo, ids, mine));
+                    }
+                }
+                tasks.into_par_iter().for_each(|(lo, ids, nodes)| {
+                    for &i in ids {
+                        let i = i as usize;
+                        let st = stencil(x[i], c.inv_dx);
+                        let a = damped_affine(&cm[i], c.rpic_damping);
+                        scatter(nodes, lo, n, &st, v[i], &a, mass[i], &stress[i], c);
+                    }
+                });
+            }
+        });
+        Ok(())
+    }
+
+    fn grid_update(
+        &self,
+        g: &mut Grid<Self>,
+        bcs: &Vec<GridBc>,
+        c: &StepConsts,
+    ) -> Result<(), Never> {
+        let bcs = &bcs[..c.n_grid_bcs as usize];
+        let n = g.n;
+        self.run(|| {
+            for_active_blocks(&mut g.nodes, &g.active, n, |ijk, node| {
+                grid_node_update(ijk, node, bcs, c)
+            })
+        });
+        Ok(())
+    }
+
+    fn g2p(&self, p: &mut Particles<Self>, g: &mut Grid<Self>, c: &StepConsts) -> Result<(), Never> {
+        let n = g.n;
+        let nodes = &g.nodes;
+        let worst = self.run(|| {
+            p.x.par_iter_mut()
+                .zip(p.v.par_iter_mut())
+                .zip(p.c.par_iter_mut())
+                .zip(p.f.par_iter_mut())
+                .enumerate()
+                .map(|(i, (((x, v), cm), f))| {
+                    if !in_domain(*x, c.inv_dx, n) {
+                        return Some((HEALTH_OUT_OF_DOMAIN, i as u32, x[0]));
+                    }
+                    let st = stencil(*x, c.inv_dx);
+                    let gathered = gather(nodes, n, &st, c);
+                    let (code, val) = g2p_finish(&gathered, x, v, cm, f, c);
+                    (code != 0).then_some((code, i as u32, val))
+                })
+                .reduce(|| None, |a, b| match (a, b) {
+                    (Some(a), Some(b)) => Some(if a.1 <= b.1 { a } else { b }),
+                    (a, None) => a,
+                    (None, b) => b,
+                })
+        });
+        if let Some((code, i, val)) = worst {
+            record(&mut g.health[0], code, c.substep, i, val);
+        }
+        Ok(())
+    }
+
+    fn memory_usage(&self) -> MemoryUsage {
+        MemoryUsage::default()
+    }
+}

@@ -1,0 +1,75 @@
+//! Helpers shared by the integration tests: reading the reference `.npz` fixtures.
+#![allow(dead_code)]
+
+use std::collections::HashMap;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+/// An array from a `.npy` member: shape and values converted to f64.
+#[derive(Clone, Debug)]
+pub struct Array {
+    pub shape: Vec<usize>,
+    pub data: Vec<f64>,
+}
+
+impl Array {
+    /// Element at a multi-index.
+    pub fn at(&self, idx: &[usize]) -> f64 {
+        let mut o = 0;
+        for (i, &k) in idx.iter().enumerate() {
+            o = o * self.shape[i] + k;
+        }
+        self.data[o]
+    }
+}
+
+/// Path of a fixture file under `tests/fixtures`.
+pub fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(rel)
+}
+
+/// Reads every array of an `.npz` file (little-endian f4/f8/i4/i8/u1, C order).
+pub fn read_npz(path: &Path) -> HashMap<String, Array> {
+    let f = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut z = zip::ZipArchive::new(f).unwrap();
+    let mut out = HashMap::new();
+    for i in 0..z.len() {
+        let mut m = z.by_index(i).unwrap();
+        let name = m.name().trim_end_matches(".npy").to_string();
+        let mut bytes = Vec::new();
+        m.read_to_end(&mut bytes).unwrap();
+        out.insert(name, parse_npy(&bytes));
+    }
+    out
+}
+
+fn parse_npy(b: &[u8]) -> Array {
+    assert_eq!(&b[..6], b"\x93NUMPY");
+    let (hlen, start) = if b[6] == 1 {
+        (u16::from_le_bytes([b[8], b[9]]) as usize, 10)
+    } else {
+        (u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize, 12)
+    };
+    let header = std::str::from_utf8(&b[start..start + hlen]).unwrap();
+    assert!(header.contains("'fortran_order': False"), "{header}");
+    let descr = header.split("'descr': '").nth(1).unwrap().split('\'').next().unwrap();
+    let shape_s = header.split("'shape': (").nth(1).unwrap().split(')').next().unwrap();
+    let shape: Vec<usize> = shape_s
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| s.parse().unwrap())
+        .collect();
+    let body = &b[start + hlen..];
+    let n: usize = shape.iter().product();
+    let data: Vec<f64> = match descr {
+        "<f4" => body.chunks_exact(4).take(n).map(|c| f32::from_le_bytes(c.try_into().unwrap()) as f64).collect(),
+        "<f8" => body.chunks_exact(8).take(n).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect(),
+        "<i4" => body.chunks_exact(4).take(n).map(|c| i32::from_le_bytes(c.try_into().unwrap()) as f64).collect(),
+        "<i8" => body.chunks_exact(8).take(n).map(|c| i64::from_le_bytes(c.try_into().unwrap()) as f64).collect(),
+        "|u1" => body.iter().take(n).map(|&c| c as f64).collect(),
+        d => panic!("unsupported dtype {d}"),
+    };
+    assert_eq!(data.len(), n);
+    Array { shape, data }
+}
