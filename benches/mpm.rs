@@ -1,1 +1,102 @@
-fn main(){}
+//! MPM substep benchmarks: one substep of a jelly block at 10k, 32k and 100k particles,
+//! n_grid 64, dt 1e-4, on the CPU backend (all cores) and the single-threaded reference.
+//!
+//! Reports time per substep; particle-substeps per second = particles / time. A counting
+//! global allocator reports the peak host memory of each case after its run.
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use r4d_backend_cpu::CpuBackend;
+use r4d_mpm::{
+    reference::ReferenceBackend, BoundaryCondition, MpmKernels, MpmSim, ParticleSet, PartParams,
+    Shape, SimConfig, Simulator, Surface,
+};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Counts live and peak heap bytes.
+struct Counting;
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        // SAFETY: forwarded to the system allocator with the caller's layout.
+        let p = unsafe { System.alloc(l) };
+        if !p.is_null() {
+            let now = LIVE.fetch_add(l.size(), Ordering::Relaxed) + l.size();
+            PEAK.fetch_max(now, Ordering::Relaxed);
+        }
+        p
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        // SAFETY: `p` was allocated by `alloc` above with this layout.
+        unsafe { System.dealloc(p, l) };
+        LIVE.fetch_sub(l.size(), Ordering::Relaxed);
+    }
+}
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// A jelly cube of about `n` particles (8 per cell) in a 64^3 grid.
+fn config(target: usize) -> SimConfig {
+    let dx = 1.0 / 64.0;
+    let cells = ((target as f64 / 8.0).cbrt()).round();
+    let side = cells * dx;
+    let lo = 0.5 - side / 2.0;
+    SimConfig {
+        domain: r4d_mpm::Domain { grid_lim: 1.0, n_grid: 64 },
+        time: r4d_mpm::TimeConfig {
+            substep_dt: 1e-4,
+            frame_dt: None,
+            substeps_per_frame: Some(1),
+            frames: 1,
+        },
+        solver: Default::default(),
+        parts: vec![PartParams {
+            youngs_modulus_pa: 1e5,
+            poisson_ratio: 0.3,
+            density_kg_m3: 1000.0,
+            ..Default::default()
+        }],
+        shapes: vec![Shape::Box {
+            min: [lo, lo, 0.1],
+            max: [lo + side, lo + side, 0.1 + side],
+            part: 0,
+            per_cell: 2,
+        }],
+        particles: None,
+        boundary: vec![BoundaryCondition::BoundingBox { layers: 3, surface: Surface::Slip }],
+    }
+}
+
+fn bench_backend<B: MpmKernels>(c: &mut Criterion, name: &str, make: impl Fn() -> B, sizes: &[usize]) {
+    let mut group = c.benchmark_group(format!("substep/{name}"));
+    group.sample_size(10);
+    for &target in sizes {
+        let cfg = config(target);
+        let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
+        let np = scene.len();
+        PEAK.store(LIVE.load(Ordering::Relaxed), Ordering::Relaxed);
+        let base = LIVE.load(Ordering::Relaxed);
+        let mut sim = MpmSim::new(make(), &cfg, scene, "bench").unwrap();
+        let mut state = sim.init_state(&cfg.parts).unwrap();
+        // Warm up: let the block fall a little so velocities and stresses are non-trivial.
+        for _ in 0..20 {
+            sim.substep(&mut state).unwrap();
+        }
+        group.throughput(Throughput::Elements(np as u64));
+        group.bench_with_input(BenchmarkId::from_parameter(np), &np, |b, _| {
+            b.iter(|| sim.substep(&mut state).unwrap())
+        });
+        let peak = PEAK.load(Ordering::Relaxed) - base;
+        eprintln!("substep/{name}/{np}: peak host memory {:.1} MiB ({:.0} B/particle)", peak as f64 / 1048576.0, peak as f64 / np as f64);
+    }
+    group.finish();
+}
+
+fn benches(c: &mut Criterion) {
+    bench_backend(c, "cpu", CpuBackend::default, &[10_000, 32_000, 100_000]);
+    bench_backend(c, "reference", || ReferenceBackend, &[10_000]);
+}
+
+criterion_group!(mpm, benches);
+criterion_main!(mpm);

@@ -1,0 +1,43 @@
+//! Command-line interface: argument parsing and backend selection at runtime.
+
+mod simulate;
+
+use clap::{Parser, Subcommand, ValueEnum};
+
+/// resonance4d: physically simulated 4D Gaussian scenes from video.
+#[derive(Parser, Debug)]
+#[command(name = "r4d", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Run an MPM simulation and write one PLY per frame.
+    Simulate(simulate::SimulateArgs),
+}
+
+/// Compute backend.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BackendKind {
+    /// Multi-threaded CPU backend (rayon).
+    Cpu,
+    /// Single-threaded reference kernels (slow; for checking).
+    Reference,
+}
+
+/// Entry point.
+pub fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Simulate(a) => simulate::run(a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
