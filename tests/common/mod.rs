@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests: reading the reference `.npz` fixtures.
 #![allow(dead_code)]
 
+pub mod scenes;
+
 use std::collections::HashMap;
 use std::io::Read;
 use std::path::{Path, PathBuf};
