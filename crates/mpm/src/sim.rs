@@ -182,6 +182,10 @@ impl<B: MpmKernels> MpmSim<B> {
     pub fn setup(&self) -> &SimSetup {
         &self.setup
     }
+    /// The grid as the last substep left it (node velocities and masses).
+    pub fn grid(&self) -> &Grid<B> {
+        &self.grid
+    }
     /// The initial particles.
     pub fn scene(&self) -> &ParticleSet {
         &self.scene
