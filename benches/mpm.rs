@@ -4,10 +4,15 @@
 //! Reports time per substep; particle-substeps per second = particles / time. A counting
 //! global allocator reports the peak host memory of each case after its run.
 
+#![expect(
+    missing_docs,
+    reason = "criterion's macros generate undocumented public items"
+)]
+
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    reference::ReferenceBackend, BoundaryCondition, MpmKernels, MpmSim, ParticleSet, PartParams,
+    reference::ReferenceBackend, BoundaryCondition, MpmKernels, MpmSim, PartParams, ParticleSet,
     Shape, SimConfig, Simulator, Surface,
 };
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -43,7 +48,10 @@ fn config(target: usize) -> SimConfig {
     let side = cells * dx;
     let lo = 0.5 - side / 2.0;
     SimConfig {
-        domain: r4d_mpm::Domain { grid_lim: 1.0, n_grid: 64 },
+        domain: r4d_mpm::Domain {
+            grid_lim: 1.0,
+            n_grid: 64,
+        },
         time: r4d_mpm::TimeConfig {
             substep_dt: 1e-4,
             frame_dt: None,
@@ -64,11 +72,19 @@ fn config(target: usize) -> SimConfig {
             per_cell: 2,
         }],
         particles: None,
-        boundary: vec![BoundaryCondition::BoundingBox { layers: 3, surface: Surface::Slip }],
+        boundary: vec![BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        }],
     }
 }
 
-fn bench_backend<B: MpmKernels>(c: &mut Criterion, name: &str, make: impl Fn() -> B, sizes: &[usize]) {
+fn bench_backend<B: MpmKernels>(
+    c: &mut Criterion,
+    name: &str,
+    make: impl Fn() -> B,
+    sizes: &[usize],
+) {
     let mut group = c.benchmark_group(format!("substep/{name}"));
     group.sample_size(10);
     for &target in sizes {
@@ -88,7 +104,11 @@ fn bench_backend<B: MpmKernels>(c: &mut Criterion, name: &str, make: impl Fn() -
             b.iter(|| sim.substep(&mut state).unwrap())
         });
         let peak = PEAK.load(Ordering::Relaxed) - base;
-        eprintln!("substep/{name}/{np}: peak host memory {:.1} MiB ({:.0} B/particle)", peak as f64 / 1048576.0, peak as f64 / np as f64);
+        eprintln!(
+            "substep/{name}/{np}: peak host memory {:.1} MiB ({:.0} B/particle)",
+            peak as f64 / 1048576.0,
+            peak as f64 / np as f64
+        );
     }
     group.finish();
 }

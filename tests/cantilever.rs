@@ -14,8 +14,8 @@ mod common;
 use common::scenes::config;
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    BoundaryCondition, ForceForm, Material, MpmKernels as _, MpmSim, PartParams, ParticleSet, Shape,
-    Simulator,
+    BoundaryCondition, ForceForm, Material, MpmKernels as _, MpmSim, PartParams, ParticleSet,
+    Shape, Simulator,
 };
 
 const E: f64 = 1e6;
@@ -40,7 +40,12 @@ fn timoshenko_hz(l: f64, h: f64, kappa: f64) -> f64 {
         let w2 = omega * omega;
         let f = |y: [f64; 4]| -> [f64; 4] {
             let (w, dw, psi, dpsi) = (y[0], y[1], y[2], y[3]);
-            [dw, dpsi - RHO * w2 * w / (kappa * g), dpsi, -(kappa * g * a * (dw - psi) + RHO * i * w2 * psi) / (E * i)]
+            [
+                dw,
+                dpsi - RHO * w2 * w / (kappa * g),
+                dpsi,
+                -(kappa * g * a * (dw - psi) + RHO * i * w2 * psi) / (E * i),
+            ]
         };
         let n = 4000;
         let hstep = l / n as f64;
@@ -51,7 +56,9 @@ fn timoshenko_hz(l: f64, h: f64, kappa: f64) -> f64 {
             let k2 = f(add(y, k1, hstep / 2.0));
             let k3 = f(add(y, k2, hstep / 2.0));
             let k4 = f(add(y, k3, hstep));
-            y = std::array::from_fn(|j| y[j] + hstep / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]));
+            y = std::array::from_fn(|j| {
+                y[j] + hstep / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
+            });
         }
         y
     };
@@ -97,7 +104,8 @@ fn fit_frequency_hz(t: &[f64], z: &[f64], guess_hz: f64) -> f64 {
             }
         }
         let det3 = |m: [[f64; 3]; 3]| {
-            m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+                - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
                 + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
         };
         let d = det3(m);
@@ -142,7 +150,14 @@ fn fit_frequency_hz(t: &[f64], z: &[f64], guess_hz: f64) -> f64 {
 
 /// Simulates the cantilever and returns its measured first frequency (Hz).
 /// The section is `cells` cells thick, clamped on node layers x <= x_c = clamp_node dx.
-fn measured_frequency_hz(n_grid: usize, cells: usize, l_over_h: usize, clamp_node: usize, dt: f64, periods: f64) -> f64 {
+fn measured_frequency_hz(
+    n_grid: usize,
+    cells: usize,
+    l_over_h: usize,
+    clamp_node: usize,
+    dt: f64,
+    periods: f64,
+) -> f64 {
     let part = PartParams {
         material: Material::Jelly,
         youngs_modulus_pa: E,
@@ -167,12 +182,23 @@ fn measured_frequency_hz(n_grid: usize, cells: usize, l_over_h: usize, clamp_nod
         reset: false,
     }];
     let scene = ParticleSet::from_shapes(
-        &[Shape::Beam { origin: [xc - 4.0 * dx, lo, lo], length: l + 4.0 * dx, width: h, thickness: h, part: 0, per_cell: 2 }],
+        &[Shape::Beam {
+            origin: [xc - 4.0 * dx, lo, lo],
+            length: l + 4.0 * dx,
+            width: h,
+            thickness: h,
+            part: 0,
+            per_cell: 2,
+        }],
         dx,
     );
     // First Euler-Bernoulli mode shape, tip speed 0.05 m/s.
     let sigma = (BETA1.cosh() + BETA1.cos()) / (BETA1.sinh() + BETA1.sin());
-    let mode = |xi: f64| (BETA1 * xi).cosh() - (BETA1 * xi).cos() - sigma * ((BETA1 * xi).sinh() - (BETA1 * xi).sin());
+    let mode = |xi: f64| {
+        (BETA1 * xi).cosh()
+            - (BETA1 * xi).cos()
+            - sigma * ((BETA1 * xi).sinh() - (BETA1 * xi).sin())
+    };
     let v: Vec<[f32; 3]> = scene
         .x
         .iter()
@@ -181,7 +207,9 @@ fn measured_frequency_hz(n_grid: usize, cells: usize, l_over_h: usize, clamp_nod
             [0.0, 0.0, (0.05 * mode(xi) / mode(1.0)) as f32]
         })
         .collect();
-    let tip: Vec<usize> = (0..scene.len()).filter(|&i| scene.x[i][0] as f64 > xc + l - dx).collect();
+    let tip: Vec<usize> = (0..scene.len())
+        .filter(|&i| scene.x[i][0] as f64 > xc + l - dx)
+        .collect();
     let z0: f64 = tip.iter().map(|&i| scene.x[i][2] as f64).sum::<f64>() / tip.len() as f64;
     let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene, "cantilever").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
@@ -214,7 +242,10 @@ fn stubby_cantilever_matches_timoshenko_within_3_percent() {
     let f = measured_frequency_hz(48, 6, 4, 15, 1.5e-4, 1.3);
     let ft = timoshenko_hz(0.5, 0.125, 0.85);
     let err = f / ft - 1.0;
-    eprintln!("stubby cantilever: {f:.4} Hz vs Timoshenko {ft:.4} Hz: {:+.2}%", 100.0 * err);
+    eprintln!(
+        "stubby cantilever: {f:.4} Hz vs Timoshenko {ft:.4} Hz: {:+.2}%",
+        100.0 * err
+    );
     assert!(err.abs() < 0.03, "{:+.2}%", 100.0 * err);
 }
 

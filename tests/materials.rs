@@ -40,7 +40,6 @@ fn run(
     }
 }
 
-
 /// Surface slope (degrees) of an axisymmetric heap centred at (cx, cy): max z per radial ring,
 /// fitted where the height is between 25% and 75% of the heap's height above `floor`.
 fn cone_slope_deg(x: &[[f32; 3]], dx: f64, c: [f64; 2], floor: f64) -> f64 {
@@ -59,12 +58,11 @@ fn cone_slope_deg(x: &[[f32; 3]], dx: f64, c: [f64; 2], floor: f64) -> f64 {
     let n = pts.len() as f64;
     let (sx, sz) = pts.iter().fold((0.0, 0.0), |a, p| (a.0 + p.0, a.1 + p.1));
     let (mx, mz) = (sx / n, sz / n);
-    let (sxx, sxz) = pts
-        .iter()
-        .fold((0.0, 0.0), |a, p| (a.0 + (p.0 - mx).powi(2), a.1 + (p.0 - mx) * (p.1 - mz)));
+    let (sxx, sxz) = pts.iter().fold((0.0, 0.0), |a, p| {
+        (a.0 + (p.0 - mx).powi(2), a.1 + (p.0 - mx) * (p.1 - mz))
+    });
     (-sxz / sxx).atan().to_degrees()
 }
-
 
 /// Quasi-static collapse of a sand column (H/R = 1) on a sticky floor; grid velocity damping
 /// removes the inertial run-out so the heap settles at its static slope.
@@ -82,11 +80,21 @@ fn sand_column_slope(phi: f64) -> f64 {
     let dx = cfg.domain.dx();
     let floor = 3.0 * dx;
     cfg.boundary = vec![
-        BoundaryCondition::BoundingBox { layers: 3, surface: Surface::Slip },
+        BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        },
         sticky_floor(floor),
     ];
     let scene = ParticleSet::from_shapes(
-        &[Shape::Cylinder { base: [0.5, 0.5, floor], axis: 2, radius: 0.125, length: 0.125, part: 0, per_cell: 2 }],
+        &[Shape::Cylinder {
+            base: [0.5, 0.5, floor],
+            axis: 2,
+            radius: 0.125,
+            length: 0.125,
+            part: 0,
+            per_cell: 2,
+        }],
         dx,
     );
     let mut slope = 0.0;
@@ -105,7 +113,10 @@ fn sand_column_settles_near_its_friction_angle() {
     eprintln!("sand heap slope: phi 20 -> {s20:.1} deg, phi 30 -> {s30:.1} deg");
     assert!((s20 - 20.0).abs() < 7.0, "phi 20: slope {s20:.1}");
     assert!((s30 - 30.0).abs() < 7.0, "phi 30: slope {s30:.1}");
-    assert!(s30 > s20 + 2.0, "a higher friction angle must hold a steeper heap");
+    assert!(
+        s30 > s20 + 2.0,
+        "a higher friction angle must hold a steeper heap"
+    );
 }
 
 fn jelly(e: f64) -> PartParams {
@@ -158,9 +169,18 @@ fn jelly_returns_to_its_rest_shape() {
         peak = peak.max(e);
         last = e;
     });
-    eprintln!("jelly: peak shape error {:.4} m, final {:.5} m (bbox {extent} m)", peak, last);
-    assert!(peak > 0.05 * extent, "the cube must deform visibly (peak {peak})");
-    assert!(last < 0.01 * extent, "final shape error {last} >= 1% of the bbox");
+    eprintln!(
+        "jelly: peak shape error {:.4} m, final {:.5} m (bbox {extent} m)",
+        peak, last
+    );
+    assert!(
+        peak > 0.05 * extent,
+        "the cube must deform visibly (peak {peak})"
+    );
+    assert!(
+        last < 0.01 * extent,
+        "final shape error {last} >= 1% of the bbox"
+    );
 }
 
 /// A cantilever clamped at x <= 0.3 with a downward load on its tip for `load_steps`
@@ -170,7 +190,10 @@ fn loaded_cantilever(part: PartParams) -> (f64, f64) {
     cfg.solver.gravity = [0.0; 3];
     cfg.solver.grid_v_damping = 0.999;
     cfg.boundary = vec![
-        BoundaryCondition::BoundingBox { layers: 3, surface: Surface::Slip },
+        BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        },
         BoundaryCondition::Cuboid {
             point: [0.0, 0.5, 0.5],
             size: [0.3 + 0.5 / 32.0, 1.0, 1.0],
@@ -211,11 +234,19 @@ fn metal_keeps_a_residual_deflection_but_jelly_does_not() {
         ..Default::default()
     };
     let (mp, ml) = loaded_cantilever(metal);
-    let (jp, jl) = loaded_cantilever(PartParams { density_kg_m3: 1500.0, ..jelly(5e6) });
-    eprintln!("metal tip: peak {mp:.4} m final {ml:.4} m; jelly tip: peak {jp:.4} m final {jl:.5} m");
+    let (jp, jl) = loaded_cantilever(PartParams {
+        density_kg_m3: 1500.0,
+        ..jelly(5e6)
+    });
+    eprintln!(
+        "metal tip: peak {mp:.4} m final {ml:.4} m; jelly tip: peak {jp:.4} m final {jl:.5} m"
+    );
     assert!(mp > 0.01, "the load must bend the metal bar (peak {mp})");
     assert!(ml > 0.2 * mp, "metal residual {ml} <= 20% of peak {mp}");
-    assert!(jl.abs() < 0.1 * jp, "jelly must spring back (final {jl}, peak {jp})");
+    assert!(
+        jl.abs() < 0.1 * jp,
+        "jelly must spring back (final {jl}, peak {jp})"
+    );
 }
 
 /// A block on a sticky floor whose top layer is dragged sideways at 0.2 m/s for 0.1 s and then
@@ -225,7 +256,10 @@ fn sheared_block(part: PartParams) -> (f64, f64) {
     cfg.solver.grid_v_damping = 0.999;
     let dx = cfg.domain.dx();
     cfg.boundary = vec![
-        BoundaryCondition::BoundingBox { layers: 3, surface: Surface::Slip },
+        BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        },
         sticky_floor(4.0 * dx),
         BoundaryCondition::ParticleVelocity {
             velocity: [0.2, 0.0, 0.0],
@@ -236,7 +270,9 @@ fn sheared_block(part: PartParams) -> (f64, f64) {
         },
     ];
     let scene = boxed(&cfg, [0.4, 0.4, 3.0 * dx], [0.6, 0.6, 4.0 * dx + 0.18]);
-    let top: Vec<usize> = (0..scene.len()).filter(|&i| scene.x[i][2] as f64 > 4.0 * dx + 0.15).collect();
+    let top: Vec<usize> = (0..scene.len())
+        .filter(|&i| scene.x[i][2] as f64 > 4.0 * dx + 0.15)
+        .collect();
     let x0: f64 = top.iter().map(|&i| scene.x[i][0] as f64).sum::<f64>() / top.len() as f64;
     let (mut peak, mut last) = (0.0f64, 0.0);
     run(&cfg, scene, 25, |_, s, st| {
@@ -261,10 +297,18 @@ fn foam_flows_past_yield_and_stays_elastic_below() {
     };
     let (yp, yl) = sheared_block(foam(1e3));
     let (ep, el) = sheared_block(foam(1e8));
-    eprintln!("foam above yield: peak {yp:.4} final {yl:.4}; below yield: peak {ep:.4} final {el:.5}");
+    eprintln!(
+        "foam above yield: peak {yp:.4} final {yl:.4}; below yield: peak {ep:.4} final {el:.5}"
+    );
     assert!(yp > 0.015, "the top must move (peak {yp})");
-    assert!(yl > 0.5 * yp, "foam past yield keeps its shear: final {yl}, peak {yp}");
-    assert!(el.abs() < 0.1 * ep, "below yield the foam springs back: final {el}, peak {ep}");
+    assert!(
+        yl > 0.5 * yp,
+        "foam past yield keeps its shear: final {yl}, peak {yp}"
+    );
+    assert!(
+        el.abs() < 0.1 * ep,
+        "below yield the foam springs back: final {el}, peak {ep}"
+    );
 }
 
 #[test]
@@ -280,7 +324,10 @@ fn snow_compacts_under_compression() {
     let dx = cfg.domain.dx();
     // A plate descends on the block at 0.3 m/s for 0.2 s (6 cm into a 15 cm block).
     cfg.boundary = vec![
-        BoundaryCondition::BoundingBox { layers: 3, surface: Surface::Slip },
+        BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        },
         BoundaryCondition::Cuboid {
             point: [0.5, 0.5, 3.0 * dx + 0.15 + 1.5 * dx],
             size: [0.3, 0.3, dx],
@@ -308,7 +355,10 @@ fn pressed_slab(part: PartParams) -> (f64, f64) {
     let dx = cfg.domain.dx();
     let (z0, z1) = (3.0 * dx, 3.0 * dx + 0.1);
     cfg.boundary = vec![
-        BoundaryCondition::BoundingBox { layers: 3, surface: Surface::Slip },
+        BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        },
         BoundaryCondition::Cuboid {
             point: [0.5, 0.5, z1 + 0.75 * dx],
             size: [0.3, 0.3, dx],
@@ -340,7 +390,10 @@ fn plasticine_stays_flattened_but_jelly_recovers() {
         ..Default::default()
     };
     let (h0, h) = pressed_slab(plast);
-    let (j0, j) = pressed_slab(PartParams { density_kg_m3: 1200.0, ..jelly(3e5) });
+    let (j0, j) = pressed_slab(PartParams {
+        density_kg_m3: 1200.0,
+        ..jelly(3e5)
+    });
     eprintln!("plasticine: thickness {h0:.4} -> {h:.4} m; jelly {j0:.4} -> {j:.4} m");
     assert!(h < 0.85 * h0, "plasticine must stay flattened: {h0} -> {h}");
     assert!(j > 0.95 * j0, "jelly must recover: {j0} -> {j}");

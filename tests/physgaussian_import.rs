@@ -4,7 +4,6 @@
 //! Jelly: every particle within 0.05 dx at every frame. Metal, sand, plasticine (path
 //! dependent): centroid within 0.25 dx and bounding box within 0.5 dx at every frame.
 
-
 mod common;
 
 use common::{fixture, read_npz, Array};
@@ -25,7 +24,9 @@ fn run<B: MpmKernels>(backend: B, scenario: &str) -> Run {
     let x0 = &init["x0"];
     let n = x0.shape[0];
     let mut scene = ParticleSet {
-        x: (0..n).map(|i| std::array::from_fn(|a| x0.at(&[i, a]) as f32)).collect(),
+        x: (0..n)
+            .map(|i| std::array::from_fn(|a| x0.at(&[i, a]) as f32))
+            .collect(),
         volume: init["volume"].data.iter().map(|&v| v as f32).collect(),
         part: vec![0; n],
     };
@@ -75,8 +76,18 @@ fn check_per_particle(r: &Run, tol_dx: f64) {
             }
         }
     }
-    eprintln!("max particle deviation {:.3e} m = {:.4} dx (frame {})", worst.0, worst.0 / r.dx, worst.1);
-    assert!(worst.0 <= tol_dx * r.dx, "max deviation {:.4} dx at frame {}", worst.0 / r.dx, worst.1);
+    eprintln!(
+        "max particle deviation {:.3e} m = {:.4} dx (frame {})",
+        worst.0,
+        worst.0 / r.dx,
+        worst.1
+    );
+    assert!(
+        worst.0 <= tol_dx * r.dx,
+        "max deviation {:.4} dx at frame {}",
+        worst.0 / r.dx,
+        worst.1
+    );
 }
 
 fn check_aggregate(r: &Run) {
@@ -92,7 +103,11 @@ fn check_aggregate(r: &Run) {
             wb = wb.max((lo1[a] - lo2[a]).abs()).max((hi1[a] - hi2[a]).abs());
         }
     }
-    eprintln!("max centroid deviation {:.4} dx, max bbox deviation {:.4} dx", wc / r.dx, wb / r.dx);
+    eprintln!(
+        "max centroid deviation {:.4} dx, max bbox deviation {:.4} dx",
+        wc / r.dx,
+        wb / r.dx
+    );
     assert!(wc <= 0.25 * r.dx, "centroid off by {:.4} dx", wc / r.dx);
     assert!(wb <= 0.5 * r.dx, "bounding box off by {:.4} dx", wb / r.dx);
 }

@@ -85,10 +85,16 @@ fn free_fall_matches_the_analytic_parabola() {
         for (p, p0) in x.iter().zip(&scene.x) {
             let expect = p0[2] as f64 - 0.5 * 9.8 * t * t;
             worst = worst.max((p[2] as f64 - expect).abs());
-            worst = worst.max((p[0] - p0[0]).abs() as f64).max((p[1] - p0[1]).abs() as f64);
+            worst = worst
+                .max((p[0] - p0[0]).abs() as f64)
+                .max((p[1] - p0[1]).abs() as f64);
         }
     }
-    eprintln!("free fall: worst deviation {:.2e} m = {:.4} dx after 0.24 s", worst, worst / dx);
+    eprintln!(
+        "free fall: worst deviation {:.2e} m = {:.4} dx after 0.24 s",
+        worst,
+        worst / dx
+    );
     assert!(worst < dx / 4.0, "deviation {worst} m");
 }
 
@@ -112,7 +118,10 @@ fn mixed_scene() -> (SimConfig, ParticleSet) {
         ..Default::default()
     });
     cfg.boundary = vec![
-        BoundaryCondition::BoundingBox { layers: 3, surface: Surface::Slip },
+        BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        },
         BoundaryCondition::SurfaceCollider {
             point: [0.0, 0.0, 0.15],
             normal: [0.0, 0.2, 1.0],
@@ -139,9 +148,26 @@ fn mixed_scene() -> (SimConfig, ParticleSet) {
     ];
     let dx = cfg.domain.dx();
     let shapes = [
-        r4d_mpm::Shape::Box { min: [0.25, 0.4, 0.45], max: [0.7, 0.6, 0.55], part: 1, per_cell: 2 },
-        r4d_mpm::Shape::Box { min: [0.3, 0.3, 0.2], max: [0.45, 0.45, 0.35], part: 0, per_cell: 2 },
-        r4d_mpm::Shape::Cylinder { base: [0.6, 0.3, 0.2], axis: 2, radius: 0.06, length: 0.15, part: 2, per_cell: 2 },
+        r4d_mpm::Shape::Box {
+            min: [0.25, 0.4, 0.45],
+            max: [0.7, 0.6, 0.55],
+            part: 1,
+            per_cell: 2,
+        },
+        r4d_mpm::Shape::Box {
+            min: [0.3, 0.3, 0.2],
+            max: [0.45, 0.45, 0.35],
+            part: 0,
+            per_cell: 2,
+        },
+        r4d_mpm::Shape::Cylinder {
+            base: [0.6, 0.3, 0.2],
+            axis: 2,
+            radius: 0.06,
+            length: 0.15,
+            part: 2,
+            per_cell: 2,
+        },
     ];
     (cfg, ParticleSet::from_shapes(&shapes, dx))
 }

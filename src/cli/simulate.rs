@@ -32,7 +32,7 @@ pub struct SimulateArgs {
     /// Compute backend.
     #[arg(long, value_enum, default_value_t = BackendKind::Cpu)]
     backend: BackendKind,
-    /// Also write the deformation gradient as f00..f22 (fij = F[i][j] = dx_i/dX_j).
+    /// Also write the deformation gradient as f00..f22 (fij = F_ij = dx_i / dX_j).
     #[arg(long)]
     write_f: bool,
     /// Override the number of frames.
@@ -86,7 +86,9 @@ fn write_frame(dir: &Path, k: usize, x: &[[f32; 3]], f: Option<&[[f32; 9]]>) -> 
     let cols: Vec<Vec<f32>> = (0..3).map(|a| x.iter().map(|p| p[a]).collect()).collect();
     let mut names = vec!["x", "y", "z"];
     let mut data: Vec<Vec<f32>> = cols;
-    const F_NAMES: [&str; 9] = ["f00", "f01", "f02", "f10", "f11", "f12", "f20", "f21", "f22"];
+    const F_NAMES: [&str; 9] = [
+        "f00", "f01", "f02", "f10", "f11", "f12", "f20", "f21", "f22",
+    ];
     if let Some(f) = f {
         for (e, name) in F_NAMES.iter().enumerate() {
             names.push(name);
@@ -126,7 +128,11 @@ fn simulate<B: MpmKernels>(
     let start = Instant::now();
     let write = |sim: &MpmSim<B>, state: &r4d_mpm::SimState<B>, k: usize| -> Result<()> {
         let x = sim.positions(state)?;
-        let f = if a.write_f { Some(sim.deformation_gradients(state)?) } else { None };
+        let f = if a.write_f {
+            Some(sim.deformation_gradients(state)?)
+        } else {
+            None
+        };
         write_frame(&a.out, k, &x, f.as_deref())
     };
     write(&sim, &state, 0)?;
@@ -165,10 +171,9 @@ fn simulate<B: MpmKernels>(
     std::fs::write(&sp, serde_json::to_string_pretty(&summary)? + "\n")
         .with_context(|| format!("writing {}", sp.display()))?;
     if let Some(e) = error {
-        return Err(anyhow::Error::new(e).context(format!(
-            "frames 0..={done} are in {}",
-            a.out.display()
-        )));
+        return Err(
+            anyhow::Error::new(e).context(format!("frames 0..={done} are in {}", a.out.display()))
+        );
     }
     println!(
         "wrote {} frames of {n} particles to {} ({:.1} s, {:.2e} particle-substeps/s); summary: {}",

@@ -27,7 +27,9 @@ impl Array {
 
 /// Path of a fixture file under `tests/fixtures`.
 pub fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(rel)
 }
 
 /// Reads every array of an `.npz` file (little-endian f4/f8/i4/i8/u1, C order).
@@ -54,8 +56,20 @@ fn parse_npy(b: &[u8]) -> Array {
     };
     let header = std::str::from_utf8(&b[start..start + hlen]).unwrap();
     assert!(header.contains("'fortran_order': False"), "{header}");
-    let descr = header.split("'descr': '").nth(1).unwrap().split('\'').next().unwrap();
-    let shape_s = header.split("'shape': (").nth(1).unwrap().split(')').next().unwrap();
+    let descr = header
+        .split("'descr': '")
+        .nth(1)
+        .unwrap()
+        .split('\'')
+        .next()
+        .unwrap();
+    let shape_s = header
+        .split("'shape': (")
+        .nth(1)
+        .unwrap()
+        .split(')')
+        .next()
+        .unwrap();
     let shape: Vec<usize> = shape_s
         .split(',')
         .map(str::trim)
@@ -65,10 +79,26 @@ fn parse_npy(b: &[u8]) -> Array {
     let body = &b[start + hlen..];
     let n: usize = shape.iter().product();
     let data: Vec<f64> = match descr {
-        "<f4" => body.chunks_exact(4).take(n).map(|c| f32::from_le_bytes(c.try_into().unwrap()) as f64).collect(),
-        "<f8" => body.chunks_exact(8).take(n).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect(),
-        "<i4" => body.chunks_exact(4).take(n).map(|c| i32::from_le_bytes(c.try_into().unwrap()) as f64).collect(),
-        "<i8" => body.chunks_exact(8).take(n).map(|c| i64::from_le_bytes(c.try_into().unwrap()) as f64).collect(),
+        "<f4" => body
+            .chunks_exact(4)
+            .take(n)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()) as f64)
+            .collect(),
+        "<f8" => body
+            .chunks_exact(8)
+            .take(n)
+            .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+            .collect(),
+        "<i4" => body
+            .chunks_exact(4)
+            .take(n)
+            .map(|c| i32::from_le_bytes(c.try_into().unwrap()) as f64)
+            .collect(),
+        "<i8" => body
+            .chunks_exact(8)
+            .take(n)
+            .map(|c| i64::from_le_bytes(c.try_into().unwrap()) as f64)
+            .collect(),
         "|u1" => body.iter().take(n).map(|&c| c as f64).collect(),
         d => panic!("unsupported dtype {d}"),
     };

@@ -3,16 +3,27 @@
 
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    BoundaryCondition, Domain, ForceForm, MpmSim, ParticleSet, PartParams, Shape, SimConfig,
+    BoundaryCondition, Domain, ForceForm, MpmSim, PartParams, ParticleSet, Shape, SimConfig,
     SolverConfig, TimeConfig,
 };
 
 /// A config with one part, no shapes and no boundary conditions.
 pub fn config(n_grid: usize, dt: f64, substeps: u32, part: PartParams) -> SimConfig {
     SimConfig {
-        domain: Domain { grid_lim: 1.0, n_grid },
-        time: TimeConfig { substep_dt: dt, frame_dt: None, substeps_per_frame: Some(substeps), frames: 1 },
-        solver: SolverConfig { force: ForceForm::Mls, ..Default::default() },
+        domain: Domain {
+            grid_lim: 1.0,
+            n_grid,
+        },
+        time: TimeConfig {
+            substep_dt: dt,
+            frame_dt: None,
+            substeps_per_frame: Some(substeps),
+            frames: 1,
+        },
+        solver: SolverConfig {
+            force: ForceForm::Mls,
+            ..Default::default()
+        },
         parts: vec![part],
         shapes: Vec::new(),
         particles: None,
@@ -22,7 +33,15 @@ pub fn config(n_grid: usize, dt: f64, substeps: u32, part: PartParams) -> SimCon
 
 /// Samples a box of particles (2 per cell per axis).
 pub fn boxed(cfg: &SimConfig, min: [f64; 3], max: [f64; 3]) -> ParticleSet {
-    ParticleSet::from_shapes(&[Shape::Box { min, max, part: 0, per_cell: 2 }], cfg.domain.dx())
+    ParticleSet::from_shapes(
+        &[Shape::Box {
+            min,
+            max,
+            part: 0,
+            per_cell: 2,
+        }],
+        cfg.domain.dx(),
+    )
 }
 
 /// A simulator on the CPU backend.

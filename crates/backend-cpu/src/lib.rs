@@ -23,8 +23,8 @@ use r4d_mpm::kernels::{
     BLOCK, HEALTH_OUT_OF_DOMAIN,
 };
 use r4d_mpm::transfer::{
-    damped_affine, g2p_finish, gather, grid_node_update, in_domain, particle_bcs,
-    particle_stress, record, scatter, stencil,
+    damped_affine, g2p_finish, gather, grid_node_update, in_domain, particle_bcs, particle_stress,
+    record, scatter, stencil,
 };
 use r4d_mpm::PartConsts;
 use rayon::prelude::*;
@@ -92,6 +92,9 @@ impl CpuBackend {
         }
     }
 }
+
+/// One parallel scatter task: first node layer, particle ids, and the slab's nodes.
+type SlabTask<'a> = (usize, &'a [u32], &'a mut [[f32; 4]]);
 
 /// Node index range `[lo, hi)` (in x layers) written by slab `s`.
 fn slab_layers(s: usize, n: usize) -> (usize, usize) {
@@ -247,7 +250,7 @@ impl MpmKernels for CpuBackend {
             let (v, mass, stress) = (&p.v, &p.mass, &p.stress);
             let layer = n * n;
             for colour in 0..2 {
-                let mut tasks: Vec<(usize, &[u32], &mut [[f32; 4]])> = Vec::new();
+                let mut tasks: Vec<SlabTask> = Vec::new();
                 let mut rest: &mut [[f32; 4]] = &mut g.nodes;
                 let mut rest_lo = 0usize;
                 for s in (colour..n_slabs).step_by(2) {
@@ -291,7 +294,12 @@ impl MpmKernels for CpuBackend {
         Ok(())
     }
 
-    fn g2p(&self, p: &mut Particles<Self>, g: &mut Grid<Self>, c: &StepConsts) -> Result<(), Never> {
+    fn g2p(
+        &self,
+        p: &mut Particles<Self>,
+        g: &mut Grid<Self>,
+        c: &StepConsts,
+    ) -> Result<(), Never> {
         let n = g.n;
         let nodes = &g.nodes;
         let worst = self.run(|| {
@@ -309,11 +317,14 @@ impl MpmKernels for CpuBackend {
                     let (code, val) = g2p_finish(&gathered, x, v, cm, f, c);
                     (code != 0).then_some((code, i as u32, val))
                 })
-                .reduce(|| None, |a, b| match (a, b) {
-                    (Some(a), Some(b)) => Some(if a.1 <= b.1 { a } else { b }),
-                    (a, None) => a,
-                    (None, b) => b,
-                })
+                .reduce(
+                    || None,
+                    |a, b| match (a, b) {
+                        (Some(a), Some(b)) => Some(if a.1 <= b.1 { a } else { b }),
+                        (a, None) => a,
+                        (None, b) => b,
+                    },
+                )
         });
         if let Some((code, i, val)) = worst {
             record(&mut g.health[0], code, c.substep, i, val);

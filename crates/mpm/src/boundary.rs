@@ -155,13 +155,23 @@ impl BoundaryCondition {
             BoundaryCondition::BoundingBox { layers, .. } if *layers == 0 => {
                 bad("layers", "must be >= 1")
             }
-            BoundaryCondition::Cuboid { point, size, velocity, .. } => {
+            BoundaryCondition::Cuboid {
+                point,
+                size,
+                velocity,
+                ..
+            } => {
                 if !finite(point) || !finite(size) || !finite(velocity) {
                     return bad("point/size/velocity", "must be finite");
                 }
                 Ok(())
             }
-            BoundaryCondition::SurfaceCollider { point, normal, friction, .. } => {
+            BoundaryCondition::SurfaceCollider {
+                point,
+                normal,
+                friction,
+                ..
+            } => {
                 if !finite(point) || !finite(normal) {
                     return bad("point/normal", "must be finite");
                 }
@@ -173,13 +183,20 @@ impl BoundaryCondition {
                 }
                 Ok(())
             }
-            BoundaryCondition::ParticleImpulse { force, point, size, .. } => {
+            BoundaryCondition::ParticleImpulse {
+                force, point, size, ..
+            } => {
                 if !finite(force) || !finite(point) || !finite(size) {
                     return bad("force/point/size", "must be finite");
                 }
                 Ok(())
             }
-            BoundaryCondition::ParticleVelocity { velocity, point, size, .. } => {
+            BoundaryCondition::ParticleVelocity {
+                velocity,
+                point,
+                size,
+                ..
+            } => {
                 if !finite(velocity) || !finite(point) || !finite(size) {
                     return bad("velocity/point/size", "must be finite");
                 }

@@ -226,7 +226,11 @@ impl SimConfig {
             return Err(bad("domain.grid_lim", d.grid_lim, "must be > 0"));
         }
         if d.n_grid < 8 || d.n_grid > 1024 {
-            return Err(bad("domain.n_grid", d.n_grid as f64, "must lie in [8, 1024]"));
+            return Err(bad(
+                "domain.n_grid",
+                d.n_grid as f64,
+                "must lie in [8, 1024]",
+            ));
         }
         let t = &self.time;
         if !(t.substep_dt.is_finite() && t.substep_dt > 0.0) {
@@ -250,7 +254,11 @@ impl SimConfig {
             return Err(bad("solver.max_cfl", s.max_cfl, "must be > 0"));
         }
         if !(s.grid_v_damping.is_finite() && s.grid_v_damping > 0.0) {
-            return Err(bad("solver.grid_v_damping", s.grid_v_damping, "must be > 0"));
+            return Err(bad(
+                "solver.grid_v_damping",
+                s.grid_v_damping,
+                "must be > 0",
+            ));
         }
         if !s.rpic_damping.is_finite() || s.rpic_damping > 1.0 {
             return Err(bad("solver.rpic_damping", s.rpic_damping, "must be <= 1"));

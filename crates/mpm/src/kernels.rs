@@ -134,7 +134,7 @@ pub const HEALTH_SPEED: u32 = 2;
 pub const HEALTH_OUT_OF_DOMAIN: u32 = 3;
 
 /// Particle state on a backend: a struct of buffers, defined once for every backend.
-pub struct Particles<B: MpmKernels + ?Sized> {
+pub struct Particles<B: MpmKernels> {
     /// Number of particles.
     pub count: usize,
     /// Positions (m).
@@ -160,7 +160,7 @@ pub struct Particles<B: MpmKernels + ?Sized> {
 }
 
 /// Grid state on a backend.
-pub struct Grid<B: MpmKernels + ?Sized> {
+pub struct Grid<B: MpmKernels> {
     /// Nodes per axis.
     pub n: usize,
     /// Per node `[momentum or velocity (3), mass]`, index `(i n + j) n + k`.
@@ -238,8 +238,12 @@ pub trait MpmKernels: Sized + Send + Sync + 'static {
         c: &StepConsts,
     ) -> Result<(), Self::Error>;
     /// Grid-to-particle transfer, advection, F update and health check.
-    fn g2p(&self, p: &mut Particles<Self>, g: &mut Grid<Self>, c: &StepConsts)
-        -> Result<(), Self::Error>;
+    fn g2p(
+        &self,
+        p: &mut Particles<Self>,
+        g: &mut Grid<Self>,
+        c: &StepConsts,
+    ) -> Result<(), Self::Error>;
     /// Memory the backend has allocated.
     fn memory_usage(&self) -> MemoryUsage;
 }

@@ -168,7 +168,10 @@ impl PartParams {
     pub fn lame(&self) -> (f64, f64) {
         let e = self.youngs_modulus_pa;
         let nu = self.poisson_ratio;
-        (e / (2.0 * (1.0 + nu)), e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)))
+        (
+            e / (2.0 * (1.0 + nu)),
+            e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)),
+        )
     }
 
     /// Speed of the pressure (P) wave `sqrt((lambda + 2 mu) / rho)` in m/s: the fastest wave
@@ -206,7 +209,11 @@ impl PartParams {
         fin("xi", self.xi)?;
         fin("softening", self.softening)?;
         if self.youngs_modulus_pa <= 0.0 {
-            return Err(bad("youngs_modulus_pa", self.youngs_modulus_pa, "must be > 0"));
+            return Err(bad(
+                "youngs_modulus_pa",
+                self.youngs_modulus_pa,
+                "must be > 0",
+            ));
         }
         if !(self.poisson_ratio > -1.0 && self.poisson_ratio < 0.5) {
             return Err(bad(
@@ -222,10 +229,18 @@ impl PartParams {
             return Err(bad("yield_stress_pa", self.yield_stress_pa, "must be >= 0"));
         }
         if self.plastic_viscosity_pa_s < 0.0 {
-            return Err(bad("plastic_viscosity_pa_s", self.plastic_viscosity_pa_s, "must be >= 0"));
+            return Err(bad(
+                "plastic_viscosity_pa_s",
+                self.plastic_viscosity_pa_s,
+                "must be >= 0",
+            ));
         }
         if !(0.0..90.0).contains(&self.friction_angle_deg) {
-            return Err(bad("friction_angle_deg", self.friction_angle_deg, "must lie in [0, 90)"));
+            return Err(bad(
+                "friction_angle_deg",
+                self.friction_angle_deg,
+                "must lie in [0, 90)",
+            ));
         }
         if self.softening < 0.0 {
             return Err(bad("softening", self.softening, "must be >= 0"));
@@ -247,6 +262,8 @@ impl PartParams {
     /// The f32 constants the kernels read.
     pub fn consts(&self) -> PartConsts {
         let (mu, la) = self.lame();
+        // PhysGaussian's constant for pi, kept so imported scenes yield identically.
+        #[expect(clippy::approx_constant, reason = "PhysGaussian's truncated pi")]
         let phi = self.friction_angle_deg * 3.14159265 / 180.0;
         let sp = phi.sin();
         let alpha = (2.0f64 / 3.0).sqrt() * 2.0 * sp / (3.0 - sp);
@@ -310,7 +327,11 @@ mod tests {
         assert!(e.contains("parts[1]") && e.contains("poisson_ratio"), "{e}");
         p.poisson_ratio = 0.3;
         p.youngs_modulus_pa = -1.0;
-        assert!(p.validate("x").unwrap_err().to_string().contains("youngs_modulus_pa"));
+        assert!(p
+            .validate("x")
+            .unwrap_err()
+            .to_string()
+            .contains("youngs_modulus_pa"));
         p.youngs_modulus_pa = f64::NAN;
         assert!(p.validate("x").is_err());
         p.youngs_modulus_pa = 1e5;

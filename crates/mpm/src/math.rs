@@ -191,7 +191,10 @@ impl<T: Real> Mat3<T> {
     }
     /// Frobenius norm.
     pub fn frobenius(self) -> T {
-        self.to_array().iter().fold(T::zero(), |a, &x| a + x * x).sqrt()
+        self.to_array()
+            .iter()
+            .fold(T::zero(), |a, &x| a + x * x)
+            .sqrt()
     }
     /// Converts the scalar type.
     pub fn cast<U: Real>(self) -> Mat3<U> {
@@ -216,7 +219,7 @@ impl<T: Real> Add for Mat3<T> {
         let mut m = self.0;
         for i in 0..3 {
             for j in 0..3 {
-                m[i][j] = m[i][j] + o.0[i][j];
+                m[i][j] += o.0[i][j];
             }
         }
         Mat3(m)
@@ -306,9 +309,11 @@ impl<T: Real> Svd3<T> {
 /// the diagonal, at most 12 sweeps; 3x3 Jacobi converges quadratically, so 4-5 sweeps is usual.
 pub fn svd3<T: Real>(f: Mat3<T>) -> Svd3<T> {
     let a = f.transpose() * f;
-    let mut s = [[a.0[0][0], a.0[0][1], a.0[0][2]], [a.0[1][0], a.0[1][1], a.0[1][2]], [
-        a.0[2][0], a.0[2][1], a.0[2][2],
-    ]];
+    let mut s = [
+        [a.0[0][0], a.0[0][1], a.0[0][2]],
+        [a.0[1][0], a.0[1][1], a.0[1][2]],
+        [a.0[2][0], a.0[2][1], a.0[2][2]],
+    ];
     let mut v = Mat3::<T>::identity().0;
     let eps = T::epsilon();
     let tiny = T::min_positive_value();
@@ -359,9 +364,7 @@ pub fn svd3<T: Real>(f: Mat3<T>) -> Svd3<T> {
     let swap = |lam: &mut [T; 3], vm: &mut Mat3<T>, i: usize, j: usize| {
         lam.swap(i, j);
         for r in 0..3 {
-            let t = vm.0[r][i];
-            vm.0[r][i] = vm.0[r][j];
-            vm.0[r][j] = t;
+            vm.0[r].swap(i, j);
         }
     };
     if lam[0] < lam[1] {
@@ -425,7 +428,10 @@ mod tests {
     fn check(f: Mat3<f64>, tol: f64) {
         let s = svd3(f);
         let r = s.compose(s.sigma);
-        assert!((r - f).frobenius() <= tol * f.frobenius().max(1.0), "{f:?} -> {s:?}");
+        assert!(
+            (r - f).frobenius() <= tol * f.frobenius().max(1.0),
+            "{f:?} -> {s:?}"
+        );
         assert!((s.u.det() - 1.0).abs() < 1e-9);
         assert!((s.v.det() - 1.0).abs() < 1e-9);
         assert!((s.u.transpose() * s.u - Mat3::identity()).frobenius() < 1e-9);
@@ -440,10 +446,15 @@ mod tests {
         check(Mat3::diag([2.0, 2.0, 2.0]), 1e-12);
         check(Mat3::diag([1.0, -1.0, 1.0]), 1e-12);
         check(Mat3::diag([3.0, 1e-9, 0.0]), 1e-12);
-        check(Mat3::from_array([1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 1.0, 0.0, 1.0]), 1e-12);
+        check(
+            Mat3::from_array([1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 1.0, 0.0, 1.0]),
+            1e-12,
+        );
         let mut seed = 12345u64;
         let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
         };
         for _ in 0..2000 {

@@ -66,7 +66,9 @@ impl Import {
             }
             scene.part[i] = part;
         }
-        if !volumes_from_file && self.config.parts[0].material == Material::Sand && !scene.is_empty()
+        if !volumes_from_file
+            && self.config.parts[0].material == Material::Sand
+            && !scene.is_empty()
         {
             let mean = scene.volume.iter().map(|&v| v as f64).sum::<f64>() / scene.len() as f64;
             scene.volume.iter_mut().for_each(|v| *v = mean as f32);
@@ -176,7 +178,9 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
         .ok_or_else(|| {
             r.err(
                 "material",
-                &format!("unknown material '{mat_name}' (jelly, metal, sand, foam, snow, plasticine)"),
+                &format!(
+                    "unknown material '{mat_name}' (jelly, metal, sand, foam, snow, plasticine)"
+                ),
             )
         })?;
     let defaults = PartParams::default();
@@ -222,7 +226,10 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
             .ok_or_else(|| r.err("additional_material_params", "expected a list"))?;
         for (i, item) in list.iter().enumerate() {
             let m = item.as_object().ok_or_else(|| {
-                r.err(&format!("additional_material_params[{i}]"), "expected an object")
+                r.err(
+                    &format!("additional_material_params[{i}]"),
+                    "expected an object",
+                )
             })?;
             let rr = Reader {
                 file,
@@ -248,9 +255,9 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
             .as_array()
             .ok_or_else(|| r.err("boundary_conditions", "expected a list"))?;
         for (i, item) in list.iter().enumerate() {
-            let m = item.as_object().ok_or_else(|| {
-                r.err(&format!("boundary_conditions[{i}]"), "expected an object")
-            })?;
+            let m = item
+                .as_object()
+                .ok_or_else(|| r.err(&format!("boundary_conditions[{i}]"), "expected an object"))?;
             let b = Reader {
                 file,
                 map: m,
@@ -299,9 +306,10 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
                     let s1 = b.f64_req("end_position")?;
                     let t0 = b.f64_req("start_time")?;
                     let t1 = b.f64_req("end_time")?;
-                    let axis = (0..3).rev().find(|&a| normal[a] != 0.0).ok_or_else(|| {
-                        b.err("normal", "must have a non-zero component")
-                    })?;
+                    let axis = (0..3)
+                        .rev()
+                        .find(|&a| normal[a] != 0.0)
+                        .ok_or_else(|| b.err("normal", "must have a non-zero component"))?;
                     let layers = 50;
                     let l = (s0 - s1).abs() / layers as f64;
                     for i in 0..layers {
@@ -347,17 +355,38 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
                     }
                 }
                 "enforce_particle_velocity_rotation" => {
-                    return Err(b.err("type", "enforce_particle_velocity_rotation is not supported yet"))
+                    return Err(b.err(
+                        "type",
+                        "enforce_particle_velocity_rotation is not supported yet",
+                    ))
                 }
-                other => return Err(b.err("type", &format!("unknown boundary condition '{other}'"))),
+                other => {
+                    return Err(b.err("type", &format!("unknown boundary condition '{other}'")))
+                }
             }
         }
     }
 
     let known: &[&str] = &[
-        "material", "E", "nu", "density", "g", "grid_lim", "n_grid", "substep_dt", "frame_dt",
-        "frame_num", "yield_stress", "plastic_viscosity", "friction_angle", "hardening", "xi",
-        "softening", "rpic_damping", "grid_v_damping_scale", "boundary_conditions",
+        "material",
+        "E",
+        "nu",
+        "density",
+        "g",
+        "grid_lim",
+        "n_grid",
+        "substep_dt",
+        "frame_dt",
+        "frame_num",
+        "yield_stress",
+        "plastic_viscosity",
+        "friction_angle",
+        "hardening",
+        "xi",
+        "softening",
+        "rpic_damping",
+        "grid_v_damping_scale",
+        "boundary_conditions",
         "additional_material_params",
     ];
     for key in map.keys() {
@@ -429,7 +458,11 @@ mod tests {
         )
         .unwrap();
         let c = &imp.config;
-        assert_eq!(c.time.substeps(), 999, "int(0.02 / 2e-5) truncates to 999 in PhysGaussian");
+        assert_eq!(
+            c.time.substeps(),
+            999,
+            "int(0.02 / 2e-5) truncates to 999 in PhysGaussian"
+        );
         assert_eq!(c.domain.n_grid, 50);
         assert_eq!(c.parts.len(), 2);
         assert!(c.parts[0].hardening);
@@ -447,13 +480,20 @@ mod tests {
 
     #[test]
     fn bad_values_are_typed_errors_naming_the_key() {
-        let e = import_str(r#"{"g": [0,0,-9.8], "nu": 0.5}"#, "s.json").unwrap_err().to_string();
-        assert!(e.contains("s.json") && e.contains("poisson_ratio"), "{e}");
-        let e = import_str(r#"{"E": 1e5}"#, "s.json").unwrap_err().to_string();
-        assert!(e.contains("g: missing"), "{e}");
-        let e = import_str(r#"{"g": [0,0,-9.8], "boundary_conditions": [{"type": "warp"}]}"#, "s.json")
+        let e = import_str(r#"{"g": [0,0,-9.8], "nu": 0.5}"#, "s.json")
             .unwrap_err()
             .to_string();
+        assert!(e.contains("s.json") && e.contains("poisson_ratio"), "{e}");
+        let e = import_str(r#"{"E": 1e5}"#, "s.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("g: missing"), "{e}");
+        let e = import_str(
+            r#"{"g": [0,0,-9.8], "boundary_conditions": [{"type": "warp"}]}"#,
+            "s.json",
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("boundary_conditions[0].type"), "{e}");
     }
 }

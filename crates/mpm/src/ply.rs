@@ -20,7 +20,10 @@ pub struct PlyVertices {
 impl PlyVertices {
     /// The column of a property, if present.
     pub fn get(&self, name: &str) -> Option<&[f32]> {
-        self.columns.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_slice())
+        self.columns
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_slice())
     }
 }
 
@@ -89,6 +92,9 @@ impl Ty {
     }
 }
 
+/// An element of the header: name, count and scalar properties.
+type Element = (String, usize, Vec<(String, Ty)>);
+
 /// Reads the vertex element of a PLY file.
 pub fn read_ply(path: &Path) -> Result<PlyVertices> {
     let bytes = std::fs::read(path).map_err(|source| Error::Io {
@@ -132,7 +138,7 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
     }
     let mut format = None;
     // (element name, count, properties (name, type))
-    let mut elements: Vec<(String, usize, Vec<(String, Ty)>)> = Vec::new();
+    let mut elements: Vec<Element> = Vec::new();
     let mut has_list_in: Vec<bool> = Vec::new();
     for (ln, line) in lines.iter().enumerate().skip(1) {
         let t: Vec<&str> = line.split_whitespace().collect();
@@ -147,7 +153,10 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
             }
             Some("element") => {
                 let (Some(name), Some(n)) = (t.get(1), t.get(2)) else {
-                    return Err(err(format!("header line {}: bad element line '{line}'", ln + 1)));
+                    return Err(err(format!(
+                        "header line {}: bad element line '{line}'",
+                        ln + 1
+                    )));
                 };
                 let n: usize = n
                     .parse()
@@ -199,19 +208,22 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
             let text = std::str::from_utf8(&bytes[pos..])
                 .map_err(|_| err("ASCII body is not text".into()))?;
             let skip_rows: usize = elements[..vi].iter().map(|e| e.1).sum();
-            let mut rows = text.lines().filter(|l| !l.trim().is_empty()).skip(skip_rows);
+            let mut rows = text
+                .lines()
+                .filter(|l| !l.trim().is_empty())
+                .skip(skip_rows);
             for r in 0..count {
-                let row = rows
-                    .next()
-                    .ok_or_else(|| err(format!("vertex {r}: file ends early ({count} declared)")))?;
+                let row = rows.next().ok_or_else(|| {
+                    err(format!("vertex {r}: file ends early ({count} declared)"))
+                })?;
                 let mut vals = row.split_whitespace();
                 for (ci, (name, _)) in props.iter().enumerate() {
                     let tok = vals
                         .next()
                         .ok_or_else(|| err(format!("vertex {r}: missing value for '{name}'")))?;
-                    let v: f32 = tok
-                        .parse()
-                        .map_err(|_| err(format!("vertex {r}: '{name}' = '{tok}' is not a number")))?;
+                    let v: f32 = tok.parse().map_err(|_| {
+                        err(format!("vertex {r}: '{name}' = '{tok}' is not a number"))
+                    })?;
                     columns[ci].1.push(v);
                 }
             }
@@ -247,7 +259,10 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
 pub fn write_ply(path: &Path, names: &[&str], columns: &[&[f32]]) -> Result<()> {
     assert_eq!(names.len(), columns.len(), "one name per column");
     let count = columns.first().map_or(0, |c| c.len());
-    assert!(columns.iter().all(|c| c.len() == count), "columns of equal length");
+    assert!(
+        columns.iter().all(|c| c.len() == count),
+        "columns of equal length"
+    );
     let io = |source| Error::Io {
         path: path.to_path_buf(),
         source,
@@ -297,9 +312,12 @@ mod tests {
         assert!(e.contains("bad.ply") && e.contains("ends early"), "{e}");
         let e = parse_ply(b"plx\n", "b.ply").unwrap_err().to_string();
         assert!(e.contains("b.ply"), "{e}");
-        let e = parse_ply(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\nabc\n", "c.ply")
-            .unwrap_err()
-            .to_string();
+        let e = parse_ply(
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\nabc\n",
+            "c.ply",
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("not a number"), "{e}");
     }
 }

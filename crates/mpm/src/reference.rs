@@ -3,13 +3,12 @@
 //! functions of [`crate::transfer`], which hold the math once.
 
 use crate::kernels::{
-    Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts,
-    HEALTH_OUT_OF_DOMAIN,
+    Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts, HEALTH_OUT_OF_DOMAIN,
 };
 use crate::material::PartConsts;
 use crate::transfer::{
-    damped_affine, g2p_finish, gather, grid_node_update, in_domain, particle_bcs,
-    particle_stress, record, scatter, stencil,
+    damped_affine, g2p_finish, gather, grid_node_update, in_domain, particle_bcs, particle_stress,
+    record, scatter, stencil,
 };
 use bytemuck::Pod;
 
@@ -66,7 +65,8 @@ impl MpmKernels for ReferenceBackend {
         g.nodes.fill([0.0; 4]);
         for i in 0..p.count {
             let pc = &parts[p.part[i] as usize];
-            p.stress[i] = particle_stress(&mut p.f[i], &mut p.plastic[i], &p.c[i], p.vol0[i], pc, c);
+            p.stress[i] =
+                particle_stress(&mut p.f[i], &mut p.plastic[i], &p.c[i], p.vol0[i], pc, c);
         }
         for i in 0..p.count {
             if !in_domain(p.x[i], c.inv_dx, g.n) {
@@ -74,12 +74,27 @@ impl MpmKernels for ReferenceBackend {
             }
             let st = stencil(p.x[i], c.inv_dx);
             let cm = damped_affine(&p.c[i], c.rpic_damping);
-            scatter(&mut g.nodes, 0, g.n, &st, p.v[i], &cm, p.mass[i], &p.stress[i], c);
+            scatter(
+                &mut g.nodes,
+                0,
+                g.n,
+                &st,
+                p.v[i],
+                &cm,
+                p.mass[i],
+                &p.stress[i],
+                c,
+            );
         }
         Ok(())
     }
 
-    fn grid_update(&self, g: &mut Grid<Self>, bcs: &Vec<GridBc>, c: &StepConsts) -> Result<(), Never> {
+    fn grid_update(
+        &self,
+        g: &mut Grid<Self>,
+        bcs: &Vec<GridBc>,
+        c: &StepConsts,
+    ) -> Result<(), Never> {
         let n = g.n;
         let bcs = &bcs[..c.n_grid_bcs as usize];
         for i in 0..n {
@@ -92,7 +107,12 @@ impl MpmKernels for ReferenceBackend {
         Ok(())
     }
 
-    fn g2p(&self, p: &mut Particles<Self>, g: &mut Grid<Self>, c: &StepConsts) -> Result<(), Never> {
+    fn g2p(
+        &self,
+        p: &mut Particles<Self>,
+        g: &mut Grid<Self>,
+        c: &StepConsts,
+    ) -> Result<(), Never> {
         let mut h = g.health[0];
         for i in 0..p.count {
             if !in_domain(p.x[i], c.inv_dx, g.n) {
@@ -101,8 +121,14 @@ impl MpmKernels for ReferenceBackend {
             }
             let st = stencil(p.x[i], c.inv_dx);
             let gathered = gather(&g.nodes, g.n, &st, c);
-            let (code, val) =
-                g2p_finish(&gathered, &mut p.x[i], &mut p.v[i], &mut p.c[i], &mut p.f[i], c);
+            let (code, val) = g2p_finish(
+                &gathered,
+                &mut p.x[i],
+                &mut p.v[i],
+                &mut p.c[i],
+                &mut p.f[i],
+                c,
+            );
             record(&mut h, code, c.substep, i as u32, val);
         }
         g.health[0] = h;
@@ -113,4 +139,3 @@ impl MpmKernels for ReferenceBackend {
         MemoryUsage::default()
     }
 }
-

@@ -144,7 +144,10 @@ impl Shape {
     pub fn validate(&self, what: &str, num_parts: usize) -> Result<()> {
         let (lo, hi) = self.bounds();
         if !(lo.iter().chain(&hi).all(|x| x.is_finite()) && (0..3).all(|a| hi[a] > lo[a])) {
-            return Err(Error::config(what, "shape extents must be finite and positive"));
+            return Err(Error::config(
+                what,
+                "shape extents must be finite and positive",
+            ));
         }
         if let Shape::Cylinder { axis, .. } = self {
             if *axis > 2 {
@@ -154,7 +157,10 @@ impl Shape {
         if self.part() as usize >= num_parts {
             return Err(Error::config(
                 what,
-                format!("part = {} but only {num_parts} part(s) are defined", self.part()),
+                format!(
+                    "part = {} but only {num_parts} part(s) are defined",
+                    self.part()
+                ),
             ));
         }
         if !(1..=8).contains(&self.per_cell()) {
@@ -178,7 +184,11 @@ impl Shape {
         for i in range(0) {
             for j in range(1) {
                 for k in range(2) {
-                    let p = [(i as f64 + 0.5) * h, (j as f64 + 0.5) * h, (k as f64 + 0.5) * h];
+                    let p = [
+                        (i as f64 + 0.5) * h,
+                        (j as f64 + 0.5) * h,
+                        (k as f64 + 0.5) * h,
+                    ];
                     if self.contains(p) {
                         out.x.push(p.map(|c| c as f32));
                         out.volume.push(vol);

@@ -5,7 +5,7 @@ use crate::config::SimConfig;
 use crate::error::{Error, Result};
 use crate::kernels::{
     blocks_per_axis, Grid, GridBc, Health, MpmKernels, ParticleBc, Particles, StepConsts,
-    HEALTH_NAN, HEALTH_OUT_OF_DOMAIN, HEALTH_SPEED,
+    HEALTH_OUT_OF_DOMAIN, HEALTH_SPEED,
 };
 use crate::material::{PartConsts, PartParams};
 use crate::scene::ParticleSet;
@@ -23,8 +23,11 @@ pub trait Simulator {
     /// A fresh state at rest (frame 0) for the given per-part parameters.
     fn init_state(&self, params: &[PartParams]) -> Result<Self::State, Self::Error>;
     /// Advances one frame.
-    fn step_frame(&mut self, state: &mut Self::State, params: &[PartParams])
-        -> Result<(), Self::Error>;
+    fn step_frame(
+        &mut self,
+        state: &mut Self::State,
+        params: &[PartParams],
+    ) -> Result<(), Self::Error>;
     /// Particle positions (m), in input order.
     fn positions(&self, state: &Self::State) -> Result<Vec<[f32; 3]>, Self::Error>;
     /// Deformation gradients `F[i][j] = dx_i / dX_j` (row-major), in input order.
@@ -71,7 +74,11 @@ impl SimSetup {
             n: config.domain.n_grid,
             substeps_per_frame: config.time.substeps(),
             grid_bcs: config.boundary.iter().filter_map(|b| b.grid_bc()).collect(),
-            particle_bcs: config.boundary.iter().filter_map(|b| b.particle_bc(dt)).collect(),
+            particle_bcs: config
+                .boundary
+                .iter()
+                .filter_map(|b| b.particle_bc(dt))
+                .collect(),
             config: config.clone(),
         }
     }
@@ -239,7 +246,8 @@ impl<B: MpmKernels> MpmSim<B> {
             b.particle_bcs(p, &self.particle_bcs, &c).map_err(be)?;
         }
         b.p2g(p, &self.parts, &mut self.grid, &c).map_err(be)?;
-        b.grid_update(&mut self.grid, &self.grid_bcs, &c).map_err(be)?;
+        b.grid_update(&mut self.grid, &self.grid_bcs, &c)
+            .map_err(be)?;
         b.g2p(p, &mut self.grid, &c).map_err(be)?;
         state.time_s += self.setup.config.time.substep_dt;
         state.substep += 1;
@@ -268,7 +276,7 @@ impl<B: MpmKernels> MpmSim<B> {
                 lo: 0.5 * self.setup.dx,
                 hi: (self.setup.n as f64 - 1.5) * self.setup.dx,
             },
-            HEALTH_NAN | _ => Error::NonFinite {
+            _ => Error::NonFinite {
                 frame,
                 substep,
                 global_substep: global,
@@ -319,7 +327,9 @@ impl<B: MpmKernels> Simulator for MpmSim<B> {
         if params != state.params.as_slice() {
             self.check_params(params)?;
             let m = self.masses(params);
-            self.backend.write(&mut state.particles.mass, &m).map_err(be)?;
+            self.backend
+                .write(&mut state.particles.mass, &m)
+                .map_err(be)?;
             state.params = params.to_vec();
         }
         self.upload_params(params)?;
@@ -330,7 +340,9 @@ impl<B: MpmKernels> Simulator for MpmSim<B> {
         }
         let h = self.backend.download(&self.grid.health).map_err(be)?[0];
         if h.code != 0 {
-            self.backend.write(&mut self.grid.health, &[Health::default()]).map_err(be)?;
+            self.backend
+                .write(&mut self.grid.health, &[Health::default()])
+                .map_err(be)?;
             return Err(self.health_error(h, frame, start));
         }
         state.frame = frame;

@@ -167,7 +167,8 @@ pub fn scatter(
         }
     }
     let mv = [mass * v[0], mass * v[1], mass * v[2]];
-    let dp: [[f32; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|o| (o as f32 - st.fx[a]) * dx));
+    let dp: [[f32; 3]; 3] =
+        std::array::from_fn(|a| std::array::from_fn(|o| (o as f32 - st.fx[a]) * dx));
     let (w0, w1, w2) = (st.w[0], st.w[1], st.w[2]);
     let (d0, d1, d2) = (st.dw[0], st.dw[1], st.dw[2]);
     let bz = st.base[2] as usize;
@@ -235,7 +236,11 @@ pub fn grid_node_update(ijk: [usize; 3], node: &mut [f32; 4], bcs: &[GridBc], c:
         }
     }
     let n = c.n_grid as usize;
-    let pos = [ijk[0] as f32 * c.dx, ijk[1] as f32 * c.dx, ijk[2] as f32 * c.dx];
+    let pos = [
+        ijk[0] as f32 * c.dx,
+        ijk[1] as f32 * c.dx,
+        ijk[2] as f32 * c.dx,
+    ];
     for bc in bcs {
         let on = active(bc.start, bc.end, c.time);
         match bc.kind {
@@ -367,7 +372,11 @@ pub fn gather(nodes: &[[f32; 4]], n: usize, st: &Stencil, c: &StepConsts) -> Gat
             *e *= c.inv_dx;
         }
     }
-    Gathered { v, c: cm, grad_v: gv }
+    Gathered {
+        v,
+        c: cm,
+        grad_v: gv,
+    }
 }
 
 /// Finishes G2P for one particle: stores v and C, advects x, updates F to
@@ -394,8 +403,7 @@ pub fn g2p_finish(
     }
     *f = (l * fe).to_array();
     let speed2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-    if !(speed2.is_finite() && x.iter().all(|e| e.is_finite()) && f.iter().all(|e| e.is_finite()))
-    {
+    if !(speed2.is_finite() && x.iter().all(|e| e.is_finite()) && f.iter().all(|e| e.is_finite())) {
         return (HEALTH_NAN, f32::NAN);
     }
     if speed2 > c.max_speed * c.max_speed {
@@ -410,7 +418,10 @@ pub fn g2p_finish(
                 *e = e.clamp(lo, hi);
             }
         } else {
-            let worst = x.iter().cloned().fold(0.0f32, |m, e| if e.abs() > m.abs() { e } else { m });
+            let worst = x
+                .iter()
+                .cloned()
+                .fold(0.0f32, |m, e| if e.abs() > m.abs() { e } else { m });
             return (HEALTH_OUT_OF_DOMAIN, worst);
         }
     }
@@ -424,9 +435,8 @@ pub fn record(h: &mut Health, code: u32, substep: u32, particle: u32, value: f32
     if code == 0 {
         return;
     }
-    let earlier = h.code == 0
-        || substep < h.substep
-        || (substep == h.substep && particle < h.particle);
+    let earlier =
+        h.code == 0 || substep < h.substep || (substep == h.substep && particle < h.particle);
     if earlier {
         *h = Health {
             code,
