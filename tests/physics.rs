@@ -209,3 +209,71 @@ fn cpu_backend_matches_the_reference_kernels() {
         assert!((worst as f64) < 1e-3 * dx, "frame {}: {worst}", k + 1);
     }
 }
+
+/// Mean x-velocity after 0.2 s of a stiff block launched at 1 m/s along a floor collider, and
+/// the x displacement of its bottom particle layer.
+fn sliding_speed(surface: Surface, friction: f64) -> (f64, f64) {
+    let mut cfg = config(
+        32,
+        1e-4,
+        200,
+        PartParams {
+            youngs_modulus_pa: 2e6,
+            ..jelly()
+        },
+    );
+    let dx = cfg.domain.dx();
+    let floor = 4.0 * dx;
+    cfg.boundary = vec![
+        BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        },
+        BoundaryCondition::SurfaceCollider {
+            point: [0.0, 0.0, floor],
+            normal: [0.0, 0.0, 1.0],
+            surface,
+            friction,
+            start_time: 0.0,
+            end_time: f64::INFINITY,
+        },
+    ];
+    let scene = boxed(&cfg, [0.2, 0.4, floor], [0.35, 0.6, floor + 0.1]);
+    let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene.clone(), "slide").unwrap();
+    let mut st = sim.init_state(&cfg.parts).unwrap();
+    sim.backend()
+        .write(&mut st.particles.v, &vec![[1.0, 0.0, 0.0]; scene.len()])
+        .unwrap();
+    for _ in 0..10 {
+        sim.step_frame(&mut st, &cfg.parts).unwrap();
+    }
+    let v = &st.particles.v;
+    let speed = v.iter().map(|p| p[0] as f64).sum::<f64>() / v.len() as f64;
+    let x = &st.particles.x;
+    let bottom: Vec<usize> = (0..scene.len())
+        .filter(|&i| (scene.x[i][2] as f64) < floor + 0.5 * dx)
+        .collect();
+    let shift = bottom
+        .iter()
+        .map(|&i| (x[i][0] - scene.x[i][0]) as f64)
+        .sum::<f64>()
+        / bottom.len() as f64;
+    (speed, shift)
+}
+
+#[test]
+fn surface_colliders_slip_stick_and_rub_with_coulomb_friction() {
+    let (slip, slip_shift) = sliding_speed(Surface::Slip, 0.0);
+    let (rough, _) = sliding_speed(Surface::Friction, 0.3);
+    let (_, sticky_shift) = sliding_speed(Surface::Sticky, 0.0);
+    // Coulomb friction decelerates at mu g: 1 - 0.3 * 9.8 * 0.2 = 0.412 m/s after 0.2 s.
+    eprintln!(
+        "after 0.2 s: slip {slip:.3} m/s (bottom moved {slip_shift:.3} m), friction 0.3 {rough:.3} m/s, sticky bottom moved {sticky_shift:.4} m"
+    );
+    assert!(slip > 0.95 && slip_shift > 0.18, "slip {slip} {slip_shift}");
+    assert!((rough - 0.412).abs() < 0.05, "friction {rough}");
+    assert!(
+        sticky_shift.abs() < 0.01,
+        "sticky bottom moved {sticky_shift}"
+    );
+}

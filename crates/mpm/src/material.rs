@@ -321,8 +321,10 @@ mod tests {
 
     #[test]
     fn validation_names_the_field() {
-        let mut p = PartParams::default();
-        p.poisson_ratio = 0.5;
+        let mut p = PartParams {
+            poisson_ratio: 0.5,
+            ..Default::default()
+        };
         let e = p.validate("parts[1]").unwrap_err().to_string();
         assert!(e.contains("parts[1]") && e.contains("poisson_ratio"), "{e}");
         p.poisson_ratio = 0.3;
