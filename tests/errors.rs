@@ -3,22 +3,11 @@
 
 mod common;
 
-use common::scenes::{boxed, config};
+use common::scenes::{boxed, config, jelly};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    BoundaryCondition, Error, Material, MpmSim, OutOfDomain, PartParams, ParticleSet, SimConfig,
-    Simulator,
+    BoundaryCondition, Error, MpmSim, OutOfDomain, PartParams, ParticleSet, SimConfig, Simulator,
 };
-
-fn jelly(e: f64) -> PartParams {
-    PartParams {
-        material: Material::Jelly,
-        youngs_modulus_pa: e,
-        poisson_ratio: 0.3,
-        density_kg_m3: 1000.0,
-        ..Default::default()
-    }
-}
 
 fn tmp(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("r4d_errors_{}", std::process::id()));

@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::scenes::{bbox, boxed, config, sim};
+use common::scenes::{bbox, boxed, config, jelly, sim};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
     BoundaryCondition, Material, MpmSim, PartParams, ParticleSet, Shape, SimConfig, SimState,
@@ -117,16 +117,6 @@ fn sand_column_settles_near_its_friction_angle() {
         s30 > s20 + 2.0,
         "a higher friction angle must hold a steeper heap"
     );
-}
-
-fn jelly(e: f64) -> PartParams {
-    PartParams {
-        material: Material::Jelly,
-        youngs_modulus_pa: e,
-        poisson_ratio: 0.3,
-        density_kg_m3: 1000.0,
-        ..Default::default()
-    }
 }
 
 /// Max distance of any particle from its rest position, after removing the centroid.

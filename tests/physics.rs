@@ -3,22 +3,12 @@
 
 mod common;
 
-use common::scenes::{boxed, config};
+use common::scenes::{boxed, config, jelly};
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_mpm::{
     reference::ReferenceBackend, BoundaryCondition, ForceForm, Material, MpmKernels, MpmSim,
     PartParams, ParticleSet, SimConfig, Simulator, Surface,
 };
-
-fn jelly() -> PartParams {
-    PartParams {
-        material: Material::Jelly,
-        youngs_modulus_pa: 1e5,
-        poisson_ratio: 0.3,
-        density_kg_m3: 1000.0,
-        ..Default::default()
-    }
-}
 
 fn momentum(m: &[f32], v: &[[f32; 3]]) -> [f64; 3] {
     let mut p = [0.0; 3];
@@ -37,7 +27,7 @@ fn norm(a: [f64; 3]) -> f64 {
 #[test]
 fn mass_and_momentum_are_conserved_in_free_space() {
     for force in [ForceForm::Mls, ForceForm::Classic] {
-        let mut cfg = config(32, 1e-4, 100, jelly());
+        let mut cfg = config(32, 1e-4, 100, jelly(1e5));
         cfg.solver.gravity = [0.0; 3];
         cfg.solver.force = force;
         let scene = boxed(&cfg, [0.4, 0.4, 0.4], [0.6, 0.6, 0.6]);
@@ -71,7 +61,7 @@ fn mass_and_momentum_are_conserved_in_free_space() {
 
 #[test]
 fn free_fall_matches_the_analytic_parabola() {
-    let mut cfg = config(32, 2e-4, 100, jelly());
+    let mut cfg = config(32, 2e-4, 100, jelly(1e5));
     cfg.solver.force = ForceForm::Classic;
     let scene = boxed(&cfg, [0.45, 0.45, 0.8], [0.55, 0.55, 0.9]);
     let dx = cfg.domain.dx();
@@ -100,7 +90,7 @@ fn free_fall_matches_the_analytic_parabola() {
 
 /// Three parts (jelly, metal, sand) with every kind of boundary condition.
 fn mixed_scene() -> (SimConfig, ParticleSet) {
-    let mut cfg = config(32, 1e-4, 100, jelly());
+    let mut cfg = config(32, 1e-4, 100, jelly(1e5));
     cfg.parts.push(PartParams {
         material: Material::Metal,
         youngs_modulus_pa: 1e6,
@@ -219,7 +209,7 @@ fn sliding_speed(surface: Surface, friction: f64) -> (f64, f64) {
         200,
         PartParams {
             youngs_modulus_pa: 2e6,
-            ..jelly()
+            ..jelly(1e5)
         },
     );
     let dx = cfg.domain.dx();

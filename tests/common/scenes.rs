@@ -7,6 +7,17 @@ use r4d_mpm::{
     SolverConfig, TimeConfig,
 };
 
+/// An elastic jelly part: E as given, nu 0.3, density 1000 kg/m^3.
+pub fn jelly(e: f64) -> PartParams {
+    PartParams {
+        material: r4d_mpm::Material::Jelly,
+        youngs_modulus_pa: e,
+        poisson_ratio: 0.3,
+        density_kg_m3: 1000.0,
+        ..Default::default()
+    }
+}
+
 /// A config with one part, no shapes and no boundary conditions.
 pub fn config(n_grid: usize, dt: f64, substeps: u32, part: PartParams) -> SimConfig {
     SimConfig {

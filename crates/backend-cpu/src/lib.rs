@@ -28,6 +28,7 @@ use r4d_mpm::transfer::{
 };
 use r4d_mpm::PartConsts;
 use rayon::prelude::*;
+use std::convert::Infallible;
 use std::sync::Arc;
 
 /// Width (in node layers along x) of the slabs scattered in parallel; must be >= 2.
@@ -57,11 +58,6 @@ impl Default for CpuBackend {
         Self::new(Par::Rayon)
     }
 }
-
-/// The CPU backend never fails.
-#[derive(Debug, thiserror::Error)]
-#[error("unreachable")]
-pub enum Never {}
 
 impl CpuBackend {
     /// A backend with the given parallelism.
@@ -138,25 +134,25 @@ fn for_active_blocks(
 
 impl MpmKernels for CpuBackend {
     type Buf<T: bytemuck::Pod + Send + Sync> = Vec<T>;
-    type Error = Never;
+    type Error = Infallible;
 
     fn name(&self) -> &'static str {
         "cpu"
     }
-    fn upload<T: bytemuck::Pod + Send + Sync>(&self, data: &[T]) -> Result<Vec<T>, Never> {
+    fn upload<T: bytemuck::Pod + Send + Sync>(&self, data: &[T]) -> Result<Vec<T>, Infallible> {
         Ok(data.to_vec())
     }
-    fn zeros<T: bytemuck::Pod + Send + Sync>(&self, len: usize) -> Result<Vec<T>, Never> {
+    fn zeros<T: bytemuck::Pod + Send + Sync>(&self, len: usize) -> Result<Vec<T>, Infallible> {
         Ok(vec![T::zeroed(); len])
     }
-    fn download<T: bytemuck::Pod + Send + Sync>(&self, buf: &Vec<T>) -> Result<Vec<T>, Never> {
+    fn download<T: bytemuck::Pod + Send + Sync>(&self, buf: &Vec<T>) -> Result<Vec<T>, Infallible> {
         Ok(buf.clone())
     }
     fn write<T: bytemuck::Pod + Send + Sync>(
         &self,
         buf: &mut Vec<T>,
         data: &[T],
-    ) -> Result<(), Never> {
+    ) -> Result<(), Infallible> {
         buf.copy_from_slice(data);
         Ok(())
     }
@@ -166,7 +162,7 @@ impl MpmKernels for CpuBackend {
         p: &mut Particles<Self>,
         bcs: &Vec<ParticleBc>,
         c: &StepConsts,
-    ) -> Result<(), Never> {
+    ) -> Result<(), Infallible> {
         let bcs = &bcs[..c.n_particle_bcs as usize];
         let (x0, mass) = (&p.x0, &p.mass);
         self.run(|| {
@@ -183,7 +179,7 @@ impl MpmKernels for CpuBackend {
         parts: &Vec<PartConsts>,
         g: &mut Grid<Self>,
         c: &StepConsts,
-    ) -> Result<(), Never> {
+    ) -> Result<(), Infallible> {
         let n = g.n;
         let np = p.count;
         let nb = blocks_per_axis(n);
@@ -283,7 +279,7 @@ impl MpmKernels for CpuBackend {
         g: &mut Grid<Self>,
         bcs: &Vec<GridBc>,
         c: &StepConsts,
-    ) -> Result<(), Never> {
+    ) -> Result<(), Infallible> {
         let bcs = &bcs[..c.n_grid_bcs as usize];
         let n = g.n;
         self.run(|| {
@@ -299,7 +295,7 @@ impl MpmKernels for CpuBackend {
         p: &mut Particles<Self>,
         g: &mut Grid<Self>,
         c: &StepConsts,
-    ) -> Result<(), Never> {
+    ) -> Result<(), Infallible> {
         let n = g.n;
         let nodes = &g.nodes;
         let worst = self.run(|| {

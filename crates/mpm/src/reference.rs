@@ -11,33 +11,29 @@ use crate::transfer::{
     record, scatter, stencil,
 };
 use bytemuck::Pod;
+use std::convert::Infallible;
 
 /// Single-threaded reference implementation of [`MpmKernels`] on host `Vec`s.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ReferenceBackend;
 
-/// The reference backend never fails.
-#[derive(Debug, thiserror::Error)]
-#[error("unreachable")]
-pub enum Never {}
-
 impl MpmKernels for ReferenceBackend {
     type Buf<T: Pod + Send + Sync> = Vec<T>;
-    type Error = Never;
+    type Error = Infallible;
 
     fn name(&self) -> &'static str {
         "reference"
     }
-    fn upload<T: Pod + Send + Sync>(&self, data: &[T]) -> Result<Vec<T>, Never> {
+    fn upload<T: Pod + Send + Sync>(&self, data: &[T]) -> Result<Vec<T>, Infallible> {
         Ok(data.to_vec())
     }
-    fn zeros<T: Pod + Send + Sync>(&self, len: usize) -> Result<Vec<T>, Never> {
+    fn zeros<T: Pod + Send + Sync>(&self, len: usize) -> Result<Vec<T>, Infallible> {
         Ok(vec![T::zeroed(); len])
     }
-    fn download<T: Pod + Send + Sync>(&self, buf: &Vec<T>) -> Result<Vec<T>, Never> {
+    fn download<T: Pod + Send + Sync>(&self, buf: &Vec<T>) -> Result<Vec<T>, Infallible> {
         Ok(buf.clone())
     }
-    fn write<T: Pod + Send + Sync>(&self, buf: &mut Vec<T>, data: &[T]) -> Result<(), Never> {
+    fn write<T: Pod + Send + Sync>(&self, buf: &mut Vec<T>, data: &[T]) -> Result<(), Infallible> {
         buf.copy_from_slice(data);
         Ok(())
     }
@@ -47,7 +43,7 @@ impl MpmKernels for ReferenceBackend {
         p: &mut Particles<Self>,
         bcs: &Vec<ParticleBc>,
         c: &StepConsts,
-    ) -> Result<(), Never> {
+    ) -> Result<(), Infallible> {
         let bcs = &bcs[..c.n_particle_bcs as usize];
         for i in 0..p.count {
             particle_bcs(p.x0[i], &mut p.v[i], p.mass[i], bcs, c);
@@ -61,7 +57,7 @@ impl MpmKernels for ReferenceBackend {
         parts: &Vec<PartConsts>,
         g: &mut Grid<Self>,
         c: &StepConsts,
-    ) -> Result<(), Never> {
+    ) -> Result<(), Infallible> {
         g.nodes.fill([0.0; 4]);
         for i in 0..p.count {
             let pc = &parts[p.part[i] as usize];
@@ -94,7 +90,7 @@ impl MpmKernels for ReferenceBackend {
         g: &mut Grid<Self>,
         bcs: &Vec<GridBc>,
         c: &StepConsts,
-    ) -> Result<(), Never> {
+    ) -> Result<(), Infallible> {
         let n = g.n;
         let bcs = &bcs[..c.n_grid_bcs as usize];
         for i in 0..n {
@@ -112,7 +108,7 @@ impl MpmKernels for ReferenceBackend {
         p: &mut Particles<Self>,
         g: &mut Grid<Self>,
         c: &StepConsts,
-    ) -> Result<(), Never> {
+    ) -> Result<(), Infallible> {
         let mut h = g.health[0];
         for i in 0..p.count {
             if !in_domain(p.x[i], c.inv_dx, g.n) {
