@@ -4,7 +4,10 @@
 //! These are the one source of truth for the substep math. [`crate::reference`] calls them in
 //! plain loops; the CPU backend calls the same functions and adds only scheduling (particle
 //! ordering, parallel slabs, active blocks). A GPU backend's shaders mirror them and are tested
-//! against the reference.
+//! against the reference. Everything is generic over [`Real`]: `f32` for the simulation, `f64`
+//! for finite-difference checks of the adjoints. Device constants ([`StepConsts`], boundary
+//! conditions) stay `f32` and are converted with [`k`]; time windows and node positions are
+//! compared in `f32`, as the kernels do.
 //!
 //! Grid layout: node `(i, j, k)` sits at `(i dx, j dx, k dx)` and is stored at index
 //! `(i n + j) n + k` as `[momentum or velocity (3), mass]`.
@@ -16,42 +19,50 @@ use crate::kernels::{
     HEALTH_SPEED, OUT_OF_DOMAIN_CLAMP,
 };
 use crate::material::PartConsts;
-use crate::math::Mat3;
+use crate::math::{Mat3, Real};
+
+/// A device constant (stored as f32) in the kernel's scalar type.
+#[inline(always)]
+pub fn k<T: Real>(x: f32) -> T {
+    T::c(x as f64)
+}
 
 /// Quadratic B-spline stencil of a particle: base node and per-axis weights.
 #[derive(Clone, Copy, Debug)]
-pub struct Stencil {
+pub struct Stencil<T> {
     /// Lowest node index per axis (`int(x / dx - 0.5)`).
     pub base: [i32; 3],
     /// Fractional position `x / dx - base`, in [0.5, 1.5).
-    pub fx: [f32; 3],
+    pub fx: [T; 3],
     /// Weights of nodes `base + 0..3` per axis.
-    pub w: [[f32; 3]; 3],
+    pub w: [[T; 3]; 3],
     /// Derivatives of the weights with respect to `x / dx`.
-    pub dw: [[f32; 3]; 3],
+    pub dw: [[T; 3]; 3],
 }
 
 /// The stencil of a particle at `x` (PhysGaussian's convention: truncation toward zero).
 #[inline(always)]
-pub fn stencil(x: [f32; 3], inv_dx: f32) -> Stencil {
+pub fn stencil<T: Real>(x: [T; 3], inv_dx: T) -> Stencil<T> {
+    let z = T::zero();
     let mut s = Stencil {
         base: [0; 3],
-        fx: [0.0; 3],
-        w: [[0.0; 3]; 3],
-        dw: [[0.0; 3]; 3],
+        fx: [z; 3],
+        w: [[z; 3]; 3],
+        dw: [[z; 3]; 3],
     };
+    let (half, one, c15, c075, two) = (T::c(0.5), T::one(), T::c(1.5), T::c(0.75), T::c(2.0));
     for a in 0..3 {
         let g = x[a] * inv_dx;
-        let b = (g - 0.5) as i32;
-        let f = g - b as f32;
+        let b = (g - half).to_i32().unwrap_or(i32::MIN);
+        let f = g - T::c(b as f64);
         s.base[a] = b;
         s.fx[a] = f;
         s.w[a] = [
-            0.5 * (1.5 - f) * (1.5 - f),
-            0.75 - (f - 1.0) * (f - 1.0),
-            0.5 * (f - 0.5) * (f - 0.5),
+            half * (c15 - f) * (c15 - f),
+            c075 - (f - one) * (f - one),
+            half * (f - half) * (f - half),
         ];
-        s.dw[a] = [f - 1.5, -2.0 * (f - 1.0), f - 0.5];
+        s.dw[a] = [f - c15, -two * (f - one), f - half];
     }
     s
 }
@@ -59,11 +70,11 @@ pub fn stencil(x: [f32; 3], inv_dx: f32) -> Stencil {
 /// True when the whole 27-node stencil of `x` lies on the grid (`x / dx` in
 /// `[0.5, n - 1.5)` on every axis) and `x` is finite.
 #[inline(always)]
-pub fn in_domain(x: [f32; 3], inv_dx: f32, n: usize) -> bool {
-    let hi = n as f32 - 1.5;
+pub fn in_domain<T: Real>(x: [T; 3], inv_dx: T, n: usize) -> bool {
+    let (lo, hi) = (T::c(0.5), T::c(n as f64 - 1.5));
     x.iter().all(|&xa| {
         let g = xa * inv_dx;
-        g.is_finite() && (0.5..hi).contains(&g)
+        g.is_finite() && g >= lo && g < hi
     })
 }
 
@@ -73,67 +84,82 @@ fn active(start: f32, end: f32, t: f32) -> bool {
     start <= t && t < end
 }
 
+/// Whether a particle boundary condition acts on the particle with initial position `x0` in
+/// this substep (selection by initial position, strict half extents, time window).
+#[inline(always)]
+pub fn particle_bc_applies(bc: &ParticleBc, x0: [f32; 3], c: &StepConsts) -> bool {
+    active(bc.start, bc.end, c.time) && (0..3).all(|a| (x0[a] - bc.point[a]).abs() < bc.size[a])
+}
+
 /// Applies the particle boundary conditions (in order) to one particle's velocity.
 #[inline]
-pub fn particle_bcs(x0: [f32; 3], v: &mut [f32; 3], mass: f32, bcs: &[ParticleBc], c: &StepConsts) {
+pub fn particle_bcs<T: Real>(
+    x0: [f32; 3],
+    v: &mut [T; 3],
+    mass: T,
+    bcs: &[ParticleBc],
+    c: &StepConsts,
+) {
     for bc in bcs {
-        if !active(bc.start, bc.end, c.time) {
-            continue;
-        }
-        let inside = (0..3).all(|a| (x0[a] - bc.point[a]).abs() < bc.size[a]);
-        if !inside {
+        if !particle_bc_applies(bc, x0, c) {
             continue;
         }
         match bc.kind {
             PBC_IMPULSE => {
                 for a in 0..3 {
-                    v[a] += bc.vector[a] / mass * c.dt;
+                    v[a] += k::<T>(bc.vector[a]) / mass * k(c.dt);
                 }
             }
-            PBC_VELOCITY => *v = bc.vector,
+            PBC_VELOCITY => *v = bc.vector.map(k),
             _ => {}
         }
     }
 }
 
+/// The factor turning the Kirchhoff stress into the scatter's stress term: `-dt V0 / dx`
+/// (classic form, multiplied by the weight gradient in units of `1 / dx`) or
+/// `-dt V0 4 / dx^2` (MLS form, multiplied by `w dpos`).
+#[inline(always)]
+pub fn stress_scale<T: Real>(vol0: T, c: &StepConsts) -> T {
+    let (dt, inv_dx) = (k::<T>(c.dt), k::<T>(c.inv_dx));
+    if c.force_form == FORCE_MLS {
+        -dt * vol0 * T::c(4.0) * inv_dx * inv_dx
+    } else {
+        -dt * vol0 * inv_dx
+    }
+}
+
 /// The particle stage of P2G: return mapping and Kirchhoff stress.
 ///
-/// Updates `f` from F_trial to F_elastic and `plastic` in place, and returns the matrix that the
-/// scatter multiplies by the weight gradient (classic form: `-dt V0 tau / dx`, so that
-/// `S (dw/d(x/dx))` is the node force times dt) or by `w dpos` (MLS form:
-/// `-dt V0 (4 / dx^2) tau`).
+/// Updates `f` from F_trial to F_elastic and `plastic` in place, and returns the stress term
+/// of the scatter: the symmetrised Kirchhoff stress times [`stress_scale`].
 #[inline(always)]
-pub fn particle_stress(
-    f: &mut [f32; 9],
-    plastic: &mut [f32; 2],
-    c_affine: &[f32; 9],
-    vol0: f32,
+pub fn particle_stress<T: Real>(
+    f: &mut [T; 9],
+    plastic: &mut [T; 2],
+    c_affine: &[T; 9],
+    vol0: T,
     pc: &PartConsts,
     c: &StepConsts,
-) -> [f32; 9] {
+) -> [T; 9] {
     let grad_v = Mat3::from_array(*c_affine);
-    let (fe, tau) = stress_update(Mat3::from_array(*f), pc, plastic, &grad_v, c.dt);
+    let (fe, tau) = stress_update(Mat3::from_array(*f), pc, plastic, &grad_v, k(c.dt));
     *f = fe.to_array();
-    let tau = tau.sym();
-    let k = if c.force_form == FORCE_MLS {
-        -c.dt * vol0 * 4.0 * c.inv_dx * c.inv_dx
-    } else {
-        -c.dt * vol0 * c.inv_dx
-    };
-    tau.scaled(k).to_array()
+    tau.sym().scaled(stress_scale(vol0, c)).to_array()
 }
 
 /// The APIC matrix used by the scatter, after RPIC damping.
 #[inline(always)]
-pub fn damped_affine(cm: &[f32; 9], r: f32) -> [f32; 9] {
+pub fn damped_affine<T: Real>(cm: &[T; 9], r: f32) -> [T; 9] {
     if r < -0.001 {
-        return [0.0; 9];
+        return [T::zero(); 9];
     }
     if r == 0.0 {
         return *cm;
     }
     let m = Mat3::from_array(*cm);
-    (m.scaled(1.0 - r) + (m - m.transpose()).scaled(0.5 * r)).to_array()
+    let r = k::<T>(r);
+    (m.scaled(T::one() - r) + (m - m.transpose()).scaled(T::c(0.5) * r)).to_array()
 }
 
 /// Scatters one particle's mass, APIC momentum and stress force into `nodes`, a slab of the
@@ -142,20 +168,20 @@ pub fn damped_affine(cm: &[f32; 9], r: f32) -> [f32; 9] {
 /// `s` is the particle stage's stress term, `cm` the (damped) APIC matrix.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub fn scatter(
-    nodes: &mut [[f32; 4]],
+pub fn scatter<T: Real>(
+    nodes: &mut [[T; 4]],
     x_lo: usize,
     n: usize,
-    st: &Stencil,
-    v: [f32; 3],
-    cm: &[f32; 9],
-    mass: f32,
-    s: &[f32; 9],
+    st: &Stencil<T>,
+    v: [T; 3],
+    cm: &[T; 9],
+    mass: T,
+    s: &[T; 9],
     c: &StepConsts,
 ) {
-    let dx = c.dx;
+    let dx = k::<T>(c.dx);
     // Momentum of node offsets (i, j, k): w (m v + m C dpos) + stress term.
-    let mut mc = [0.0f32; 9];
+    let mut mc = [T::zero(); 9];
     for e in 0..9 {
         mc[e] = mass * cm[e];
     }
@@ -167,8 +193,8 @@ pub fn scatter(
         }
     }
     let mv = [mass * v[0], mass * v[1], mass * v[2]];
-    let dp: [[f32; 3]; 3] =
-        std::array::from_fn(|a| std::array::from_fn(|o| (o as f32 - st.fx[a]) * dx));
+    let dp: [[T; 3]; 3] =
+        std::array::from_fn(|a| std::array::from_fn(|o| (T::c(o as f64) - st.fx[a]) * dx));
     let (w0, w1, w2) = (st.w[0], st.w[1], st.w[2]);
     let (d0, d1, d2) = (st.dw[0], st.dw[1], st.dw[2]);
     let bz = st.base[2] as usize;
@@ -190,7 +216,7 @@ pub fn scatter(
             // Per (i, j): A = w_ij a_ij, B = w_ij mC[:,2], P/Q from the stress (classic form).
             let mut a = [wij * aij[0], wij * aij[1], wij * aij[2]];
             let b = [wij * mc[2], wij * mc[5], wij * mc[8]];
-            let mut q = [0.0f32; 3];
+            let mut q = [T::zero(); 3];
             if !mls {
                 let gx = d0[i] * w1[j];
                 let gy = w0[i] * d1[j];
@@ -202,10 +228,10 @@ pub fn scatter(
             let m_ij = wij * mass;
             let base = (row_i + st.base[1] as usize + j) * n + bz;
             let cell = &mut nodes[base..base + 3];
-            for (k, node) in cell.iter_mut().enumerate() {
-                let wk = w2[k];
-                let wdk = w2[k] * dp[2][k];
-                let dk = d2[k];
+            for (o, node) in cell.iter_mut().enumerate() {
+                let wk = w2[o];
+                let wdk = w2[o] * dp[2][o];
+                let dk = d2[o];
                 node[0] += wk * a[0] + wdk * b[0] + dk * q[0];
                 node[1] += wk * a[1] + wdk * b[1] + dk * q[1];
                 node[2] += wk * a[2] + wdk * b[2] + dk * q[2];
@@ -218,85 +244,117 @@ pub fn scatter(
 /// Updates one grid node: momentum to velocity plus gravity, damping, then the boundary
 /// conditions in order. `ijk` is the node index.
 #[inline]
-pub fn grid_node_update(ijk: [usize; 3], node: &mut [f32; 4], bcs: &[GridBc], c: &StepConsts) {
+pub fn grid_node_update<T: Real>(
+    ijk: [usize; 3],
+    node: &mut [T; 4],
+    bcs: &[GridBc],
+    c: &StepConsts,
+) {
     let m = node[3];
-    let mut v = if m > 1e-15 {
-        let inv = 1.0 / m;
+    let dt = k::<T>(c.dt);
+    let mut v = if m > T::c(1e-15) {
+        let inv = T::one() / m;
         [
-            node[0] * inv + c.dt * c.gravity[0],
-            node[1] * inv + c.dt * c.gravity[1],
-            node[2] * inv + c.dt * c.gravity[2],
+            node[0] * inv + dt * k(c.gravity[0]),
+            node[1] * inv + dt * k(c.gravity[1]),
+            node[2] * inv + dt * k(c.gravity[2]),
         ]
     } else {
-        [0.0; 3]
+        [T::zero(); 3]
     };
     if c.grid_v_damping < 1.0 {
+        let d = k::<T>(c.grid_v_damping);
         for x in v.iter_mut() {
-            *x *= c.grid_v_damping;
+            *x = *x * d;
         }
     }
-    let n = c.n_grid as usize;
-    let pos = [
+    apply_grid_bcs(ijk, &mut v, bcs, c);
+    node[0] = v[0];
+    node[1] = v[1];
+    node[2] = v[2];
+}
+
+/// The node position `ijk dx` in f32, as the kernels compare it.
+#[inline(always)]
+pub fn node_pos(ijk: [usize; 3], c: &StepConsts) -> [f32; 3] {
+    [
         ijk[0] as f32 * c.dx,
         ijk[1] as f32 * c.dx,
         ijk[2] as f32 * c.dx,
-    ];
+    ]
+}
+
+/// Whether the node `ijk` lies strictly behind an active collider plane.
+#[inline(always)]
+pub fn behind_surface(bc: &GridBc, ijk: [usize; 3], c: &StepConsts) -> bool {
+    let pos = node_pos(ijk, c);
+    let d: f32 = (0..3).map(|a| (pos[a] - bc.point[a]) * bc.axis[a]).sum();
+    active(bc.start, bc.end, c.time) && d < 0.0
+}
+
+/// Whether a (moving) cuboid prescribes the velocity of node `ijk` in this substep.
+#[inline(always)]
+pub fn inside_cuboid(bc: &GridBc, ijk: [usize; 3], c: &StepConsts) -> bool {
+    let pos = node_pos(ijk, c);
+    let shift = c.time - bc.start;
+    active(bc.start, bc.end, c.time)
+        && (0..3).all(|a| (pos[a] - (bc.point[a] + bc.velocity[a] * shift)).abs() < bc.axis[a])
+}
+
+/// Whether a cuboid with PhysGaussian's `reset` zeroes the whole grid in this substep.
+#[inline(always)]
+pub fn cuboid_resets(bc: &GridBc, c: &StepConsts) -> bool {
+    !active(bc.start, bc.end, c.time) && bc.layers == 1 && c.time < bc.end + 15.0 * c.dt
+}
+
+/// Applies the grid boundary conditions, in order, to a node velocity.
+#[inline]
+pub fn apply_grid_bcs<T: Real>(ijk: [usize; 3], v: &mut [T; 3], bcs: &[GridBc], c: &StepConsts) {
+    let n = c.n_grid as usize;
+    let z = T::zero();
     for bc in bcs {
-        let on = active(bc.start, bc.end, c.time);
         match bc.kind {
-            BC_BOUNDING_BOX if on => {
+            BC_BOUNDING_BOX if active(bc.start, bc.end, c.time) => {
                 let l = bc.layers as usize;
                 if bc.mode == 0 {
                     if (0..3).any(|a| ijk[a] < l || ijk[a] >= n - l) {
-                        v = [0.0; 3];
+                        *v = [z; 3];
                     }
                 } else {
                     for a in 0..3 {
-                        if ijk[a] < l && v[a] < 0.0 {
-                            v[a] = 0.0;
-                        }
-                        if ijk[a] >= n - l && v[a] > 0.0 {
-                            v[a] = 0.0;
+                        if (ijk[a] < l && v[a] < z) || (ijk[a] >= n - l && v[a] > z) {
+                            v[a] = z;
                         }
                     }
                 }
             }
             BC_CUBOID => {
-                if on {
-                    let shift = c.time - bc.start;
-                    let inside = (0..3).all(|a| {
-                        (pos[a] - (bc.point[a] + bc.velocity[a] * shift)).abs() < bc.axis[a]
-                    });
-                    if inside {
-                        v = bc.velocity;
-                    }
-                } else if bc.layers == 1 && c.time < bc.end + 15.0 * c.dt {
-                    v = [0.0; 3];
+                if inside_cuboid(bc, ijk, c) {
+                    *v = bc.velocity.map(k);
+                } else if cuboid_resets(bc, c) {
+                    *v = [z; 3];
                 }
             }
-            BC_SURFACE if on => {
-                let nrm = bc.axis;
-                let d: f32 = (0..3).map(|a| (pos[a] - bc.point[a]) * nrm[a]).sum();
-                if d < 0.0 {
-                    let vn: f32 = (0..3).map(|a| v[a] * nrm[a]).sum();
-                    match bc.mode {
-                        0 => v = [0.0; 3],
-                        1 => {
-                            for a in 0..3 {
-                                v[a] -= vn * nrm[a];
-                            }
+            BC_SURFACE if behind_surface(bc, ijk, c) => {
+                let nrm: [T; 3] = bc.axis.map(k);
+                let vn = v[0] * nrm[0] + v[1] * nrm[1] + v[2] * nrm[2];
+                match bc.mode {
+                    0 => *v = [z; 3],
+                    1 => {
+                        for a in 0..3 {
+                            v[a] = v[a] - vn * nrm[a];
                         }
-                        _ => {
-                            if vn < 0.0 {
-                                for a in 0..3 {
-                                    v[a] -= vn * nrm[a];
-                                }
-                                let vt = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-                                if vt > 1e-20 {
-                                    let k = (vt + vn * bc.friction).max(0.0) / vt;
-                                    for x in v.iter_mut() {
-                                        *x *= k;
-                                    }
+                    }
+                    _ => {
+                        if vn < z {
+                            for a in 0..3 {
+                                v[a] = v[a] - vn * nrm[a];
+                            }
+                            let vt = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                            if vt > T::c(1e-20) {
+                                let f = (vt + vn * k(bc.friction)).max(z) / vt;
+                                for x in v.iter_mut() {
+                                    *x = *x * f;
                                 }
                             }
                         }
@@ -306,45 +364,44 @@ pub fn grid_node_update(ijk: [usize; 3], node: &mut [f32; 4], bcs: &[GridBc], c:
             _ => {}
         }
     }
-    node[0] = v[0];
-    node[1] = v[1];
-    node[2] = v[2];
 }
 
 /// What G2P gathers for one particle.
 #[derive(Clone, Copy, Debug)]
-pub struct Gathered {
+pub struct Gathered<T> {
     /// Interpolated velocity.
-    pub v: [f32; 3],
+    pub v: [T; 3],
     /// APIC matrix `C = (4 / dx^2) sum w v dpos^T`.
-    pub c: [f32; 9],
+    pub c: [T; 9],
     /// Velocity gradient `sum v grad_w^T` (classic form) or C (MLS form).
-    pub grad_v: [f32; 9],
+    pub grad_v: [T; 9],
 }
 
 /// Gathers velocity, APIC matrix and velocity gradient from the grid (full grid, x_lo = 0).
 #[inline(always)]
-pub fn gather(nodes: &[[f32; 4]], n: usize, st: &Stencil, c: &StepConsts) -> Gathered {
+pub fn gather<T: Real>(nodes: &[[T; 4]], n: usize, st: &Stencil<T>, c: &StepConsts) -> Gathered<T> {
     let (w0, w1, w2) = (st.w[0], st.w[1], st.w[2]);
     let (d0, d1, d2) = (st.dw[0], st.dw[1], st.dw[2]);
-    let dp: [[f32; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|o| o as f32 - st.fx[a]));
-    let mut v = [0.0f32; 3];
-    let mut cm = [0.0f32; 9];
-    let mut gv = [0.0f32; 9];
+    let dp: [[T; 3]; 3] =
+        std::array::from_fn(|a| std::array::from_fn(|o| T::c(o as f64) - st.fx[a]));
+    let z = T::zero();
+    let mut v = [z; 3];
+    let mut cm = [z; 9];
+    let mut gv = [z; 9];
     let bz = st.base[2] as usize;
     for i in 0..3 {
         for j in 0..3 {
             let base = ((st.base[0] as usize + i) * n + st.base[1] as usize + j) * n + bz;
             let cell = &nodes[base..base + 3];
             // Sums over k: s0 = sum w_k v, s1 = sum w_k dpz_k v, s2 = sum dw_k v.
-            let mut s0 = [0.0f32; 3];
-            let mut s1 = [0.0f32; 3];
-            let mut s2 = [0.0f32; 3];
-            for (k, node) in cell.iter().enumerate() {
+            let mut s0 = [z; 3];
+            let mut s1 = [z; 3];
+            let mut s2 = [z; 3];
+            for (o, node) in cell.iter().enumerate() {
                 for a in 0..3 {
-                    s0[a] += w2[k] * node[a];
-                    s1[a] += w2[k] * dp[2][k] * node[a];
-                    s2[a] += d2[k] * node[a];
+                    s0[a] += w2[o] * node[a];
+                    s1[a] += w2[o] * dp[2][o] * node[a];
+                    s2[a] += d2[o] * node[a];
                 }
             }
             let wij = w0[i] * w1[j];
@@ -361,15 +418,16 @@ pub fn gather(nodes: &[[f32; 4]], n: usize, st: &Stencil, c: &StepConsts) -> Gat
             }
         }
     }
-    let kc = 4.0 * c.inv_dx;
+    let inv_dx = k::<T>(c.inv_dx);
+    let kc = T::c(4.0) * inv_dx;
     for e in cm.iter_mut() {
-        *e *= kc;
+        *e = *e * kc;
     }
     if c.force_form == FORCE_MLS {
         gv = cm;
     } else {
         for e in gv.iter_mut() {
-            *e *= c.inv_dx;
+            *e = *e * inv_dx;
         }
     }
     Gathered {
@@ -383,46 +441,48 @@ pub fn gather(nodes: &[[f32; 4]], n: usize, st: &Stencil, c: &StepConsts) -> Gat
 /// `(I + dt grad_v) F_elastic`, applies the out-of-domain policy and returns the health code
 /// (0 when healthy) and the offending value.
 #[inline(always)]
-pub fn g2p_finish(
-    g: &Gathered,
-    x: &mut [f32; 3],
-    v: &mut [f32; 3],
-    cm: &mut [f32; 9],
-    f: &mut [f32; 9],
+pub fn g2p_finish<T: Real>(
+    g: &Gathered<T>,
+    x: &mut [T; 3],
+    v: &mut [T; 3],
+    cm: &mut [T; 9],
+    f: &mut [T; 9],
     c: &StepConsts,
 ) -> (u32, f32) {
+    let dt = k::<T>(c.dt);
     *v = g.v;
     *cm = g.c;
     for a in 0..3 {
-        x[a] += c.dt * g.v[a];
+        x[a] += dt * g.v[a];
     }
     let fe = Mat3::from_array(*f);
-    let mut l = Mat3::from_array(g.grad_v).scaled(c.dt);
+    let mut l = Mat3::from_array(g.grad_v).scaled(dt);
     for a in 0..3 {
-        l.0[a][a] += 1.0;
+        l.0[a][a] += T::one();
     }
     *f = (l * fe).to_array();
     let speed2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
     if !(speed2.is_finite() && x.iter().all(|e| e.is_finite()) && f.iter().all(|e| e.is_finite())) {
         return (HEALTH_NAN, f32::NAN);
     }
-    if speed2 > c.max_speed * c.max_speed {
-        return (HEALTH_SPEED, speed2.sqrt());
+    let max_speed = k::<T>(c.max_speed);
+    if speed2 > max_speed * max_speed {
+        return (HEALTH_SPEED, speed2.sqrt().f64() as f32);
     }
     let n = c.n_grid as usize;
-    if !in_domain(*x, c.inv_dx, n) {
+    if !in_domain(*x, k(c.inv_dx), n) {
         if c.out_of_domain == OUT_OF_DOMAIN_CLAMP {
-            let lo = 0.5 * c.dx * 1.0001;
-            let hi = (n as f32 - 1.5) * c.dx * 0.9999;
+            let lo = T::c(0.5 * c.dx as f64 * 1.0001);
+            let hi = T::c((n as f64 - 1.5) * c.dx as f64 * 0.9999);
             for e in x.iter_mut() {
-                *e = e.clamp(lo, hi);
+                *e = e.max(lo).min(hi);
             }
         } else {
             let worst = x
                 .iter()
                 .cloned()
-                .fold(0.0f32, |m, e| if e.abs() > m.abs() { e } else { m });
-            return (HEALTH_OUT_OF_DOMAIN, worst);
+                .fold(T::zero(), |m, e| if e.abs() > m.abs() { e } else { m });
+            return (HEALTH_OUT_OF_DOMAIN, worst.f64() as f32);
         }
     }
     (0, 0.0)
