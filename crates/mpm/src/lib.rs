@@ -39,6 +39,7 @@
 //! assert!(x[0][2] < sim.scene().x[0][2]); // fell under gravity
 //! ```
 
+pub mod adjoint;
 pub mod boundary;
 pub mod config;
 pub mod constitutive;

@@ -1,0 +1,338 @@
+//! Finite-difference checks (f64, central differences) of the transfer VJPs.
+
+use super::transfer_vjp::*;
+use crate::boundary::{BoundaryCondition, Surface};
+use crate::kernels::{GridBc, ParticleBc, StepConsts, FORCE_CLASSIC, FORCE_MLS};
+use crate::transfer::{apply_grid_bcs, g2p_finish, gather, grid_node_update, scatter, stencil};
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+    fn arr<const N: usize>(&mut self, s: f64) -> [f64; N] {
+        std::array::from_fn(|_| s * self.next())
+    }
+}
+
+const N: usize = 8;
+
+fn consts(force: u32) -> StepConsts {
+    StepConsts {
+        gravity: [0.3, -0.2, -9.8],
+        dt: 1e-3,
+        dx: 0.125,
+        inv_dx: 8.0,
+        n_grid: N as u32,
+        substep: 0,
+        time: 0.05,
+        rpic_damping: 0.0,
+        grid_v_damping: 0.9,
+        force_form: force,
+        n_grid_bcs: 0,
+        n_particle_bcs: 0,
+        out_of_domain: 0,
+        max_speed: 1e9,
+    }
+}
+
+fn assert_close(what: &str, analytic: f64, fd: f64, scale: f64) {
+    let err = (analytic - fd).abs() / scale.max(1e-12);
+    assert!(
+        err < 1e-6,
+        "{what}: analytic {analytic:e} vs fd {fd:e} (rel err {err:e})"
+    );
+}
+
+fn fd<F: Fn(f64) -> f64>(f: F, x: f64) -> f64 {
+    let h = 1e-6 * x.abs().max(1.0);
+    (f(x + h) - f(x - h)) / (2.0 * h)
+}
+
+/// Particle inputs of a scatter, as one flat vector: x(3) v(3) a(9) m(1) s(9).
+fn scatter_loss(p: &[f64; 25], bar: &[[f64; 4]], c: &StepConsts) -> f64 {
+    let x = [p[0], p[1], p[2]];
+    let v = [p[3], p[4], p[5]];
+    let a: [f64; 9] = std::array::from_fn(|e| p[6 + e]);
+    let m = p[15];
+    let s: [f64; 9] = std::array::from_fn(|e| p[16 + e]);
+    let mut nodes = vec![[0.0f64; 4]; N * N * N];
+    let st = stencil(x, c.inv_dx as f64);
+    scatter(&mut nodes, 0, N, &st, v, &a, m, &s, c);
+    nodes
+        .iter()
+        .zip(bar)
+        .map(|(n, b)| (0..4).map(|q| n[q] * b[q]).sum::<f64>())
+        .sum()
+}
+
+#[test]
+fn scatter_vjp_matches_finite_differences() {
+    for force in [FORCE_CLASSIC, FORCE_MLS] {
+        let c = consts(force);
+        let mut r = Rng(7 + force as u64);
+        for _ in 0..5 {
+            let mut p = [0.0f64; 25];
+            for a in 0..3 {
+                p[a] = 0.4 + 0.2 * r.next().abs() + 0.01 * a as f64;
+            }
+            for e in 3..25 {
+                p[e] = r.next();
+            }
+            p[15] = 0.5 + r.next().abs();
+            let bar: Vec<[f64; 4]> = (0..N * N * N).map(|_| r.arr(1.0)).collect();
+            let mut out = ScatterBar::default();
+            let st = stencil([p[0], p[1], p[2]], 8.0);
+            let a: [f64; 9] = std::array::from_fn(|e| p[6 + e]);
+            let s: [f64; 9] = std::array::from_fn(|e| p[16 + e]);
+            scatter_vjp(
+                &bar,
+                N,
+                &st,
+                [p[3], p[4], p[5]],
+                &a,
+                p[15],
+                &s,
+                &c,
+                &mut out,
+            );
+            let mut analytic = [0.0; 25];
+            analytic[..3].copy_from_slice(&out.x);
+            analytic[3..6].copy_from_slice(&out.v);
+            analytic[6..15].copy_from_slice(&out.a);
+            analytic[15] = out.mass;
+            analytic[16..25].copy_from_slice(&out.s);
+            let scale = analytic.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for e in 0..25 {
+                let g = fd(
+                    |t| {
+                        let mut q = p;
+                        q[e] = t;
+                        scatter_loss(&q, &bar, &c)
+                    },
+                    p[e],
+                );
+                assert_close(&format!("force {force} input {e}"), analytic[e], g, scale);
+            }
+        }
+    }
+}
+
+fn grid_bcs(c: &StepConsts) -> Vec<GridBc> {
+    let _ = c;
+    [
+        BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        },
+        BoundaryCondition::SurfaceCollider {
+            point: [0.0, 0.0, 0.3],
+            normal: [0.1, 0.2, 1.0],
+            surface: Surface::Friction,
+            friction: 0.3,
+            start_time: 0.0,
+            end_time: 1.0,
+        },
+        BoundaryCondition::SurfaceCollider {
+            point: [0.0, 0.45, 0.0],
+            normal: [0.0, -1.0, 0.3],
+            surface: Surface::Slip,
+            friction: 0.0,
+            start_time: 0.0,
+            end_time: 1.0,
+        },
+        BoundaryCondition::Cuboid {
+            point: [0.9, 0.9, 0.9],
+            size: [0.1, 0.1, 0.1],
+            velocity: [0.0, 0.0, 1.0],
+            start_time: 0.0,
+            end_time: 1.0,
+            reset: false,
+        },
+    ]
+    .iter()
+    .filter_map(|b| b.grid_bc())
+    .collect()
+}
+
+#[test]
+fn grid_node_update_vjp_matches_finite_differences_for_every_condition() {
+    let c = consts(FORCE_CLASSIC);
+    let bcs = grid_bcs(&c);
+    let mut r = Rng(11);
+    let mut fired = [false; 4];
+    for ijk in [
+        [1, 4, 4],
+        [4, 4, 1],
+        [4, 4, 2],
+        [2, 2, 2],
+        [4, 4, 4],
+        [4, 6, 5],
+        [6, 1, 6],
+        [7, 7, 7],
+    ] {
+        for _ in 0..6 {
+            let node: [f64; 4] = [r.next(), r.next(), 2.0 * r.next(), 0.5 + r.next().abs()];
+            let vb: [f64; 3] = r.arr(1.0);
+            // Which conditions change this node's velocity (to assert they fired).
+            let mut u = [
+                node[0] / node[3],
+                node[1] / node[3],
+                node[2] / node[3] - 9.8e-3,
+            ];
+            for (bi, bc) in bcs.iter().enumerate() {
+                let before = u;
+                apply_grid_bcs(ijk, &mut u, std::slice::from_ref(bc), &c);
+                if before != u {
+                    fired[bi] = true;
+                }
+            }
+            let loss = |nd: [f64; 4]| {
+                let mut n2 = nd;
+                grid_node_update(ijk, &mut n2, &bcs, &c);
+                (0..3).map(|a| n2[a] * vb[a]).sum::<f64>()
+            };
+            let analytic = grid_node_update_vjp(ijk, node, &bcs, &c, vb);
+            for e in 0..4 {
+                let g = fd(
+                    |t| {
+                        let mut q = node;
+                        q[e] = t;
+                        loss(q)
+                    },
+                    node[e],
+                );
+                assert_close(&format!("node {ijk:?} input {e}"), analytic[e], g, 1.0);
+            }
+        }
+    }
+    assert!(
+        fired.iter().all(|&f| f),
+        "every condition must act in the check: {fired:?}"
+    );
+}
+
+#[test]
+fn g2p_vjp_matches_finite_differences() {
+    for force in [FORCE_CLASSIC, FORCE_MLS] {
+        let c = consts(force);
+        let mut r = Rng(23 + force as u64);
+        let nodes: Vec<[f64; 4]> = (0..N * N * N)
+            .map(|_| [r.next(), r.next(), r.next(), 1.0])
+            .collect();
+        let x = [0.41, 0.52, 0.47];
+        let fe: [f64; 9] =
+            std::array::from_fn(|e| if e % 4 == 0 { 1.0 } else { 0.0 } + 0.1 * r.next());
+        let (xb, vb, cb, fb): ([f64; 3], [f64; 3], [f64; 9], [f64; 9]) =
+            (r.arr(1.0), r.arr(1.0), r.arr(1.0), r.arr(1.0));
+        let loss = |x: [f64; 3], fe: [f64; 9], nodes: &[[f64; 4]]| {
+            let st = stencil(x, 8.0);
+            let g = gather(nodes, N, &st, &c);
+            let (mut x2, mut v2, mut c2, mut f2) = (x, [0.0; 3], [0.0; 9], fe);
+            g2p_finish(&g, &mut x2, &mut v2, &mut c2, &mut f2, &c);
+            (0..3).map(|a| x2[a] * xb[a] + v2[a] * vb[a]).sum::<f64>()
+                + (0..9).map(|e| c2[e] * cb[e] + f2[e] * fb[e]).sum::<f64>()
+        };
+        let mut nodes_bar = vec![[0.0f64; 4]; N * N * N];
+        let out = g2p_vjp(&nodes, N, x, &fe, &c, xb, vb, &cb, &fb, &mut nodes_bar);
+        let scale = out
+            .x
+            .iter()
+            .chain(&out.f_elastic)
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        for a in 0..3 {
+            let g = fd(
+                |t| {
+                    let mut q = x;
+                    q[a] = t;
+                    loss(q, fe, &nodes)
+                },
+                x[a],
+            );
+            assert_close(&format!("force {force} x[{a}]"), out.x[a], g, scale);
+        }
+        for e in 0..9 {
+            let g = fd(
+                |t| {
+                    let mut q = fe;
+                    q[e] = t;
+                    loss(x, q, &nodes)
+                },
+                fe[e],
+            );
+            assert_close(
+                &format!("force {force} Fe[{e}]"),
+                out.f_elastic[e],
+                g,
+                scale,
+            );
+        }
+        let st = stencil(x, 8.0);
+        let base = ((st.base[0] as usize * N + st.base[1] as usize) * N) + st.base[2] as usize;
+        for idx in [
+            base,
+            base + 1,
+            base + N + 2,
+            base + N * N + N,
+            base + 2 * N * N + 2 * N + 2,
+        ] {
+            for q in 0..3 {
+                let g = fd(
+                    |t| {
+                        let mut n2 = nodes.clone();
+                        n2[idx][q] = t;
+                        loss(x, fe, &n2)
+                    },
+                    nodes[idx][q],
+                );
+                assert_close(
+                    &format!("force {force} node {idx}[{q}]"),
+                    nodes_bar[idx][q],
+                    g,
+                    scale,
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn particle_bcs_vjp_matches_finite_differences() {
+    let c = consts(FORCE_CLASSIC);
+    let bcs: Vec<ParticleBc> = [
+        BoundaryCondition::ParticleImpulse {
+            force: [0.3, -0.2, 0.5],
+            point: [0.5; 3],
+            size: [0.2; 3],
+            num_dt: 100,
+            start_time: 0.0,
+        },
+        BoundaryCondition::ParticleImpulse {
+            force: [0.1, 0.0, -0.7],
+            point: [0.5; 3],
+            size: [0.2; 3],
+            num_dt: 100,
+            start_time: 0.0,
+        },
+    ]
+    .iter()
+    .filter_map(|b| b.particle_bc(1e-3))
+    .collect();
+    let x0 = [0.5f32; 3];
+    let vbar = [0.3, -1.0, 0.7];
+    let m = 0.8f64;
+    let loss = |m: f64| {
+        let mut v = [0.1, 0.2, 0.3];
+        crate::transfer::particle_bcs(x0, &mut v, m, &bcs, &c);
+        (0..3).map(|a| v[a] * vbar[a]).sum::<f64>()
+    };
+    let mut vb = vbar;
+    let mut mb = 0.0;
+    particle_bcs_vjp(x0, m, &bcs, &c, &mut vb, &mut mb);
+    assert_close("mass", mb, fd(loss, m), 1.0);
+    assert_eq!(vb, vbar);
+}
