@@ -1,20 +1,31 @@
 //! Constitutive models: the return mapping (plastic projection of the trial deformation
 //! gradient) and the Kirchhoff stress of every [`Material`](crate::Material).
 //!
-//! These per-particle functions are the single source of truth for the material math: the
-//! reference kernels, the CPU backend and (later) the shaders' tests all call or mirror them.
+//! Every model except the fluid is *isotropic*: with the SVD `F_trial = U diag(s) V^T`,
+//!
+//! * the return mapping gives `F_elastic = U diag(s_e) V^T`,
+//! * the Kirchhoff stress is `tau = U diag(t) U^T`,
+//!
+//! where `(s_e, t, plastic state')` are functions of the singular values `s`, the plastic state
+//! and the material parameters only. [`scalar_model`] computes exactly that scalar part, once,
+//! generic over [`Scalar`]: plain `f32`/`f64` for simulation, and forward-mode dual numbers in
+//! [`crate::adjoint`] for its Jacobian. The matrix parts (SVD, reassembly) are in
+//! [`stress_update`], and their adjoints in `crate::adjoint`.
+//!
 //! Formulas follow PhysGaussian's `mpm_utils.py` (Xie et al. 2024) where it has the model, with
 //! these deliberate differences:
 //!
-//! * The SVD of the elastic F is reused for the stress instead of being recomputed (same
-//!   numbers up to round-off).
+//! * The stress uses the SVD of the trial F (the elastic F shares its U and V) instead of a
+//!   second SVD of the elastic F (same numbers up to round-off).
 //! * Sand's stress takes `log(max(|s|, 1e-14))` like its return mapping does, so an inverted
 //!   element gives a finite stress instead of NaN.
 //! * Snow is Stomakhin et al. 2013 (PhysGaussian's snow branch computes no stress).
-//! * Fluid is our addition (weakly compressible Newtonian).
+//! * Fluid is our addition (weakly compressible Newtonian; not isotropic in the sense above,
+//!   handled apart, and not differentiated yet).
 
 use crate::material::PartConsts;
-use crate::math::{norm, svd3, Mat3, Real, Svd3, Vec3};
+use crate::math::{svd3, Mat3, Real, Svd3};
+use std::ops::{Add, Div, Mul, Neg, Sub};
 
 /// Per-particle plastic state carried between substeps: `[yield stress (Pa), J_p]`.
 ///
@@ -22,228 +33,307 @@ use crate::math::{norm, svd3, Mat3, Real, Svd3, Vec3};
 /// plasticine softening; `J_p` (snow's plastic volume ratio) starts at 1.
 pub type PlasticState<T> = [T; 2];
 
-/// Result of the return mapping: the elastic deformation gradient, its SVD and the Lamé
-/// parameters the stress uses (hardened or softened).
+/// The scalar arithmetic [`scalar_model`] needs: implemented by `f32`, `f64` and the dual
+/// numbers of [`crate::adjoint`]. Branches compare [`Scalar::re`] (the value).
+pub trait Scalar:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+{
+    /// A constant.
+    fn cst(x: f64) -> Self;
+    /// The value (for branching).
+    fn re(self) -> f64;
+    /// Natural logarithm.
+    fn ln(self) -> Self;
+    /// Exponential.
+    fn exp(self) -> Self;
+    /// Square root.
+    fn sqrt(self) -> Self;
+    /// Absolute value.
+    fn abs(self) -> Self;
+    /// The larger of two values (the first when equal).
+    fn max(self, o: Self) -> Self {
+        if o.re() > self.re() {
+            o
+        } else {
+            self
+        }
+    }
+    /// The smaller of two values (the first when equal).
+    fn min(self, o: Self) -> Self {
+        if o.re() < self.re() {
+            o
+        } else {
+            self
+        }
+    }
+}
+
+impl<T: Real> Scalar for T {
+    #[inline(always)]
+    fn cst(x: f64) -> Self {
+        T::c(x)
+    }
+    #[inline(always)]
+    fn re(self) -> f64 {
+        self.f64()
+    }
+    #[inline(always)]
+    fn ln(self) -> Self {
+        num_traits::Float::ln(self)
+    }
+    #[inline(always)]
+    fn exp(self) -> Self {
+        num_traits::Float::exp(self)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        num_traits::Float::sqrt(self)
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        num_traits::Float::abs(self)
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        if o > self {
+            o
+        } else {
+            self
+        }
+    }
+    #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        if o < self {
+            o
+        } else {
+            self
+        }
+    }
+}
+
+/// Inputs of [`scalar_model`]: the trial singular values, the plastic state and the
+/// differentiable material constants.
 #[derive(Clone, Copy, Debug)]
-pub struct Elastic<T> {
-    /// Elastic deformation gradient (the projected F).
-    pub f: Mat3<T>,
-    /// SVD of `f`.
-    pub svd: Svd3<T>,
-    /// Effective shear modulus.
-    pub mu: T,
-    /// Effective first Lamé parameter.
-    pub lambda: T,
+pub struct ModelIn<S> {
+    /// Singular values of F_trial (McAdams' convention: the last may be negative).
+    pub sigma: [S; 3],
+    /// Plastic state `[yield stress, J_p]`.
+    pub state: [S; 2],
+    /// Lamé mu (Pa).
+    pub mu: S,
+    /// Lamé lambda (Pa).
+    pub lambda: S,
+    /// Plastic viscosity (Pa s).
+    pub eta: S,
+    /// Drucker-Prager alpha.
+    pub alpha: S,
+}
+
+impl<T: Real> ModelIn<T> {
+    /// The inputs for singular values `sigma`, plastic `state` and a part's constants.
+    pub fn new(sigma: [T; 3], state: [T; 2], pc: &PartConsts) -> Self {
+        ModelIn {
+            sigma,
+            state,
+            mu: T::c(pc.mu as f64),
+            lambda: T::c(pc.lambda as f64),
+            eta: T::c(pc.plastic_viscosity as f64),
+            alpha: T::c(pc.dp_alpha as f64),
+        }
+    }
+}
+
+/// Outputs of [`scalar_model`].
+#[derive(Clone, Copy, Debug)]
+pub struct ModelOut<S> {
+    /// Singular values of F_elastic.
+    pub sigma_e: [S; 3],
+    /// Principal Kirchhoff stresses: `tau = U diag(t) U^T`.
+    pub t: [S; 3],
+    /// Plastic state after the substep.
+    pub state: [S; 2],
+    /// True when the return mapping left F unchanged (F_elastic = F_trial exactly).
+    pub unchanged: bool,
 }
 
 #[inline(always)]
-fn exp3<T: Real>(e: Vec3<T>) -> Vec3<T> {
-    [e[0].exp(), e[1].exp(), e[2].exp()]
+fn norm3<S: Scalar>(v: [S; 3]) -> S {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
-/// Projects the trial deformation gradient onto the material's elastic region, updating the
-/// plastic state. `dt` is the substep length (foam's viscoplastic update depends on it).
-pub fn return_mapping<T: Real>(
-    f_trial: Mat3<T>,
-    pc: &PartConsts,
-    state: &mut PlasticState<T>,
-    dt: T,
-) -> Elastic<T> {
-    let svd = svd3(f_trial);
-    let mu = T::c(pc.mu as f64);
-    let lambda = T::c(pc.lambda as f64);
-    let elastic = |svd: Svd3<T>, sigma: Vec3<T>| {
-        let s = Svd3 { sigma, ..svd };
-        Elastic {
-            f: s.compose(sigma),
-            svd: s,
-            mu,
-            lambda,
-        }
+/// Principal Kirchhoff stresses of the fixed corotated model:
+/// `t_i = 2 mu (s_i - 1) s_i + lambda J (J - 1)`.
+#[inline(always)]
+fn fixed_corotated<S: Scalar>(s: [S; 3], mu: S, lambda: S) -> [S; 3] {
+    let two = S::cst(2.0);
+    let j = s[0] * s[1] * s[2];
+    let vol = lambda * j * (j - S::cst(1.0));
+    [
+        two * mu * (s[0] - S::cst(1.0)) * s[0] + vol,
+        two * mu * (s[1] - S::cst(1.0)) * s[1] + vol,
+        two * mu * (s[2] - S::cst(1.0)) * s[2] + vol,
+    ]
+}
+
+/// Principal Kirchhoff stresses of StVK on the Hencky strain (PhysGaussian's metal and foam
+/// stress): `t_i = (2 mu log s_i + lambda sum log s_j) s_i` with the logs of `max(s, 0.01)`.
+#[inline(always)]
+fn stvk_hencky<S: Scalar>(s: [S; 3], mu: S, lambda: S) -> [S; 3] {
+    let two = S::cst(2.0);
+    let l = [0, 1, 2].map(|i| s[i].max(S::cst(0.01)).ln());
+    let tr = l[0] + l[1] + l[2];
+    [0, 1, 2].map(|i| (two * mu * l[i] + lambda * tr) * s[i])
+}
+
+/// The scalar part of every isotropic model: return mapping on the singular values, plastic
+/// state update and principal Kirchhoff stresses. `pc` supplies the material id and the
+/// constants that are not differentiated (hardening, softening, snow limits); `dt` is the
+/// substep (foam's viscoplastic update depends on it).
+pub fn scalar_model<S: Scalar>(pc: &PartConsts, m: ModelIn<S>, dt: f64) -> ModelOut<S> {
+    let (mu, lambda) = (m.mu, m.lambda);
+    let two = S::cst(2.0);
+    let three = S::cst(3.0);
+    let sigma = m.sigma;
+    let keep = |t: [S; 3], state: [S; 2]| ModelOut {
+        sigma_e: sigma,
+        t,
+        state,
+        unchanged: true,
     };
-    let unchanged = Elastic {
-        f: f_trial,
-        svd,
-        mu,
-        lambda,
-    };
+    let exp3 = |e: [S; 3]| e.map(|x| x.exp());
     match pc.material {
-        // Jelly: purely elastic.
-        0 => unchanged,
+        // Jelly: purely elastic, fixed corotated.
+        0 => keep(fixed_corotated(sigma, mu, lambda), m.state),
         // Metal (1) and plasticine (5): von Mises on the Hencky strain.
         1 | 5 => {
             let plasticine = pc.material == 5;
-            let y = state[0];
-            if plasticine && y <= T::zero() {
-                // Fully softened: the particle carries no stress (mu = lambda = 0 for good).
-                return Elastic {
-                    mu: T::zero(),
-                    lambda: T::zero(),
-                    ..unchanged
-                };
+            let y = m.state[0];
+            let zero = [S::cst(0.0); 3];
+            if plasticine && y.re() <= 0.0 {
+                // Fully softened: no stress for good (PhysGaussian sets mu = lambda = 0).
+                return keep(zero, m.state);
             }
-            let floor = T::c(0.01);
-            let s = svd.sigma.map(|x| x.max(floor));
+            let s = sigma.map(|x| x.max(S::cst(0.01)));
             let eps = s.map(|x| x.ln());
             let tr = eps[0] + eps[1] + eps[2];
-            let t = eps.map(|e| T::c(2.0) * mu * e + lambda * tr);
-            let mt = (t[0] + t[1] + t[2]) / T::c(3.0);
+            let t = eps.map(|e| two * mu * e + lambda * tr);
+            let mt = (t[0] + t[1] + t[2]) / three;
             let d = t.map(|x| x - mt);
-            if norm(d) > y {
-                let third = tr / T::c(3.0);
+            if norm3(d).re() > y.re() {
+                let third = tr / three;
                 let eps_hat = eps.map(|e| e - third);
-                let n = norm(eps_hat) + T::c(1e-6);
-                let dgamma = n - y / (T::c(2.0) * mu);
-                let k = dgamma / n;
-                let eps_new = [
-                    eps[0] - k * eps_hat[0],
-                    eps[1] - k * eps_hat[1],
-                    eps[2] - k * eps_hat[2],
-                ];
+                let nh = norm3(eps_hat);
+                let n = nh + S::cst(1e-6);
+                let dgamma = n - y / (two * mu);
+                let kk = dgamma / n;
+                let eps_new = [0, 1, 2].map(|i| eps[i] - kk * eps_hat[i]);
+                let sigma_e = exp3(eps_new);
+                let mut state = m.state;
+                let mut stress = if plasticine {
+                    fixed_corotated(sigma_e, mu, lambda)
+                } else {
+                    stvk_hencky(sigma_e, mu, lambda)
+                };
                 if plasticine {
-                    let dp = norm(eps_hat) * k.abs();
-                    state[0] = y - T::c(pc.softening as f64) * dp;
+                    state[0] = y - S::cst(pc.softening as f64) * nh * kk.abs();
+                    if state[0].re() <= 0.0 {
+                        stress = zero;
+                    }
                 } else if pc.hardening_xi != 0.0 {
-                    state[0] = y + T::c(2.0) * mu * T::c(pc.hardening_xi as f64) * dgamma;
+                    state[0] = y + two * mu * S::cst(pc.hardening_xi as f64) * dgamma;
                 }
-                elastic(svd, exp3(eps_new))
+                ModelOut {
+                    sigma_e,
+                    t: stress,
+                    state,
+                    unchanged: false,
+                }
+            } else if plasticine {
+                keep(fixed_corotated(sigma, mu, lambda), m.state)
             } else {
-                unchanged
+                keep(stvk_hencky(sigma, mu, lambda), m.state)
             }
         }
-        // Sand: Drucker-Prager.
+        // Sand: Drucker-Prager (Klar et al. 2016), stress 2 mu log s + lambda tr log s.
         2 => {
-            let eps = svd.sigma.map(|x| x.abs().max(T::c(1e-14)).ln());
+            let dp_stress = |s: [S; 3]| {
+                let l = s.map(|x| x.abs().max(S::cst(1e-14)).ln());
+                let tr = l[0] + l[1] + l[2];
+                l.map(|e| two * mu * e + lambda * tr)
+            };
+            let eps = sigma.map(|x| x.abs().max(S::cst(1e-14)).ln());
             let tr = eps[0] + eps[1] + eps[2];
-            let third = tr / T::c(3.0);
+            let third = tr / three;
             let eps_hat = eps.map(|e| e - third);
-            let n = norm(eps_hat);
-            let alpha = T::c(pc.dp_alpha as f64);
-            let dgamma = n + (T::c(3.0) * lambda + T::c(2.0) * mu) / (T::c(2.0) * mu) * tr * alpha;
-            if dgamma <= T::zero() {
-                unchanged
-            } else if tr > T::zero() {
-                elastic(svd, [T::one(); 3])
+            let n = norm3(eps_hat);
+            let dgamma = n + (three * lambda + two * mu) / (two * mu) * tr * m.alpha;
+            let sigma_e = if dgamma.re() <= 0.0 {
+                return keep(dp_stress(sigma), m.state);
+            } else if tr.re() > 0.0 {
+                [S::cst(1.0); 3]
             } else {
-                let k = dgamma / n;
-                elastic(
-                    svd,
-                    exp3([
-                        eps[0] - k * eps_hat[0],
-                        eps[1] - k * eps_hat[1],
-                        eps[2] - k * eps_hat[2],
-                    ]),
-                )
+                let kk = dgamma / n;
+                exp3([0, 1, 2].map(|i| eps[i] - kk * eps_hat[i]))
+            };
+            ModelOut {
+                sigma_e,
+                t: dp_stress(sigma_e),
+                state: m.state,
+                unchanged: false,
             }
         }
-        // Foam: viscoplastic von Mises.
+        // Foam: viscoplastic von Mises with StVK-Hencky stress.
         3 => {
-            let s = svd.sigma.map(|x| x.max(T::c(0.01)));
-            let b_tr = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]) / T::c(3.0);
+            let s = sigma.map(|x| x.max(S::cst(0.01)));
+            let b_tr = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]) / three;
             let eps = s.map(|x| x.ln());
             let tr = eps[0] + eps[1] + eps[2];
-            let third = tr / T::c(3.0);
-            let s_trial = eps.map(|e| T::c(2.0) * mu * (e - third));
-            let s_norm = norm(s_trial);
-            let y = s_norm - T::c((2.0f64 / 3.0).sqrt()) * state[0];
-            if y > T::zero() {
+            let third = tr / three;
+            let s_trial = eps.map(|e| two * mu * (e - third));
+            let s_norm = norm3(s_trial);
+            let y = s_norm - S::cst((2.0f64 / 3.0).sqrt()) * m.state[0];
+            if y.re() > 0.0 {
                 let mu_hat = mu * b_tr;
-                let eta = T::c(pc.plastic_viscosity as f64);
-                let s_new_norm = s_norm - y / (T::one() + eta / (T::c(2.0) * mu_hat * dt));
-                let k = s_new_norm / s_norm;
-                let eps_new = s_trial.map(|x| k * x / (T::c(2.0) * mu) + third);
-                elastic(svd, exp3(eps_new))
+                let s_new_norm = s_norm - y / (S::cst(1.0) + m.eta / (two * mu_hat * S::cst(dt)));
+                let kk = s_new_norm / s_norm;
+                let sigma_e = exp3(s_trial.map(|x| kk * x / (two * mu) + third));
+                ModelOut {
+                    sigma_e,
+                    t: stvk_hencky(sigma_e, mu, lambda),
+                    state: m.state,
+                    unchanged: false,
+                }
             } else {
-                unchanged
+                keep(stvk_hencky(sigma, mu, lambda), m.state)
             }
         }
         // Snow: Stomakhin et al. 2013.
         4 => {
-            let lo = T::one() - T::c(pc.theta_c as f64);
-            let hi = T::one() + T::c(pc.theta_s as f64);
-            let sc = svd.sigma.map(|x| x.max(lo).min(hi));
-            let j_trial = svd.sigma[0] * svd.sigma[1] * svd.sigma[2];
-            let j_e = sc[0] * sc[1] * sc[2];
-            state[1] = state[1] * j_trial / j_e;
-            let h = (T::c(pc.snow_xi as f64) * (T::one() - state[1])).exp();
-            Elastic {
-                mu: mu * h,
-                lambda: lambda * h,
-                ..elastic(svd, sc)
+            let lo = S::cst(1.0 - pc.theta_c as f64);
+            let hi = S::cst(1.0 + pc.theta_s as f64);
+            let sigma_e = sigma.map(|x| x.max(lo).min(hi));
+            let j_trial = sigma[0] * sigma[1] * sigma[2];
+            let j_e = sigma_e[0] * sigma_e[1] * sigma_e[2];
+            let jp = m.state[1] * j_trial / j_e;
+            let h = (S::cst(pc.snow_xi as f64) * (S::cst(1.0) - jp)).exp();
+            ModelOut {
+                sigma_e,
+                t: fixed_corotated(sigma_e, mu * h, lambda * h),
+                state: [m.state[0], jp],
+                unchanged: false,
             }
         }
-        // Fluid: keep only the volume change.
-        6 => {
-            let j = svd.sigma[0] * svd.sigma[1] * svd.sigma[2];
-            let c = j.abs().cbrt() * j.signum();
-            let s = [c; 3];
-            Elastic {
-                f: Mat3::diag(s),
-                svd: Svd3 {
-                    u: Mat3::identity(),
-                    sigma: s,
-                    v: Mat3::identity(),
-                },
-                mu,
-                lambda,
-            }
-        }
-        _ => unchanged,
+        _ => keep([S::cst(0.0); 3], m.state),
     }
 }
 
-/// Kirchhoff stress `tau = J sigma` of the elastic state (symmetric). `grad_v` is the
-/// particle's velocity gradient estimate (the APIC matrix C), used only by the fluid.
-pub fn kirchhoff_stress<T: Real>(e: &Elastic<T>, pc: &PartConsts, grad_v: &Mat3<T>) -> Mat3<T> {
-    let s = e.svd.sigma;
-    let u = e.svd.u;
-    let two = T::c(2.0);
-    let diag_stress = |d: Vec3<T>| u.mul_diag(d) * u.transpose();
-    match pc.material {
-        // StVK on the Hencky strain (metal, foam): tau = U diag(t_i s_i) U^T with
-        // t_i = 2 mu log s_i + lambda sum log s_j, s clamped to >= 0.01 inside the log.
-        1 | 3 => {
-            let l = s.map(|x| x.max(T::c(0.01)).ln());
-            let tr = l[0] + l[1] + l[2];
-            diag_stress([
-                (two * e.mu * l[0] + e.lambda * tr) * s[0],
-                (two * e.mu * l[1] + e.lambda * tr) * s[1],
-                (two * e.mu * l[2] + e.lambda * tr) * s[2],
-            ])
-        }
-        // Drucker-Prager's stress: tau = U diag(2 mu log s_i + lambda sum log s_j) U^T.
-        2 => {
-            let l = s.map(|x| x.abs().max(T::c(1e-14)).ln());
-            let tr = l[0] + l[1] + l[2];
-            diag_stress([
-                two * e.mu * l[0] + e.lambda * tr,
-                two * e.mu * l[1] + e.lambda * tr,
-                two * e.mu * l[2] + e.lambda * tr,
-            ])
-        }
-        6 => {
-            let j = s[0] * s[1] * s[2];
-            let k = T::c(pc.bulk as f64);
-            let eta = T::c(pc.plastic_viscosity as f64);
-            let p = k * j * (j - T::one());
-            let visc = (*grad_v + grad_v.transpose()).scaled(eta * j);
-            visc + Mat3::diag([p; 3])
-        }
-        // Fixed corotated (jelly, snow, plasticine):
-        // tau = 2 mu (F - R) F^T + lambda J (J - 1) I = U diag(2 mu (s^2 - s) + lambda J (J-1)) U^T.
-        _ => {
-            let j = s[0] * s[1] * s[2];
-            let vol = e.lambda * j * (j - T::one());
-            diag_stress([
-                two * e.mu * (s[0] - T::one()) * s[0] + vol,
-                two * e.mu * (s[1] - T::one()) * s[1] + vol,
-                two * e.mu * (s[2] - T::one()) * s[2] + vol,
-            ])
-        }
-    }
-}
-
-/// Convenience: return mapping then stress, as one substep's particle stage does.
+/// Return mapping and Kirchhoff stress of one particle: returns `(F_elastic, tau)` and updates
+/// the plastic state. `grad_v` (the APIC matrix C) is used only by the fluid.
 pub fn stress_update<T: Real>(
     f_trial: Mat3<T>,
     pc: &PartConsts,
@@ -251,15 +341,38 @@ pub fn stress_update<T: Real>(
     grad_v: &Mat3<T>,
     dt: T,
 ) -> (Mat3<T>, Mat3<T>) {
-    let e = return_mapping(f_trial, pc, state, dt);
-    let tau = kirchhoff_stress(&e, pc, grad_v);
-    (e.f, tau)
+    let svd = svd3(f_trial);
+    if pc.material == 6 {
+        return fluid(&svd, pc, grad_v);
+    }
+    let out = scalar_model(pc, ModelIn::new(svd.sigma, *state, pc), dt.f64());
+    *state = out.state;
+    let fe = if out.unchanged {
+        f_trial
+    } else {
+        svd.compose(out.sigma_e)
+    };
+    let u = svd.u;
+    (fe, u.mul_diag(out.t) * u.transpose())
+}
+
+/// The weakly compressible Newtonian fluid: F keeps only its volume change; pressure
+/// `K J (J - 1)`, viscous stress `mu_v J (C + C^T)`.
+fn fluid<T: Real>(svd: &Svd3<T>, pc: &PartConsts, grad_v: &Mat3<T>) -> (Mat3<T>, Mat3<T>) {
+    let j = svd.sigma[0] * svd.sigma[1] * svd.sigma[2];
+    let c = num_traits::Float::cbrt(num_traits::Float::abs(j)) * num_traits::Float::signum(j);
+    let k = T::c(pc.bulk as f64);
+    let eta = T::c(pc.plastic_viscosity as f64);
+    let p = k * j * (j - T::one());
+    let visc = (*grad_v + grad_v.transpose()).scaled(eta * j);
+    (Mat3::diag([c; 3]), visc + Mat3::diag([p; 3]))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::material::{Material, PartParams};
+    use crate::math::norm;
 
     fn rot(a: f64) -> Mat3<f64> {
         let (s, c) = a.sin_cos();
@@ -275,6 +388,7 @@ mod tests {
             Material::Foam,
             Material::Snow,
             Material::Plasticine,
+            Material::Fluid,
         ] {
             let pc = PartParams::new(m).consts();
             let mut st = [pc.yield_stress as f64, 1.0];
@@ -307,10 +421,15 @@ mod tests {
             ..Default::default()
         };
         let pc = p.consts();
-        let f = Mat3::diag([1.05, 0.98, 0.98]);
         let mut st = [pc.yield_stress as f64, 1.0];
-        let e = return_mapping(f, &pc, &mut st, 1e-4);
-        let eps = e.svd.sigma.map(|x: f64| x.ln());
+        let (fe, _) = stress_update(
+            Mat3::diag([1.05, 0.98, 0.98]),
+            &pc,
+            &mut st,
+            &Mat3::zero(),
+            1e-4,
+        );
+        let eps = svd3(fe).sigma.map(|x: f64| x.ln());
         let tr: f64 = eps.iter().sum();
         let t = eps.map(|x| 2.0 * pc.mu as f64 * x + pc.lambda as f64 * tr);
         let m = t.iter().sum::<f64>() / 3.0;
@@ -323,7 +442,13 @@ mod tests {
     fn snow_compression_lowers_jp() {
         let pc = PartParams::new(Material::Snow).consts();
         let mut st = [0.0, 1.0];
-        let _ = return_mapping(Mat3::diag([0.9, 0.9, 0.9f64]), &pc, &mut st, 1e-4);
+        let _ = stress_update(
+            Mat3::diag([0.9, 0.9, 0.9f64]),
+            &pc,
+            &mut st,
+            &Mat3::zero(),
+            1e-4,
+        );
         assert!(st[1] < 0.8, "{}", st[1]);
     }
 }
