@@ -332,6 +332,31 @@ pub fn scalar_model<S: Scalar>(pc: &PartConsts, m: ModelIn<S>, dt: f64) -> Model
     }
 }
 
+/// The differentiable material constants of a part, in the kernel's scalar type.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MaterialParams<T> {
+    /// Lamé mu (Pa).
+    pub mu: T,
+    /// Lamé lambda (Pa).
+    pub lambda: T,
+    /// Plastic viscosity (Pa s).
+    pub eta: T,
+    /// Drucker-Prager alpha.
+    pub alpha: T,
+}
+
+impl<T: Real> MaterialParams<T> {
+    /// The constants of a part.
+    pub fn of(pc: &PartConsts) -> Self {
+        MaterialParams {
+            mu: T::c(pc.mu as f64),
+            lambda: T::c(pc.lambda as f64),
+            eta: T::c(pc.plastic_viscosity as f64),
+            alpha: T::c(pc.dp_alpha as f64),
+        }
+    }
+}
+
 /// Return mapping and Kirchhoff stress of one particle: returns `(F_elastic, tau)` and updates
 /// the plastic state. `grad_v` (the APIC matrix C) is used only by the fluid.
 pub fn stress_update<T: Real>(
@@ -341,11 +366,31 @@ pub fn stress_update<T: Real>(
     grad_v: &Mat3<T>,
     dt: T,
 ) -> (Mat3<T>, Mat3<T>) {
-    let svd = svd3(f_trial);
     if pc.material == 6 {
-        return fluid(&svd, pc, grad_v);
+        return fluid(&svd3(f_trial), pc, grad_v);
     }
-    let out = scalar_model(pc, ModelIn::new(svd.sigma, *state, pc), dt.f64());
+    stress_update_with(f_trial, pc, state, MaterialParams::of(pc), dt)
+}
+
+/// [`stress_update`] of the isotropic models with explicit material constants `p` (the
+/// differentiable ones); `pc` supplies the model id and the fixed constants.
+pub fn stress_update_with<T: Real>(
+    f_trial: Mat3<T>,
+    pc: &PartConsts,
+    state: &mut PlasticState<T>,
+    p: MaterialParams<T>,
+    dt: T,
+) -> (Mat3<T>, Mat3<T>) {
+    let svd = svd3(f_trial);
+    let input = ModelIn {
+        sigma: svd.sigma,
+        state: *state,
+        mu: p.mu,
+        lambda: p.lambda,
+        eta: p.eta,
+        alpha: p.alpha,
+    };
+    let out = scalar_model(pc, input, dt.f64());
     *state = out.state;
     let fe = if out.unchanged {
         f_trial

@@ -14,6 +14,7 @@
 //! `memory_plan`, parameter granularity, the `_vjp` kernel methods of the backends, and
 //! `r4d fit-trajectory`.
 
+pub mod constitutive_vjp;
 pub mod transfer_vjp;
 
 #[cfg(test)]

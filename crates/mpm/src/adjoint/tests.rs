@@ -336,3 +336,230 @@ fn particle_bcs_vjp_matches_finite_differences() {
     assert_close("mass", mb, fd(loss, m), 1.0);
     assert_eq!(vb, vbar);
 }
+
+mod constitutive {
+    use super::{fd, Rng};
+    use crate::adjoint::constitutive_vjp::stress_update_vjp;
+    use crate::constitutive::{stress_update_with, MaterialParams};
+    use crate::material::{Material, PartParams};
+    use crate::math::Mat3;
+
+    struct Case {
+        name: &'static str,
+        part: PartParams,
+        f: Mat3<f64>,
+        state: [f64; 2],
+        /// The return mapping must change F (plasticity fired).
+        plastic: bool,
+    }
+
+    fn near(r: &mut Rng, d: [f64; 3], s: f64) -> Mat3<f64> {
+        Mat3::diag(d) + Mat3::from_array(r.arr(s))
+    }
+
+    fn cases() -> Vec<Case> {
+        let mut r = Rng(99);
+        let base = |m: Material| PartParams {
+            material: m,
+            youngs_modulus_pa: 1e5,
+            poisson_ratio: 0.3,
+            yield_stress_pa: 500.0,
+            plastic_viscosity_pa_s: 0.5,
+            friction_angle_deg: 30.0,
+            density_kg_m3: 1000.0,
+            ..Default::default()
+        };
+        vec![
+            Case {
+                name: "jelly",
+                part: base(Material::Jelly),
+                f: near(&mut r, [1.0; 3], 0.1),
+                state: [0.0, 1.0],
+                plastic: false,
+            },
+            Case {
+                name: "jelly at rest",
+                part: base(Material::Jelly),
+                f: Mat3::identity(),
+                state: [0.0, 1.0],
+                plastic: false,
+            },
+            Case {
+                name: "metal",
+                part: base(Material::Metal),
+                f: near(&mut r, [1.05, 0.97, 1.0], 0.02),
+                state: [500.0, 1.0],
+                plastic: true,
+            },
+            Case {
+                name: "metal elastic",
+                part: base(Material::Metal),
+                f: near(&mut r, [1.0; 3], 1e-4),
+                state: [5e4, 1.0],
+                plastic: false,
+            },
+            Case {
+                name: "metal hardening",
+                part: PartParams {
+                    hardening: true,
+                    xi: 0.5,
+                    ..base(Material::Metal)
+                },
+                f: near(&mut r, [1.04, 0.98, 1.0], 0.02),
+                state: [500.0, 1.0],
+                plastic: true,
+            },
+            Case {
+                name: "sand compression",
+                part: base(Material::Sand),
+                f: near(&mut r, [1.1, 0.95, 0.9], 0.01),
+                state: [0.0, 1.0],
+                plastic: true,
+            },
+            Case {
+                name: "sand expansion",
+                part: base(Material::Sand),
+                f: near(&mut r, [1.05, 1.02, 1.03], 0.01),
+                state: [0.0, 1.0],
+                plastic: true,
+            },
+            Case {
+                name: "sand elastic",
+                part: base(Material::Sand),
+                f: Mat3::diag([0.99, 0.99, 0.99]) + Mat3::from_array(r.arr(1e-4)),
+                state: [0.0, 1.0],
+                plastic: false,
+            },
+            Case {
+                name: "foam",
+                part: base(Material::Foam),
+                f: near(&mut r, [1.05, 0.97, 1.0], 0.02),
+                state: [500.0, 1.0],
+                plastic: true,
+            },
+            Case {
+                name: "snow",
+                part: base(Material::Snow),
+                f: near(&mut r, [0.95, 1.0, 1.02], 0.005),
+                state: [0.0, 0.9],
+                plastic: true,
+            },
+            Case {
+                name: "plasticine",
+                part: PartParams {
+                    softening: 50.0,
+                    ..base(Material::Plasticine)
+                },
+                f: near(&mut r, [1.05, 0.97, 1.0], 0.02),
+                state: [500.0, 1.0],
+                plastic: true,
+            },
+        ]
+    }
+
+    #[test]
+    fn constitutive_vjp_matches_finite_differences_for_every_material() {
+        let dt = 1e-4;
+        for case in cases() {
+            let pc = case.part.consts();
+            let p0 = MaterialParams::<f64>::of(&pc);
+            let mut r = Rng(5);
+            let (fe_bar, tau_bar) = (Mat3::from_array(r.arr(1.0)), Mat3::from_array(r.arr(1e-4)));
+            let state_bar: [f64; 2] = r.arr(1e-3);
+            let loss = |f: Mat3<f64>, st: [f64; 2], p: MaterialParams<f64>| {
+                let mut st2 = st;
+                let (fe, tau) = stress_update_with(f, &pc, &mut st2, p, dt);
+                let a = fe.to_array();
+                let t = tau.to_array();
+                (0..9)
+                    .map(|e| a[e] * fe_bar.to_array()[e] + t[e] * tau_bar.to_array()[e])
+                    .sum::<f64>()
+                    + st2[0] * state_bar[0]
+                    + st2[1] * state_bar[1]
+            };
+            // The branch of interest fired.
+            let mut st2 = case.state;
+            let (fe, _) = stress_update_with(case.f, &pc, &mut st2, p0, dt);
+            let changed = (fe - case.f).frobenius() > 1e-9;
+            assert_eq!(
+                changed, case.plastic,
+                "{}: plasticity fired = {changed}",
+                case.name
+            );
+            let bar =
+                stress_update_vjp(case.f, &pc, case.state, p0, dt, fe_bar, tau_bar, state_bar);
+            let mut worst: f64 = 0.0;
+            let mut check = |what: String, a: f64, g: f64, scale: f64| {
+                let err = (a - g).abs() / scale.max(1e-300);
+                worst = worst.max(err);
+                assert!(
+                    err < 1e-5,
+                    "{}: {what}: analytic {a:e} fd {g:e} rel {err:e}",
+                    case.name
+                );
+            };
+            let fa = bar.f_trial.to_array();
+            let fscale = fa.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for e in 0..9 {
+                let g = fd(
+                    |t| {
+                        let mut a = case.f.to_array();
+                        a[e] = t;
+                        loss(Mat3::from_array(a), case.state, p0)
+                    },
+                    case.f.to_array()[e],
+                );
+                check(format!("dF[{e}]"), fa[e], g, fscale);
+            }
+            for e in 0..2 {
+                let g = fd(
+                    |t| {
+                        let mut s = case.state;
+                        s[e] = t;
+                        loss(case.f, s, p0)
+                    },
+                    case.state[e],
+                );
+                check(
+                    format!("dstate[{e}]"),
+                    bar.state[e],
+                    g,
+                    bar.state[e].abs().max(g.abs()).max(1e-12),
+                );
+            }
+            let pv = [p0.mu, p0.lambda, p0.eta, p0.alpha];
+            let pb = [
+                bar.params.mu,
+                bar.params.lambda,
+                bar.params.eta,
+                bar.params.alpha,
+            ];
+            for e in 0..4 {
+                let g = fd(
+                    |t| {
+                        let mut q = pv;
+                        q[e] = t;
+                        loss(
+                            case.f,
+                            case.state,
+                            MaterialParams {
+                                mu: q[0],
+                                lambda: q[1],
+                                eta: q[2],
+                                alpha: q[3],
+                            },
+                        )
+                    },
+                    pv[e],
+                );
+                check(
+                    format!("dparam[{e}]"),
+                    pb[e],
+                    g,
+                    pb[e].abs().max(g.abs()).max(1e-300),
+                );
+            }
+            eprintln!("{}: worst relative error {worst:.2e}", case.name);
+        }
+    }
+}
