@@ -79,6 +79,7 @@ impl<T: Real, const N: usize> Sub for Dual<T, N> {
 }
 impl<T: Real, const N: usize> Mul for Dual<T, N> {
     type Output = Self;
+    #[expect(clippy::suspicious_arithmetic_impl, reason = "the product rule adds")]
     fn mul(self, o: Self) -> Self {
         Dual {
             v: self.v * o.v,
@@ -188,6 +189,7 @@ fn away_from_zero<T: Real>(x: T, eps: T) -> T {
 /// Adjoint of [`stress_update_with`](crate::constitutive::stress_update_with) (isotropic
 /// models; the fluid is not differentiated yet). `fe_bar`, `tau_bar` and `state_bar` are the
 /// adjoints of `F_elastic`, `tau` and the plastic state after the call.
+#[allow(clippy::too_many_arguments)]
 pub fn stress_update_vjp<T: Real>(
     f_trial: Mat3<T>,
     pc: &PartConsts,
