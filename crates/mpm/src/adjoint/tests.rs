@@ -563,3 +563,311 @@ mod constitutive {
         }
     }
 }
+
+mod trajectory {
+    //! Whole-trajectory gradients of the host simulator against f64 finite differences:
+    //! every material x every parameter, 3 frames of 20 substeps, boundary conditions active.
+    use super::Rng;
+    use crate::adjoint::host::{HostSim, HostState, PhysParams};
+    use crate::boundary::{BoundaryCondition, Surface};
+    use crate::config::{Domain, ForceForm, SimConfig, SolverConfig, TimeConfig};
+    use crate::constitutive::stress_update_with;
+    use crate::material::{Material, PartParams};
+    use crate::math::Mat3;
+    use crate::scene::{ParticleSet, Shape};
+
+    const FRAMES: usize = 3;
+    const SPF: u64 = 20;
+
+    fn scene_for(part: PartParams, force: ForceForm) -> (SimConfig, ParticleSet) {
+        let n = 16;
+        let dx = 1.0 / n as f64;
+        let cfg = SimConfig {
+            domain: Domain {
+                grid_lim: 1.0,
+                n_grid: n,
+            },
+            time: TimeConfig {
+                substep_dt: 2e-4,
+                frame_dt: None,
+                substeps_per_frame: Some(SPF as u32),
+                frames: FRAMES,
+            },
+            solver: SolverConfig {
+                force,
+                rpic_damping: 0.1,
+                ..Default::default()
+            },
+            parts: vec![part],
+            shapes: vec![Shape::Box {
+                min: [0.3, 0.35, 3.0 * dx],
+                max: [0.55, 0.6, 3.0 * dx + 0.2],
+                part: 0,
+                per_cell: 1,
+            }],
+            particles: None,
+            boundary: vec![
+                BoundaryCondition::BoundingBox {
+                    layers: 3,
+                    surface: Surface::Slip,
+                },
+                BoundaryCondition::SurfaceCollider {
+                    point: [0.0, 0.0, 3.5 * dx],
+                    normal: [0.0, 0.0, 1.0],
+                    surface: Surface::Friction,
+                    friction: 0.4,
+                    start_time: 0.0,
+                    end_time: 1.0,
+                },
+                BoundaryCondition::Cuboid {
+                    point: [0.3, 0.5, 0.5],
+                    size: [0.04, 0.5, 0.5],
+                    velocity: [0.0; 3],
+                    start_time: 0.0,
+                    end_time: 1.0,
+                    reset: false,
+                },
+                BoundaryCondition::ParticleImpulse {
+                    force: [-0.02, 0.01, -0.05],
+                    point: [0.5, 0.5, 0.35],
+                    size: [0.1, 0.3, 0.1],
+                    num_dt: 30,
+                    start_time: 0.0,
+                },
+            ],
+        };
+        let scene = ParticleSet::from_shapes(&cfg.shapes, dx);
+        (cfg, scene)
+    }
+
+    struct Weights {
+        x: Vec<Vec<[f64; 3]>>,
+        f: Vec<Vec<[f64; 9]>>,
+    }
+
+    fn frame_loss(s: &HostState<f64>, w: &Weights, frame: usize) -> f64 {
+        let mut l = 0.0;
+        for p in 0..s.x.len() {
+            for a in 0..3 {
+                l += w.x[frame][p][a] * s.x[p][a];
+            }
+            for e in 0..9 {
+                l += w.f[frame][p][e] * s.f[p][e];
+            }
+        }
+        l
+    }
+
+    /// Loss of a run; also counts the plastic projections that happened.
+    fn run(
+        sim: &HostSim,
+        params: &[PhysParams<f64>],
+        v0: &[[f64; 3]],
+        w: &Weights,
+    ) -> (f64, Vec<HostState<f64>>, usize) {
+        let mut s = sim.init(params, v0);
+        let mut states = vec![s.clone()];
+        let mut loss = 0.0;
+        let mut plastic_events = 0;
+        for kk in 0..FRAMES as u64 * SPF {
+            for p in 0..s.x.len() {
+                let part = sim.part[p] as usize;
+                let mut st = s.plastic[p];
+                let f = Mat3::from_array(s.f[p]);
+                let (fe, _) = stress_update_with(
+                    f,
+                    &sim.consts[part],
+                    &mut st,
+                    params[part].material(),
+                    2e-4,
+                );
+                if (fe - f).frobenius() > 1e-12 {
+                    plastic_events += 1;
+                }
+            }
+            sim.substep(&mut s, params, kk);
+            states.push(s.clone());
+            if (kk + 1) % SPF == 0 {
+                loss += frame_loss(&s, w, ((kk + 1) / SPF) as usize - 1);
+            }
+        }
+        (loss, states, plastic_events)
+    }
+
+    fn check_material(name: &str, part: PartParams, force: ForceForm, plastic: bool) {
+        let (cfg, scene) = scene_for(part, force);
+        let sim = HostSim::new(&cfg, &scene).unwrap();
+        let np = sim.len();
+        let mut r = Rng(31);
+        let w = Weights {
+            x: (0..FRAMES)
+                .map(|_| (0..np).map(|_| r.arr(1.0)).collect())
+                .collect(),
+            f: (0..FRAMES)
+                .map(|_| (0..np).map(|_| r.arr(0.1)).collect())
+                .collect(),
+        };
+        let v0: Vec<[f64; 3]> = (0..np).map(|_| [0.05, -0.02, 0.03]).collect();
+        let params = vec![PhysParams::<f64>::of(&part)];
+        let (_, states, events) = run(&sim, &params, &v0, &w);
+        assert_eq!(events > 0, plastic, "{name}: {events} plastic projections");
+        // Reverse sweep.
+        let mut adj = HostState::<f64>::zeros(np);
+        let mut grad = vec![PhysParams::<f64>::default()];
+        for kk in (0..FRAMES as u64 * SPF).rev() {
+            if (kk + 1) % SPF == 0 {
+                let fr = ((kk + 1) / SPF) as usize - 1;
+                for p in 0..np {
+                    for a in 0..3 {
+                        adj.x[p][a] += w.x[fr][p][a];
+                    }
+                    for e in 0..9 {
+                        adj.f[p][e] += w.f[fr][p][e];
+                    }
+                }
+            }
+            sim.substep_vjp(&states[kk as usize], &params, kk, &mut adj, &mut grad);
+        }
+        sim.init_vjp(&adj, &mut grad);
+        let g = grad[0];
+        let analytic = [
+            ("E", g.youngs_modulus),
+            ("nu", g.poisson_ratio),
+            ("yield_stress", g.yield_stress),
+            ("plastic_viscosity", g.plastic_viscosity),
+            ("friction_angle", g.friction_angle_deg),
+            ("density", g.density),
+        ];
+        let p0 = params[0];
+        let values = [
+            p0.youngs_modulus,
+            p0.poisson_ratio,
+            p0.yield_stress,
+            p0.plastic_viscosity,
+            p0.friction_angle_deg,
+            p0.density,
+        ];
+        for (e, (pname, a)) in analytic.iter().enumerate() {
+            let h = 1e-4 * values[e].abs().max(1e-3);
+            let eval = |t: f64| {
+                let mut q = values;
+                q[e] = t;
+                let pp = PhysParams {
+                    youngs_modulus: q[0],
+                    poisson_ratio: q[1],
+                    yield_stress: q[2],
+                    plastic_viscosity: q[3],
+                    friction_angle_deg: q[4],
+                    density: q[5],
+                };
+                run(&sim, &[pp], &v0, &w).0
+            };
+            let fd = (eval(values[e] + h) - eval(values[e] - h)) / (2.0 * h);
+            let rel = (a - fd).abs() / a.abs().max(fd.abs()).max(1e-300);
+            eprintln!("{name}: d/d{pname}: adjoint {a:+.6e} fd {fd:+.6e} rel {rel:.1e}");
+            // Parameters a model does not read have zero gradient on both sides.
+            let negligible = a.abs().max(fd.abs()) * values[e].abs().max(1e-3) < 1e-9;
+            assert!(
+                negligible || rel < 1e-4,
+                "{name}: d/d{pname}: adjoint {a:e} vs fd {fd:e} (rel {rel:e})"
+            );
+        }
+        // Initial velocity of the whole object (PhysDreamer's use) and one initial position.
+        let vbar: f64 = adj.v.iter().map(|v| v[0]).sum();
+        let fd_v = {
+            let h = 1e-6;
+            let shifted = |d: f64| {
+                run(
+                    &sim,
+                    &params,
+                    &v0.iter()
+                        .map(|v| [v[0] + d, v[1], v[2]])
+                        .collect::<Vec<_>>(),
+                    &w,
+                )
+                .0
+            };
+            (shifted(h) - shifted(-h)) / (2.0 * h)
+        };
+        let rel = (vbar - fd_v).abs() / vbar.abs().max(fd_v.abs());
+        eprintln!("{name}: d/dv0_x: adjoint {vbar:+.6e} fd {fd_v:+.6e} rel {rel:.1e}");
+        assert!(rel < 1e-4, "{name}: initial velocity gradient rel {rel:e}");
+    }
+
+    fn base(m: Material) -> PartParams {
+        PartParams {
+            material: m,
+            youngs_modulus_pa: 3e4,
+            poisson_ratio: 0.3,
+            yield_stress_pa: 300.0,
+            plastic_viscosity_pa_s: 0.2,
+            friction_angle_deg: 35.0,
+            density_kg_m3: 800.0,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn trajectory_gradients_match_finite_differences_jelly() {
+        check_material("jelly (mls)", base(Material::Jelly), ForceForm::Mls, false);
+        check_material(
+            "jelly (classic)",
+            base(Material::Jelly),
+            ForceForm::Classic,
+            false,
+        );
+    }
+    #[test]
+    fn trajectory_gradients_match_finite_differences_metal() {
+        let p = PartParams {
+            hardening: true,
+            xi: 0.3,
+            yield_stress_pa: 20.0,
+            ..base(Material::Metal)
+        };
+        check_material("metal", p, ForceForm::Mls, true);
+    }
+    #[test]
+    fn trajectory_gradients_match_finite_differences_sand() {
+        check_material("sand", base(Material::Sand), ForceForm::Classic, true);
+    }
+    #[test]
+    fn trajectory_gradients_match_finite_differences_foam() {
+        check_material(
+            "foam",
+            PartParams {
+                yield_stress_pa: 20.0,
+                plastic_viscosity_pa_s: 2.0,
+                ..base(Material::Foam)
+            },
+            ForceForm::Mls,
+            true,
+        );
+    }
+    #[test]
+    fn trajectory_gradients_match_finite_differences_snow() {
+        check_material(
+            "snow",
+            PartParams {
+                snow_critical_compression: 2e-3,
+                snow_critical_stretch: 1e-3,
+                ..base(Material::Snow)
+            },
+            ForceForm::Mls,
+            true,
+        );
+    }
+    #[test]
+    fn trajectory_gradients_match_finite_differences_plasticine() {
+        check_material(
+            "plasticine",
+            PartParams {
+                softening: 5.0,
+                yield_stress_pa: 20.0,
+                ..base(Material::Plasticine)
+            },
+            ForceForm::Classic,
+            true,
+        );
+    }
+}

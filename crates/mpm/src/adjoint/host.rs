@@ -1,0 +1,419 @@
+//! A host (CPU, single-threaded) simulator generic over the scalar type, with the exact reverse
+//! sweep of its substep: the f64 reference every gradient is checked against.
+//!
+//! It runs the same per-particle and per-node functions as the backends ([`crate::transfer`],
+//! [`crate::constitutive`]) on plain `Vec`s and a full grid, and differentiates them with the
+//! VJPs of [`super::transfer_vjp`] and [`super::constitutive_vjp`]. Gradients flow to every
+//! part's physical parameters ([`PhysParams`]: E, nu, yield stress, plastic viscosity,
+//! friction angle, density) and to the initial state (positions, velocities).
+//!
+//! Differences from [`crate::MpmSim`]: the time of substep `k` is `k dt` (MpmSim accumulates
+//! `t += dt` like PhysGaussian; the two differ by round-off, which matters only when a
+//! boundary-condition window ends exactly on a substep), the out-of-domain clamp is not
+//! differentiated, and the fluid model has no adjoint yet.
+
+use super::constitutive_vjp::stress_update_vjp;
+use super::transfer_vjp::{
+    damped_affine_vjp, g2p_vjp, grid_node_update_vjp, particle_bcs_vjp, scatter_vjp, ScatterBar,
+};
+use crate::config::SimConfig;
+use crate::constitutive::{stress_update_with, MaterialParams};
+use crate::error::{Error, Result};
+use crate::material::{PartConsts, PartParams};
+use crate::math::{Mat3, Real};
+use crate::scene::ParticleSet;
+use crate::sim::SimSetup;
+use crate::transfer::{
+    damped_affine, g2p_finish, gather, grid_node_update, k, particle_bcs, scatter, stencil,
+    stress_scale,
+};
+
+/// The physical parameters of a part that receive gradients, in SI units.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PhysParams<T> {
+    /// Young's modulus E (Pa).
+    pub youngs_modulus: T,
+    /// Poisson's ratio nu.
+    pub poisson_ratio: T,
+    /// Initial yield stress (Pa).
+    pub yield_stress: T,
+    /// Plastic viscosity (Pa s).
+    pub plastic_viscosity: T,
+    /// Friction angle (degrees).
+    pub friction_angle_deg: T,
+    /// Density (kg/m^3).
+    pub density: T,
+}
+
+/// PhysGaussian's degrees-to-radians factor (its truncated pi), kept for identical yields.
+#[expect(clippy::approx_constant, reason = "PhysGaussian's truncated pi")]
+const DEG: f64 = 3.14159265 / 180.0;
+
+impl<T: Real> PhysParams<T> {
+    /// The values of a part.
+    pub fn of(p: &PartParams) -> Self {
+        PhysParams {
+            youngs_modulus: T::c(p.youngs_modulus_pa),
+            poisson_ratio: T::c(p.poisson_ratio),
+            yield_stress: T::c(p.yield_stress_pa),
+            plastic_viscosity: T::c(p.plastic_viscosity_pa_s),
+            friction_angle_deg: T::c(p.friction_angle_deg),
+            density: T::c(p.density_kg_m3),
+        }
+    }
+
+    /// The constants the constitutive model reads: mu, lambda, plastic viscosity, alpha.
+    pub fn material(&self) -> MaterialParams<T> {
+        let (e, nu) = (self.youngs_modulus, self.poisson_ratio);
+        let one = T::one();
+        let two = T::c(2.0);
+        let phi = self.friction_angle_deg * T::c(DEG);
+        let sp = phi.sin();
+        MaterialParams {
+            mu: e / (two * (one + nu)),
+            lambda: e * nu / ((one + nu) * (one - two * nu)),
+            eta: self.plastic_viscosity,
+            alpha: T::c((2.0f64 / 3.0).sqrt()) * two * sp / (T::c(3.0) - sp),
+        }
+    }
+
+    /// Chain rule of [`PhysParams::material`]: adds the gradient of the physical parameters
+    /// given that of the material constants.
+    pub fn add_material_vjp(&self, bar: &MaterialParams<T>, out: &mut PhysParams<T>) {
+        let (e, nu) = (self.youngs_modulus, self.poisson_ratio);
+        let one = T::one();
+        let two = T::c(2.0);
+        let d = (one + nu) * (one - two * nu);
+        out.youngs_modulus += bar.mu / (two * (one + nu)) + bar.lambda * nu / d;
+        out.poisson_ratio += -bar.mu * e / (two * (one + nu) * (one + nu))
+            + bar.lambda * e * (one + two * nu * nu) / (d * d);
+        out.plastic_viscosity += bar.eta;
+        let phi = self.friction_angle_deg * T::c(DEG);
+        let (sp, cp) = (phi.sin(), phi.cos());
+        let da = T::c((2.0f64 / 3.0).sqrt()) * two * T::c(3.0) * cp
+            / ((T::c(3.0) - sp) * (T::c(3.0) - sp));
+        out.friction_angle_deg += bar.alpha * da * T::c(DEG);
+    }
+}
+
+/// Simulation state on the host.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HostState<T> {
+    /// Positions.
+    pub x: Vec<[T; 3]>,
+    /// Velocities.
+    pub v: Vec<[T; 3]>,
+    /// APIC matrices.
+    pub c: Vec<[T; 9]>,
+    /// Deformation gradients (F_trial after G2P).
+    pub f: Vec<[T; 9]>,
+    /// Plastic state `[yield stress, J_p]`.
+    pub plastic: Vec<[T; 2]>,
+}
+
+impl<T: Real> HostState<T> {
+    /// All-zero state of `n` particles (used for adjoints).
+    pub fn zeros(n: usize) -> Self {
+        let z = T::zero();
+        HostState {
+            x: vec![[z; 3]; n],
+            v: vec![[z; 3]; n],
+            c: vec![[z; 9]; n],
+            f: vec![[z; 9]; n],
+            plastic: vec![[z; 2]; n],
+        }
+    }
+}
+
+/// The host simulator: a validated config and its particles.
+#[derive(Clone, Debug)]
+pub struct HostSim {
+    /// Derived settings (grid, boundary conditions, time stepping).
+    pub setup: SimSetup,
+    /// Device constants of each part (material id and the non-differentiated constants).
+    pub consts: Vec<PartConsts>,
+    /// Initial positions (f32, as the particle boundary conditions select by them).
+    pub x0: Vec<[f32; 3]>,
+    /// Initial volumes.
+    pub vol0: Vec<f64>,
+    /// Part of each particle.
+    pub part: Vec<u32>,
+}
+
+impl HostSim {
+    /// Builds the host simulator; the config must be valid. Fluid parts are refused.
+    pub fn new(config: &SimConfig, scene: &ParticleSet) -> Result<Self> {
+        let setup = SimSetup::new(config);
+        scene.validate("host simulation", setup.dx, setup.n, config.parts.len())?;
+        if let Some(i) = config
+            .parts
+            .iter()
+            .position(|p| p.material == crate::Material::Fluid)
+        {
+            return Err(Error::config(
+                format!("parts[{i}]"),
+                "the fluid model has no adjoint yet",
+            ));
+        }
+        Ok(HostSim {
+            consts: config.parts.iter().map(|p| p.consts()).collect(),
+            x0: scene.x.clone(),
+            vol0: scene.volume.iter().map(|&v| v as f64).collect(),
+            part: scene.part.clone(),
+            setup,
+        })
+    }
+
+    /// Number of particles.
+    pub fn len(&self) -> usize {
+        self.x0.len()
+    }
+    /// True when there are no particles.
+    pub fn is_empty(&self) -> bool {
+        self.x0.is_empty()
+    }
+
+    /// The state at rest with initial velocities `v0`.
+    pub fn init<T: Real>(&self, params: &[PhysParams<T>], v0: &[[T; 3]]) -> HostState<T> {
+        let n = self.len();
+        let z = T::zero();
+        let o = T::one();
+        HostState {
+            x: self.x0.iter().map(|p| p.map(|c| T::c(c as f64))).collect(),
+            v: v0.to_vec(),
+            c: vec![[z; 9]; n],
+            f: vec![[o, z, z, z, o, z, z, z, o]; n],
+            plastic: self
+                .part
+                .iter()
+                .map(|&p| [params[p as usize].yield_stress, o])
+                .collect(),
+        }
+    }
+
+    fn masses<T: Real>(&self, params: &[PhysParams<T>]) -> Vec<T> {
+        self.vol0
+            .iter()
+            .zip(&self.part)
+            .map(|(&v, &p)| params[p as usize].density * T::c(v))
+            .collect()
+    }
+
+    /// Constants of substep `k` (time `k dt`).
+    fn consts_at(&self, k_sub: u64) -> crate::StepConsts {
+        self.setup
+            .step_consts(k_sub as f64 * self.setup.config.time.substep_dt, k_sub)
+    }
+
+    /// The forward pass of substep `k_sub`, returning the intermediates the reverse sweep
+    /// needs: masses, velocities after the particle conditions, stress terms, the scattered
+    /// grid and the updated grid.
+    fn forward<T: Real>(
+        &self,
+        s: &mut HostState<T>,
+        params: &[PhysParams<T>],
+        k_sub: u64,
+    ) -> Intermediates<T> {
+        let c = self.consts_at(k_sub);
+        let n = self.setup.n;
+        let mats: Vec<MaterialParams<T>> = params.iter().map(|p| p.material()).collect();
+        let mass = self.masses(params);
+        let pbcs = &self.setup.particle_bcs;
+        let dt = k::<T>(c.dt);
+        let np = self.len();
+        let mut v1 = s.v.clone();
+        let mut stress = vec![[T::zero(); 9]; np];
+        let x_start = s.x.clone();
+        let f_trial = s.f.clone();
+        let plastic_in = s.plastic.clone();
+        for p in 0..np {
+            particle_bcs(self.x0[p], &mut v1[p], mass[p], pbcs, &c);
+            let part = self.part[p] as usize;
+            let (fe, tau) = stress_update_with(
+                Mat3::from_array(s.f[p]),
+                &self.consts[part],
+                &mut s.plastic[p],
+                mats[part],
+                dt,
+            );
+            s.f[p] = fe.to_array();
+            stress[p] = tau
+                .sym()
+                .scaled(stress_scale(T::c(self.vol0[p]), &c))
+                .to_array();
+        }
+        let mut grid_in = vec![[T::zero(); 4]; n * n * n];
+        let inv_dx = k::<T>(c.inv_dx);
+        for p in 0..np {
+            let st = stencil(s.x[p], inv_dx);
+            let a = damped_affine(&s.c[p], c.rpic_damping);
+            scatter(&mut grid_in, 0, n, &st, v1[p], &a, mass[p], &stress[p], &c);
+        }
+        let mut grid = grid_in.clone();
+        for i in 0..n {
+            for j in 0..n {
+                for kk in 0..n {
+                    grid_node_update(
+                        [i, j, kk],
+                        &mut grid[(i * n + j) * n + kk],
+                        &self.setup.grid_bcs,
+                        &c,
+                    );
+                }
+            }
+        }
+        let f_elastic = s.f.clone();
+        for p in 0..np {
+            let st = stencil(s.x[p], inv_dx);
+            let g = gather(&grid, n, &st, &c);
+            let _ = g2p_finish(&g, &mut s.x[p], &mut s.v[p], &mut s.c[p], &mut s.f[p], &c);
+        }
+        Intermediates {
+            mass,
+            v1,
+            stress,
+            x_start,
+            f_trial,
+            f_elastic,
+            plastic_in,
+            grid_in,
+            grid,
+            mats,
+        }
+    }
+
+    /// Advances one substep (`k_sub` is its global index).
+    pub fn substep<T: Real>(&self, s: &mut HostState<T>, params: &[PhysParams<T>], k_sub: u64) {
+        let _ = self.forward(s, params, k_sub);
+    }
+
+    /// Reverse sweep of substep `k_sub`: `before` is the state at its start, `adj` holds the
+    /// adjoint of the state after it on entry and before it on return; parameter gradients are
+    /// added to `grad`.
+    pub fn substep_vjp<T: Real>(
+        &self,
+        before: &HostState<T>,
+        params: &[PhysParams<T>],
+        k_sub: u64,
+        adj: &mut HostState<T>,
+        grad: &mut [PhysParams<T>],
+    ) {
+        let mut s = before.clone();
+        let it = self.forward(&mut s, params, k_sub);
+        let c = self.consts_at(k_sub);
+        let n = self.setup.n;
+        let np = self.len();
+        let dt = k::<T>(c.dt);
+        let inv_dx = k::<T>(c.inv_dx);
+        // G2P.
+        let mut grid_bar = vec![[T::zero(); 4]; n * n * n];
+        let mut x_bar = vec![[T::zero(); 3]; np];
+        let mut fe_bar = vec![[T::zero(); 9]; np];
+        for p in 0..np {
+            let g = g2p_vjp(
+                &it.grid,
+                n,
+                it.x_start[p],
+                &it.f_elastic[p],
+                &c,
+                adj.x[p],
+                adj.v[p],
+                &adj.c[p],
+                &adj.f[p],
+                &mut grid_bar,
+            );
+            x_bar[p] = g.x;
+            fe_bar[p] = g.f_elastic;
+        }
+        // Grid update.
+        let mut grid_in_bar = vec![[T::zero(); 4]; n * n * n];
+        for i in 0..n {
+            for j in 0..n {
+                for kk in 0..n {
+                    let idx = (i * n + j) * n + kk;
+                    let vb = [grid_bar[idx][0], grid_bar[idx][1], grid_bar[idx][2]];
+                    if vb.iter().any(|x| *x != T::zero()) {
+                        grid_in_bar[idx] = grid_node_update_vjp(
+                            [i, j, kk],
+                            it.grid_in[idx],
+                            &self.setup.grid_bcs,
+                            &c,
+                            vb,
+                        );
+                    }
+                }
+            }
+        }
+        // P2G, stress, particle conditions.
+        let mut out = HostState::zeros(np);
+        for p in 0..np {
+            let part = self.part[p] as usize;
+            let st = stencil(it.x_start[p], inv_dx);
+            let a = damped_affine(&before.c[p], c.rpic_damping);
+            let mut sb = ScatterBar::default();
+            scatter_vjp(
+                &grid_in_bar,
+                n,
+                &st,
+                it.v1[p],
+                &a,
+                it.mass[p],
+                &it.stress[p],
+                &c,
+                &mut sb,
+            );
+            let scale = stress_scale(T::c(self.vol0[p]), &c);
+            let tau_bar = Mat3::from_array(sb.s).scaled(scale);
+            let cb = stress_update_vjp(
+                Mat3::from_array(it.f_trial[p]),
+                &self.consts[part],
+                it.plastic_in[p],
+                it.mats[part],
+                dt,
+                Mat3::from_array(fe_bar[p]),
+                tau_bar,
+                adj.plastic[p],
+            );
+            params[part].add_material_vjp(&cb.params, &mut grad[part]);
+            let mut v_bar = sb.v;
+            let mut m_bar = sb.mass;
+            particle_bcs_vjp(
+                self.x0[p],
+                it.mass[p],
+                &self.setup.particle_bcs,
+                &c,
+                &mut v_bar,
+                &mut m_bar,
+            );
+            grad[part].density += m_bar * T::c(self.vol0[p]);
+            out.x[p] = std::array::from_fn(|q| x_bar[p][q] + sb.x[q]);
+            out.v[p] = v_bar;
+            out.c[p] = damped_affine_vjp(&sb.a, c.rpic_damping);
+            out.f[p] = cb.f_trial.to_array();
+            out.plastic[p] = cb.state;
+        }
+        *adj = out;
+    }
+
+    /// Adds the gradient of the initial state's dependence on the parameters (the initial
+    /// plastic yield stress) to `grad`, given the adjoint of the initial state.
+    pub fn init_vjp<T: Real>(&self, adj0: &HostState<T>, grad: &mut [PhysParams<T>]) {
+        for (p, &part) in self.part.iter().enumerate() {
+            grad[part as usize].yield_stress += adj0.plastic[p][0];
+        }
+    }
+}
+
+/// What a substep's reverse sweep needs from its forward pass.
+struct Intermediates<T> {
+    mass: Vec<T>,
+    v1: Vec<[T; 3]>,
+    stress: Vec<[T; 9]>,
+    x_start: Vec<[T; 3]>,
+    f_trial: Vec<[T; 9]>,
+    f_elastic: Vec<[T; 9]>,
+    plastic_in: Vec<[T; 2]>,
+    grid_in: Vec<[T; 4]>,
+    grid: Vec<[T; 4]>,
+    mats: Vec<MaterialParams<T>>,
+}
