@@ -417,3 +417,43 @@ struct Intermediates<T> {
     grid: Vec<[T; 4]>,
     mats: Vec<MaterialParams<T>>,
 }
+
+/// [`HostSim`] as a [`Differentiable`](super::checkpoint::Differentiable) stepper in scalar
+/// type `T`.
+pub struct HostStepper<'a, T> {
+    /// The simulator.
+    pub sim: &'a HostSim,
+    _t: std::marker::PhantomData<T>,
+}
+
+impl<'a, T> HostStepper<'a, T> {
+    /// Wraps a host simulator.
+    pub fn new(sim: &'a HostSim) -> Self {
+        HostStepper {
+            sim,
+            _t: std::marker::PhantomData,
+        }
+    }
+}
+
+impl<T: Real> super::checkpoint::Differentiable for HostStepper<'_, T> {
+    type State = HostState<T>;
+    type Params = Vec<PhysParams<T>>;
+    type Grad = Vec<PhysParams<T>>;
+    fn step(&self, s: &mut HostState<T>, p: &Vec<PhysParams<T>>, k: u64) {
+        self.sim.substep(s, p, k);
+    }
+    fn step_vjp(
+        &self,
+        before: &HostState<T>,
+        p: &Vec<PhysParams<T>>,
+        k: u64,
+        adj: &mut HostState<T>,
+        grad: &mut Vec<PhysParams<T>>,
+    ) {
+        self.sim.substep_vjp(before, p, k, adj, grad);
+    }
+    fn zero_adjoint(&self, s: &HostState<T>) -> HostState<T> {
+        HostState::zeros(s.x.len())
+    }
+}

@@ -22,8 +22,10 @@
 //! parameter granularity (object, particle), trajectory losses and `r4d fit-trajectory`, the
 //! fluid's adjoint.
 
+pub mod checkpoint;
 pub mod constitutive_vjp;
 pub mod host;
+pub mod trajectory_loss;
 pub mod transfer_vjp;
 
 #[cfg(test)]
