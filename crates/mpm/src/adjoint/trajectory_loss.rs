@@ -114,7 +114,7 @@ mod tests {
                     let f = |h: f64| {
                         let mut x2 = x.clone();
                         x2[p][a] += h;
-                        loss.value_and_grad(&x2, target, &mut vec![[0.0; 3]; 3])
+                        loss.value_and_grad(&x2, target, &mut [[0.0; 3]; 3])
                     };
                     let fd = (f(1e-6) - f(-1e-6)) / 2e-6;
                     assert!(
