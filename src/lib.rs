@@ -1,8 +1,13 @@
 //! # resonance4d
 //!
 //! Physically simulated 4D Gaussian scenes from video: a differentiable MLS-MPM simulator
-//! ([`mpm`]) with backends behind traits ([`backend_cpu`] today; wgpu and Vulkan later).
-//! The binary `r4d` wires everything up; this facade re-exports the crates for embedding.
+//! ([`mpm`]) with backends behind traits ([`backend_cpu`] today; wgpu and Vulkan later), and
+//! log-domain optimisation ([`optim`]). The binary `r4d` wires everything up; this facade
+//! re-exports the crates for embedding and holds the pipelines that combine them
+//! ([`fit_trajectory`]).
+
+pub mod fit_trajectory;
 
 pub use r4d_backend_cpu as backend_cpu;
 pub use r4d_mpm as mpm;
+pub use r4d_optim as optim;

@@ -141,3 +141,68 @@ fn every_shipped_config_loads_and_runs_a_substep() {
     }
     assert!(n >= 7);
 }
+
+#[test]
+fn fit_trajectory_writes_params_json_and_a_log() {
+    let truth = out_dir("fit_truth");
+    let o = r4d(&[
+        "simulate",
+        "--config",
+        &repo("tests/fixtures/fit/beam.toml"),
+        "--out",
+        truth.to_str().unwrap(),
+        "--frames",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = out_dir("fit_out");
+    let o = r4d(&[
+        "fit-trajectory",
+        "--config",
+        &repo("tests/fixtures/fit/beam_start.toml"),
+        "--target",
+        truth.to_str().unwrap(),
+        "--params",
+        "E,density",
+        "--out",
+        out.to_str().unwrap(),
+        "--iters",
+        "2",
+        "--frames",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let p: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("params.json")).unwrap()).unwrap();
+    let part = &p["parts"][0];
+    assert_eq!(part["id"], 0);
+    assert_eq!(part["material"], "jelly");
+    for key in [
+        "E",
+        "nu",
+        "density",
+        "yield_stress",
+        "plastic_viscosity",
+        "friction_angle",
+    ] {
+        assert!(part[key].is_number(), "{key} missing: {p}");
+    }
+    let log = std::fs::read_to_string(out.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), 2);
+    let first: serde_json::Value = serde_json::from_str(log.lines().next().unwrap()).unwrap();
+    assert!(first["loss"].as_f64().unwrap() > 0.0 && first["grad_norm"].is_number());
+    // Bad parameter names are refused with the list of known ones.
+    let o = r4d(&[
+        "fit-trajectory",
+        "--config",
+        &repo("tests/fixtures/fit/beam_start.toml"),
+        "--target",
+        truth.to_str().unwrap(),
+        "--params",
+        "stiffness",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown parameter 'stiffness'"));
+}

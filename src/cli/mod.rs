@@ -1,5 +1,7 @@
 //! Command-line interface: argument parsing and backend selection at runtime.
 
+mod fit_trajectory;
+mod scene;
 mod simulate;
 
 use clap::{Parser, Subcommand, ValueEnum};
@@ -16,6 +18,8 @@ struct Cli {
 enum Command {
     /// Run an MPM simulation and write one PLY per frame.
     Simulate(simulate::SimulateArgs),
+    /// Fit part parameters to target particle trajectories (exact adjoint gradients).
+    FitTrajectory(fit_trajectory::FitTrajectoryArgs),
 }
 
 /// Compute backend.
@@ -32,6 +36,7 @@ pub fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Simulate(a) => simulate::run(a),
+        Command::FitTrajectory(a) => fit_trajectory::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -5,8 +5,8 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    physgaussian, ply::write_ply, reference::ReferenceBackend, MpmKernels, MpmSim, ParticleSet,
-    SimConfig, Simulator,
+    ply::write_ply, reference::ReferenceBackend, MpmKernels, MpmSim, ParticleSet, SimConfig,
+    Simulator,
 };
 use serde_json::json;
 use std::io::IsTerminal;
@@ -42,40 +42,12 @@ pub struct SimulateArgs {
 
 /// Runs the command.
 pub fn run(a: SimulateArgs) -> Result<()> {
-    let (config, warnings, import) = if a.physgaussian {
-        let imp = physgaussian::import_file(&a.config)?;
-        (imp.config.clone(), imp.warnings.clone(), Some(imp))
-    } else {
-        (SimConfig::load(&a.config)?, Vec::new(), None)
-    };
-    for w in &warnings {
-        eprintln!("warning: {}: {w}", a.config.display());
-    }
-    let mut config = config;
+    let loaded = super::scene::load(&a.config, a.physgaussian, a.particles.as_ref())?;
+    let mut config = loaded.config;
     if let Some(f) = a.frames {
         config.time.frames = f;
     }
-    let dx = config.domain.dx();
-    let particle_file = a.particles.clone().or(config.particles.clone());
-    let (mut scene, source, volumes_from_file) = match &particle_file {
-        Some(p) => {
-            let s = ParticleSet::from_ply(p, dx)?;
-            let has_volume = r4d_mpm::ply::read_ply(p)?.get("volume").is_some();
-            (s, p.display().to_string(), has_volume)
-        }
-        None if !config.shapes.is_empty() => (
-            ParticleSet::from_shapes(&config.shapes, dx),
-            format!("{}: shapes", a.config.display()),
-            true,
-        ),
-        None => anyhow::bail!(
-            "{}: no particles: pass --particles FILE.ply or add [[shapes]] to the config",
-            a.config.display()
-        ),
-    };
-    if let Some(imp) = &import {
-        imp.apply_to_scene(&mut scene, volumes_from_file);
-    }
+    let (scene, source, warnings) = (loaded.scene, loaded.source, loaded.warnings);
     match a.backend {
         BackendKind::Cpu => simulate(CpuBackend::default(), &a, config, scene, &source, &warnings),
         BackendKind::Reference => simulate(ReferenceBackend, &a, config, scene, &source, &warnings),

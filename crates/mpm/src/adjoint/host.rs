@@ -253,12 +253,11 @@ impl HostSim {
         for i in 0..n {
             for j in 0..n {
                 for kk in 0..n {
-                    grid_node_update(
-                        [i, j, kk],
-                        &mut grid[(i * n + j) * n + kk],
-                        &self.setup.grid_bcs,
-                        &c,
-                    );
+                    let node = &mut grid[(i * n + j) * n + kk];
+                    // Nodes without mass stay at rest and are never gathered with weight.
+                    if node[3] > T::zero() {
+                        grid_node_update([i, j, kk], node, &self.setup.grid_bcs, &c);
+                    }
                 }
             }
         }

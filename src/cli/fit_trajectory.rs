@@ -1,0 +1,184 @@
+//! `r4d fit-trajectory`: fit part parameters to target particle trajectories.
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use r4d_mpm::adjoint::checkpoint::Checkpointing;
+use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
+use r4d_mpm::ply::read_ply;
+use r4d_optim::{AdamW, ParamKind};
+use resonance4d::fit_trajectory::{fit_trajectory, FitOptions, Granularity, PartRecord};
+use serde_json::json;
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+
+/// Arguments of `r4d fit-trajectory`.
+#[derive(clap::Args, Debug)]
+pub struct FitTrajectoryArgs {
+    /// Simulation config; its part parameters are the starting point.
+    #[arg(long)]
+    config: PathBuf,
+    /// Read --config as a PhysGaussian scene config.
+    #[arg(long)]
+    physgaussian: bool,
+    /// Particle PLY (overrides the config's particles).
+    #[arg(long)]
+    particles: Option<PathBuf>,
+    /// Folder of target frames as `r4d simulate` writes them (frame_0001.ply, ...).
+    #[arg(long)]
+    target: PathBuf,
+    /// Comma-separated free parameters: E, nu, yield_stress, plastic_viscosity,
+    /// friction_angle, density.
+    #[arg(long, default_value = "E")]
+    params: String,
+    /// Output folder: params.json and log.jsonl.
+    #[arg(long)]
+    out: PathBuf,
+    /// Iterations.
+    #[arg(long, default_value_t = 30)]
+    iters: usize,
+    /// Learning rate (log units per step); decays along a cosine to 5% over the run.
+    #[arg(long, default_value_t = 0.3)]
+    lr: f64,
+    /// Adam's first-moment decay (0.5: little momentum, so a fit of a few log-parameters
+    /// does not overshoot its minimum).
+    #[arg(long, default_value_t = 0.5)]
+    beta1: f64,
+    /// Adam's second-moment decay.
+    #[arg(long, default_value_t = 0.999)]
+    beta2: f64,
+    /// Loss: position (corresponding particles) or chamfer.
+    #[arg(long, default_value = "position")]
+    loss: String,
+    /// Parameter granularity: part or object.
+    #[arg(long, default_value = "part")]
+    granularity: String,
+    /// Checkpointing: per-frame, store-all or every:N.
+    #[arg(long, default_value = "per-frame")]
+    checkpointing: String,
+    /// Number of frames to fit (default: all target frames the config's frames allow).
+    #[arg(long)]
+    frames: Option<usize>,
+}
+
+fn read_targets(dir: &Path, max: usize) -> Result<Vec<Vec<[f32; 3]>>> {
+    let mut out = Vec::new();
+    for k in 1..=max {
+        let f = dir.join(format!("frame_{k:04}.ply"));
+        if !f.exists() {
+            break;
+        }
+        let ply = read_ply(&f)?;
+        let col = |n: &str| {
+            ply.get(n)
+                .with_context(|| format!("{}: missing property '{n}'", f.display()))
+        };
+        let (x, y, z) = (col("x")?, col("y")?, col("z")?);
+        out.push((0..ply.count).map(|i| [x[i], y[i], z[i]]).collect());
+    }
+    if out.is_empty() {
+        bail!(
+            "{}: no target frames (expected frame_0001.ply, ...)",
+            dir.display()
+        );
+    }
+    Ok(out)
+}
+
+/// Runs the command.
+pub fn run(a: FitTrajectoryArgs) -> Result<()> {
+    let loaded = super::scene::load(&a.config, a.physgaussian, a.particles.as_ref())?;
+    let mut config = loaded.config;
+    if let Some(f) = a.frames {
+        config.time.frames = f;
+    }
+    let params = a
+        .params
+        .split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(ParamKind::parse)
+        .collect::<Result<Vec<_>, _>>()?;
+    if params.is_empty() {
+        bail!("--params: name at least one parameter");
+    }
+    let loss = match a.loss.as_str() {
+        "position" => TrajectoryLoss::Position,
+        "chamfer" => TrajectoryLoss::Chamfer,
+        o => bail!("--loss: unknown loss '{o}' (position, chamfer)"),
+    };
+    let granularity = match a.granularity.as_str() {
+        "part" => Granularity::Part,
+        "object" => Granularity::Object,
+        "particle" => bail!("--granularity particle is not implemented yet (part, object)"),
+        o => bail!("--granularity: unknown '{o}' (part, object)"),
+    };
+    let checkpointing = match a.checkpointing.as_str() {
+        "per-frame" => Checkpointing::PerFrame,
+        "store-all" => Checkpointing::StoreAll,
+        s if s.starts_with("every:") => Checkpointing::EveryN(
+            s[6..]
+                .parse()
+                .with_context(|| format!("--checkpointing: bad interval in '{s}'"))?,
+        ),
+        o => bail!("--checkpointing: unknown '{o}' (per-frame, store-all, every:N)"),
+    };
+    let targets = read_targets(&a.target, config.time.frames)?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let log_path = a.out.join("log.jsonl");
+    let mut log = std::fs::File::create(&log_path)
+        .with_context(|| format!("creating {}", log_path.display()))?;
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::new(a.iters as u64)
+    } else {
+        ProgressBar::with_draw_target(Some(a.iters as u64), ProgressDrawTarget::hidden())
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} iter {pos}/{len} [{elapsed} < {eta}] {msg}")
+            .expect("valid template"),
+    );
+    let opts = FitOptions {
+        params,
+        iters: a.iters,
+        adam: AdamW {
+            lr: a.lr,
+            beta1: a.beta1,
+            beta2: a.beta2,
+            ..Default::default()
+        },
+        loss,
+        checkpointing,
+        granularity,
+        ..Default::default()
+    };
+    let mut io_error = None;
+    let fitted = fit_trajectory(&config, &loaded.scene, &targets, &opts, |it| {
+        bar.inc(1);
+        bar.set_message(format!("loss {:.3e}", it.loss));
+        if let Err(e) = serde_json::to_writer(&mut log, it)
+            .map(|_| ())
+            .and_then(|_| writeln!(log).map_err(serde_json::Error::io))
+        {
+            io_error.get_or_insert(e);
+        }
+    })?;
+    bar.finish_and_clear();
+    if let Some(e) = io_error {
+        return Err(e).with_context(|| format!("writing {}", log_path.display()));
+    }
+    let records: Vec<PartRecord> = fitted
+        .iter()
+        .enumerate()
+        .map(|(i, p)| PartRecord::of(i, p))
+        .collect();
+    let path = a.out.join("params.json");
+    std::fs::write(
+        &path,
+        serde_json::to_string_pretty(&json!({ "parts": records }))? + "\n",
+    )
+    .with_context(|| format!("writing {}", path.display()))?;
+    println!(
+        "fitted parameters: {}; log: {}",
+        path.display(),
+        log_path.display()
+    );
+    Ok(())
+}
