@@ -321,11 +321,13 @@ pub fn scalar_model<S: Scalar>(pc: &PartConsts, m: ModelIn<S>, dt: f64) -> Model
             let j_e = sigma_e[0] * sigma_e[1] * sigma_e[2];
             let jp = m.state[1] * j_trial / j_e;
             let h = (S::cst(pc.snow_xi as f64) * (S::cst(1.0) - jp)).exp();
+            // Within the elastic window F is kept as it is (no f32 recomposition noise).
+            let clamped = (0..3).any(|i| sigma_e[i].re() != sigma[i].re());
             ModelOut {
                 sigma_e,
                 t: fixed_corotated(sigma_e, mu * h, lambda * h),
                 state: [m.state[0], jp],
-                unchanged: false,
+                unchanged: !clamped,
             }
         }
         _ => keep([S::cst(0.0); 3], m.state),

@@ -189,8 +189,52 @@ fn away_from_zero<T: Real>(x: T, eps: T) -> T {
 /// Adjoint of [`stress_update_with`](crate::constitutive::stress_update_with) (isotropic
 /// models; the fluid is not differentiated yet). `fe_bar`, `tau_bar` and `state_bar` are the
 /// adjoints of `F_elastic`, `tau` and the plastic state after the call.
+///
+/// The adjoint is evaluated in f64 whatever `T` is: the divided differences of the
+/// regularisation need a threshold well below the plastic windows of the models (snow's
+/// critical stretch is 7.5e-3), which f32 arithmetic cannot resolve.
 #[allow(clippy::too_many_arguments)]
 pub fn stress_update_vjp<T: Real>(
+    f_trial: Mat3<T>,
+    pc: &PartConsts,
+    state: PlasticState<T>,
+    p: MaterialParams<T>,
+    dt: T,
+    fe_bar: Mat3<T>,
+    tau_bar: Mat3<T>,
+    state_bar: PlasticState<T>,
+) -> ConstitutiveBar<T> {
+    let c = |x: T| x.f64();
+    let b = stress_update_vjp_inner::<f64>(
+        f_trial.cast(),
+        pc,
+        state.map(c),
+        MaterialParams {
+            mu: c(p.mu),
+            lambda: c(p.lambda),
+            eta: c(p.eta),
+            alpha: c(p.alpha),
+        },
+        c(dt),
+        fe_bar.cast(),
+        tau_bar.cast(),
+        state_bar.map(c),
+    );
+    let t = |x: f64| T::c(x);
+    ConstitutiveBar {
+        f_trial: b.f_trial.cast(),
+        state: b.state.map(t),
+        params: MaterialParams {
+            mu: t(b.params.mu),
+            lambda: t(b.params.lambda),
+            eta: t(b.params.eta),
+            alpha: t(b.params.alpha),
+        },
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn stress_update_vjp_inner<T: Real>(
     f_trial: Mat3<T>,
     pc: &PartConsts,
     state: PlasticState<T>,

@@ -871,3 +871,199 @@ mod trajectory {
         );
     }
 }
+
+mod precision {
+    //! The adjoint in f32 (the simulation's precision) against the f64 reference gradient,
+    //! through the checkpointed driver.
+    use super::Rng;
+    use crate::adjoint::checkpoint::{value_and_grad, Checkpointing};
+    use crate::adjoint::host::{HostSim, HostStepper, PhysParams};
+    use crate::boundary::{BoundaryCondition, Surface};
+    use crate::config::{Domain, ForceForm, SimConfig, SolverConfig, TimeConfig};
+    use crate::material::{Material, PartParams};
+    use crate::math::Real;
+    use crate::scene::{ParticleSet, Shape};
+
+    fn grad<T: Real>(sim: &HostSim, part: &PartParams, w: &[Vec<[f64; 3]>]) -> [f64; 6] {
+        let params = vec![PhysParams::<T>::of(part)];
+        let v0 = vec![[T::zero(); 3]; sim.len()];
+        let init = sim.init(&params, &v0);
+        let stepper = HostStepper::<T>::new(sim);
+        let (_, adj0, mut g) = value_and_grad(
+            &stepper,
+            &init,
+            &params,
+            60,
+            20,
+            Checkpointing::EveryN(7),
+            vec![PhysParams::default()],
+            |_, _| 0.0,
+            |f, _, adj| {
+                for (a, wp) in adj.x.iter_mut().zip(&w[f - 1]) {
+                    for q in 0..3 {
+                        a[q] += T::c(wp[q]);
+                    }
+                }
+            },
+        );
+        sim.init_vjp(&adj0, &mut g);
+        let g = g[0];
+        [
+            g.youngs_modulus,
+            g.poisson_ratio,
+            g.yield_stress,
+            g.plastic_viscosity,
+            g.friction_angle_deg,
+            g.density,
+        ]
+        .map(|x| x.f64())
+    }
+
+    #[test]
+    fn f32_adjoint_matches_the_f64_reference_within_1e_2() {
+        let n = 16;
+        let dx = 1.0 / n as f64;
+        for (name, part) in [
+            (
+                "jelly",
+                PartParams {
+                    material: Material::Jelly,
+                    youngs_modulus_pa: 3e4,
+                    ..Default::default()
+                },
+            ),
+            (
+                "metal",
+                PartParams {
+                    material: Material::Metal,
+                    youngs_modulus_pa: 3e4,
+                    yield_stress_pa: 20.0,
+                    hardening: true,
+                    xi: 0.3,
+                    ..Default::default()
+                },
+            ),
+            (
+                "sand",
+                PartParams {
+                    material: Material::Sand,
+                    youngs_modulus_pa: 3e4,
+                    friction_angle_deg: 35.0,
+                    ..Default::default()
+                },
+            ),
+            (
+                "foam",
+                PartParams {
+                    material: Material::Foam,
+                    youngs_modulus_pa: 3e4,
+                    yield_stress_pa: 20.0,
+                    plastic_viscosity_pa_s: 2.0,
+                    ..Default::default()
+                },
+            ),
+            (
+                "snow",
+                PartParams {
+                    material: Material::Snow,
+                    youngs_modulus_pa: 3e4,
+                    snow_critical_compression: 2e-3,
+                    snow_critical_stretch: 1e-3,
+                    ..Default::default()
+                },
+            ),
+            (
+                "plasticine",
+                PartParams {
+                    material: Material::Plasticine,
+                    youngs_modulus_pa: 3e4,
+                    yield_stress_pa: 20.0,
+                    softening: 5.0,
+                    ..Default::default()
+                },
+            ),
+        ] {
+            let cfg = SimConfig {
+                domain: Domain {
+                    grid_lim: 1.0,
+                    n_grid: n,
+                },
+                time: TimeConfig {
+                    substep_dt: 2e-4,
+                    frame_dt: None,
+                    substeps_per_frame: Some(20),
+                    frames: 3,
+                },
+                solver: SolverConfig {
+                    force: ForceForm::Mls,
+                    ..Default::default()
+                },
+                parts: vec![PartParams {
+                    density_kg_m3: 800.0,
+                    ..part
+                }],
+                shapes: vec![Shape::Box {
+                    min: [0.3, 0.35, 3.0 * dx],
+                    max: [0.55, 0.6, 3.0 * dx + 0.2],
+                    part: 0,
+                    per_cell: 1,
+                }],
+                particles: None,
+                boundary: vec![
+                    BoundaryCondition::BoundingBox {
+                        layers: 3,
+                        surface: Surface::Slip,
+                    },
+                    BoundaryCondition::ParticleImpulse {
+                        force: [-0.2, 0.1, -0.5],
+                        point: [0.5, 0.5, 0.35],
+                        size: [0.1, 0.3, 0.1],
+                        num_dt: 30,
+                        start_time: 0.0,
+                    },
+                ],
+            };
+            let scene = ParticleSet::from_shapes(&cfg.shapes, dx);
+            let sim = HostSim::new(&cfg, &scene).unwrap();
+            let mut r = Rng(3);
+            let w: Vec<Vec<[f64; 3]>> = (0..3)
+                .map(|_| (0..sim.len()).map(|_| r.arr(1.0)).collect())
+                .collect();
+            let g64 = grad::<f64>(&sim, &cfg.parts[0], &w);
+            let g32 = grad::<f32>(&sim, &cfg.parts[0], &w);
+            for (i, pname) in [
+                "E",
+                "nu",
+                "yield_stress",
+                "plastic_viscosity",
+                "friction_angle",
+                "density",
+            ]
+            .iter()
+            .enumerate()
+            {
+                let scale = g64[i].abs().max(g32[i].abs());
+                let rel = if scale == 0.0 {
+                    0.0
+                } else {
+                    (g64[i] - g32[i]).abs() / scale
+                };
+                eprintln!(
+                    "{name}: d/d{pname}: f64 {:+.5e} f32 {:+.5e} rel {rel:.1e}",
+                    g64[i], g32[i]
+                );
+                // Sand cannot reach 1e-2: at rest it sits on the apex of the Drucker-Prager
+                // cone, where the branch (elastic or projection to the apex) is decided by the
+                // sign of a volumetric strain of the size of f32 round-off, so f32 and f64 runs
+                // take different branches for many particles (3-5% gradient differences here).
+                let tol = if name == "sand" { 1e-1 } else { 1e-2 };
+                assert!(
+                    rel < tol,
+                    "{name}: d/d{pname}: f32 {} vs f64 {} (rel {rel})",
+                    g32[i],
+                    g64[i]
+                );
+            }
+        }
+    }
+}
