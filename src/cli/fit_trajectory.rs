@@ -14,15 +14,9 @@ use std::path::{Path, PathBuf};
 /// Arguments of `r4d fit-trajectory`.
 #[derive(clap::Args, Debug)]
 pub struct FitTrajectoryArgs {
-    /// Simulation config; its part parameters are the starting point.
-    #[arg(long)]
-    config: PathBuf,
-    /// Read --config as a PhysGaussian scene config.
-    #[arg(long)]
-    physgaussian: bool,
-    /// Particle PLY (overrides the config's particles).
-    #[arg(long)]
-    particles: Option<PathBuf>,
+    /// The scene (for fitting, its part parameters are the starting point).
+    #[command(flatten)]
+    scene: super::scene::SceneArgs,
     /// Folder of target frames as `r4d simulate` writes them (frame_0001.ply, ...).
     #[arg(long)]
     target: PathBuf,
@@ -86,7 +80,7 @@ fn read_targets(dir: &Path, max: usize) -> Result<Vec<Vec<[f32; 3]>>> {
 
 /// Runs the command.
 pub fn run(a: FitTrajectoryArgs) -> Result<()> {
-    let loaded = super::scene::load(&a.config, a.physgaussian, a.particles.as_ref())?;
+    let loaded = a.scene.load()?;
     let mut config = loaded.config;
     if let Some(f) = a.frames {
         config.time.frames = f;

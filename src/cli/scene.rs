@@ -4,6 +4,28 @@ use anyhow::Result;
 use r4d_mpm::{physgaussian, ParticleSet, SimConfig};
 use std::path::{Path, PathBuf};
 
+/// The arguments that name a scene, shared by the commands.
+#[derive(clap::Args, Debug)]
+pub struct SceneArgs {
+    /// Simulation config: the project's TOML/JSON, or a PhysGaussian scene JSON with
+    /// --physgaussian.
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Read --config as a PhysGaussian scene config (config/*.json of that project).
+    #[arg(long)]
+    pub physgaussian: bool,
+    /// Particle PLY (float x, y, z; optional volume, part). Overrides the config's particles.
+    #[arg(long)]
+    pub particles: Option<PathBuf>,
+}
+
+impl SceneArgs {
+    /// Loads the scene.
+    pub fn load(&self) -> Result<Loaded> {
+        load(&self.config, self.physgaussian, self.particles.as_ref())
+    }
+}
+
 /// A config with its particles, ready to simulate.
 pub struct Loaded {
     /// The config.

@@ -16,16 +16,9 @@ use std::time::Instant;
 /// Arguments of `r4d simulate`.
 #[derive(clap::Args, Debug)]
 pub struct SimulateArgs {
-    /// Simulation config: the project's TOML/JSON, or a PhysGaussian scene JSON with
-    /// --physgaussian.
-    #[arg(long)]
-    config: PathBuf,
-    /// Read --config as a PhysGaussian scene config (config/*.json of that project).
-    #[arg(long)]
-    physgaussian: bool,
-    /// Particle PLY (float x, y, z; optional volume, part). Overrides the config's particles.
-    #[arg(long)]
-    particles: Option<PathBuf>,
+    /// The scene (for fitting, its part parameters are the starting point).
+    #[command(flatten)]
+    scene: super::scene::SceneArgs,
     /// Output folder for frame_NNNN.ply and summary.json.
     #[arg(long)]
     out: PathBuf,
@@ -42,7 +35,7 @@ pub struct SimulateArgs {
 
 /// Runs the command.
 pub fn run(a: SimulateArgs) -> Result<()> {
-    let loaded = super::scene::load(&a.config, a.physgaussian, a.particles.as_ref())?;
+    let loaded = a.scene.load()?;
     let mut config = loaded.config;
     if let Some(f) = a.frames {
         config.time.frames = f;
@@ -122,9 +115,9 @@ fn simulate<B: MpmKernels>(
     let done = state.frame;
     let summary = json!({
         "config": config,
-        "config_file": a.config,
-        "physgaussian": a.physgaussian,
-        "particles_file": a.particles,
+        "config_file": a.scene.config,
+        "physgaussian": a.scene.physgaussian,
+        "particles_file": a.scene.particles,
         "backend": backend_name,
         "particles": n,
         "frames": done + 1,

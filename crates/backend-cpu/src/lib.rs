@@ -133,30 +133,11 @@ fn for_active_blocks(
 }
 
 impl MpmKernels for CpuBackend {
-    type Buf<T: bytemuck::Pod + Send + Sync> = Vec<T>;
-    type Error = Infallible;
+    r4d_mpm::host_vec_buffers!();
 
     fn name(&self) -> &'static str {
         "cpu"
     }
-    fn upload<T: bytemuck::Pod + Send + Sync>(&self, data: &[T]) -> Result<Vec<T>, Infallible> {
-        Ok(data.to_vec())
-    }
-    fn zeros<T: bytemuck::Pod + Send + Sync>(&self, len: usize) -> Result<Vec<T>, Infallible> {
-        Ok(vec![T::zeroed(); len])
-    }
-    fn download<T: bytemuck::Pod + Send + Sync>(&self, buf: &Vec<T>) -> Result<Vec<T>, Infallible> {
-        Ok(buf.clone())
-    }
-    fn write<T: bytemuck::Pod + Send + Sync>(
-        &self,
-        buf: &mut Vec<T>,
-        data: &[T],
-    ) -> Result<(), Infallible> {
-        buf.copy_from_slice(data);
-        Ok(())
-    }
-
     fn particle_bcs(
         &self,
         p: &mut Particles<Self>,

@@ -247,3 +247,41 @@ pub trait MpmKernels: Sized + Send + Sync + 'static {
     /// Memory the backend has allocated.
     fn memory_usage(&self) -> MemoryUsage;
 }
+
+/// Implements the buffer methods of [`MpmKernels`] for a host backend whose buffers are
+/// `Vec<T>` and whose error is [`std::convert::Infallible`] (the reference and CPU backends).
+/// Use inside the `impl MpmKernels for ...` block.
+#[macro_export]
+macro_rules! host_vec_buffers {
+    () => {
+        type Buf<T: bytemuck::Pod + Send + Sync> = Vec<T>;
+        type Error = std::convert::Infallible;
+
+        fn upload<T: bytemuck::Pod + Send + Sync>(
+            &self,
+            data: &[T],
+        ) -> Result<Vec<T>, std::convert::Infallible> {
+            Ok(data.to_vec())
+        }
+        fn zeros<T: bytemuck::Pod + Send + Sync>(
+            &self,
+            len: usize,
+        ) -> Result<Vec<T>, std::convert::Infallible> {
+            Ok(vec![T::zeroed(); len])
+        }
+        fn download<T: bytemuck::Pod + Send + Sync>(
+            &self,
+            buf: &Vec<T>,
+        ) -> Result<Vec<T>, std::convert::Infallible> {
+            Ok(buf.clone())
+        }
+        fn write<T: bytemuck::Pod + Send + Sync>(
+            &self,
+            buf: &mut Vec<T>,
+            data: &[T],
+        ) -> Result<(), std::convert::Infallible> {
+            buf.copy_from_slice(data);
+            Ok(())
+        }
+    };
+}

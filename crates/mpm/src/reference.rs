@@ -10,7 +10,6 @@ use crate::transfer::{
     damped_affine, g2p_finish, gather, grid_node_update, in_domain, particle_bcs, particle_stress,
     record, scatter, stencil,
 };
-use bytemuck::Pod;
 use std::convert::Infallible;
 
 /// Single-threaded reference implementation of [`MpmKernels`] on host `Vec`s.
@@ -18,26 +17,11 @@ use std::convert::Infallible;
 pub struct ReferenceBackend;
 
 impl MpmKernels for ReferenceBackend {
-    type Buf<T: Pod + Send + Sync> = Vec<T>;
-    type Error = Infallible;
+    crate::host_vec_buffers!();
 
     fn name(&self) -> &'static str {
         "reference"
     }
-    fn upload<T: Pod + Send + Sync>(&self, data: &[T]) -> Result<Vec<T>, Infallible> {
-        Ok(data.to_vec())
-    }
-    fn zeros<T: Pod + Send + Sync>(&self, len: usize) -> Result<Vec<T>, Infallible> {
-        Ok(vec![T::zeroed(); len])
-    }
-    fn download<T: Pod + Send + Sync>(&self, buf: &Vec<T>) -> Result<Vec<T>, Infallible> {
-        Ok(buf.clone())
-    }
-    fn write<T: Pod + Send + Sync>(&self, buf: &mut Vec<T>, data: &[T]) -> Result<(), Infallible> {
-        buf.copy_from_slice(data);
-        Ok(())
-    }
-
     fn particle_bcs(
         &self,
         p: &mut Particles<Self>,

@@ -60,6 +60,14 @@ pub fn damped_affine_vjp<T: Real>(a_bar: &[T; 9], r: f32) -> [T; 9] {
     crate::transfer::damped_affine(a_bar, r)
 }
 
+/// Grid index of the stencil node at offset `off` (full grid of `n` nodes per axis).
+#[inline(always)]
+fn node_index<T>(st: &Stencil<T>, off: [usize; 3], n: usize) -> usize {
+    ((st.base[0] as usize + off[0]) * n + st.base[1] as usize + off[1]) * n
+        + st.base[2] as usize
+        + off[2]
+}
+
 /// Stencil weight of node offset `o` and its derivatives with respect to `fx` on each axis.
 #[inline(always)]
 fn weight_and_grad<T: Real>(st: &Stencil<T>, o: [usize; 3]) -> (T, [T; 3]) {
@@ -140,9 +148,7 @@ pub fn scatter_vjp<T: Real>(
         for j in 0..3 {
             for o in 0..3 {
                 let off = [i, j, o];
-                let idx = ((st.base[0] as usize + i) * n + st.base[1] as usize + j) * n
-                    + st.base[2] as usize
-                    + o;
+                let idx = node_index(st, off, n);
                 let nb = nodes_bar[idx];
                 let mom_bar = [nb[0], nb[1], nb[2]];
                 let m_bar = nb[3];
@@ -357,9 +363,7 @@ pub fn g2p_vjp<T: Real>(
         for j in 0..3 {
             for o in 0..3 {
                 let off = [i, j, o];
-                let idx = ((st.base[0] as usize + i) * n + st.base[1] as usize + j) * n
-                    + st.base[2] as usize
-                    + o;
+                let idx = node_index(&st, off, n);
                 let vi = [nodes[idx][0], nodes[idx][1], nodes[idx][2]];
                 let (w, dw) = weight_and_grad(&st, off);
                 let d: [T; 3] = std::array::from_fn(|q| T::c(off[q] as f64) - st.fx[q]);
