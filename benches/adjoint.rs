@@ -1,0 +1,128 @@
+//! Forward + backward (reverse sweep) of the MPM adjoint: time and peak host memory for each
+//! checkpointing strategy, next to `memory_plan`'s prediction.
+//!
+//! `cargo bench --bench adjoint [-- PARTICLES FRAMES SUBSTEPS_PER_FRAME]` (defaults: 10 000
+//! particles, 2 frames of 50 substeps, n_grid 64, f32). The adjoint runs on the
+//! single-threaded host simulator (the backend adjoint kernels are not written yet), so the
+//! paper's scale (16 frames x 400 substeps, 100k particles) takes hours here; pass larger
+//! arguments to measure it.
+
+use r4d_mpm::adjoint::checkpoint::{memory_plan, value_and_grad, Checkpointing};
+use r4d_mpm::adjoint::host::{HostSim, HostStepper, PhysParams};
+use r4d_mpm::{
+    BoundaryCondition, Domain, PartParams, ParticleSet, Shape, SimConfig, Surface, TimeConfig,
+};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+struct Counting;
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        // SAFETY: forwarded to the system allocator with the caller's layout.
+        let p = unsafe { System.alloc(l) };
+        if !p.is_null() {
+            let now = LIVE.fetch_add(l.size(), Ordering::Relaxed) + l.size();
+            PEAK.fetch_max(now, Ordering::Relaxed);
+        }
+        p
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        // SAFETY: `p` was allocated by `alloc` above with this layout.
+        unsafe { System.dealloc(p, l) };
+        LIVE.fetch_sub(l.size(), Ordering::Relaxed);
+    }
+}
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn main() {
+    let args: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    let target = args.first().copied().unwrap_or(10_000);
+    let frames = args.get(1).copied().unwrap_or(2);
+    let spf = args.get(2).copied().unwrap_or(50) as u32;
+    let n = 64;
+    let dx = 1.0 / n as f64;
+    let side = ((target as f64 / 8.0).cbrt()).round() * dx;
+    let cfg = SimConfig {
+        domain: Domain {
+            grid_lim: 1.0,
+            n_grid: n,
+        },
+        time: TimeConfig {
+            substep_dt: 1e-4,
+            frame_dt: None,
+            substeps_per_frame: Some(spf),
+            frames,
+        },
+        solver: Default::default(),
+        parts: vec![PartParams {
+            youngs_modulus_pa: 1e5,
+            poisson_ratio: 0.3,
+            ..Default::default()
+        }],
+        shapes: vec![Shape::Box {
+            min: [0.5 - side / 2.0, 0.5 - side / 2.0, 0.1],
+            max: [0.5 + side / 2.0, 0.5 + side / 2.0, 0.1 + side],
+            part: 0,
+            per_cell: 2,
+        }],
+        particles: None,
+        boundary: vec![BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        }],
+    };
+    let scene = ParticleSet::from_shapes(&cfg.shapes, dx);
+    let np = scene.len();
+    let sim = HostSim::new(&cfg, &scene).unwrap();
+    let stepper = HostStepper::<f32>::new(&sim);
+    let params = vec![PhysParams::<f32>::of(&cfg.parts[0])];
+    let substeps = frames as u64 * spf as u64;
+    println!("adjoint bench: {np} particles, n_grid {n}, {frames} frames x {spf} substeps, f32, host simulator (1 thread)");
+    println!("| strategy | forward (s) | forward+backward (s) | backward/forward | peak measured (MiB) | memory_plan (MiB) |");
+    println!("|---|---|---|---|---|---|");
+    for strategy in [
+        Checkpointing::StoreAll,
+        Checkpointing::PerFrame,
+        Checkpointing::EveryN(((substeps as f64).sqrt().round() as u32).max(1)),
+    ] {
+        let init = sim.init(&params, &vec![[0.0f32; 3]; np]);
+        // Forward only, for the ratio.
+        let t0 = Instant::now();
+        let mut s = init.clone();
+        for k in 0..substeps {
+            sim.substep(&mut s, &params, k);
+        }
+        let fwd = t0.elapsed().as_secs_f64();
+        drop(s);
+        let base = LIVE.load(Ordering::Relaxed);
+        PEAK.store(base, Ordering::Relaxed);
+        let t1 = Instant::now();
+        let (_, _, g) = value_and_grad(
+            &stepper,
+            &init,
+            &params,
+            substeps,
+            spf,
+            strategy,
+            vec![PhysParams::default()],
+            |_, s| s.x.iter().map(|p| p[2] as f64).sum::<f64>(),
+            |_, _, adj| adj.x.iter_mut().for_each(|a| a[2] += 1.0),
+        );
+        let total = t1.elapsed().as_secs_f64();
+        let peak = (PEAK.load(Ordering::Relaxed) - base) as f64 / 1048576.0;
+        let plan = memory_plan(np as u64, n as u64, substeps, spf, strategy, 4).peak_bytes as f64
+            / 1048576.0;
+        assert!(g[0].youngs_modulus.is_finite());
+        println!(
+            "| {strategy:?} | {fwd:.2} | {total:.2} | {:.2} | {peak:.1} | {plan:.1} |",
+            (total - fwd) / fwd
+        );
+    }
+}
