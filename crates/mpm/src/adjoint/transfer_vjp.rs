@@ -241,17 +241,14 @@ pub fn apply_grid_bcs_vjp<T: Real>(
     c: &StepConsts,
     v_bar: [T; 3],
 ) -> [T; 3] {
-    // Replay the forward chain, keeping the velocity before each condition.
-    let mut before = Vec::with_capacity(bcs.len());
-    let mut v = v_in;
-    for bc in bcs {
-        before.push(v);
-        crate::transfer::apply_grid_bcs(ijk, &mut v, std::slice::from_ref(bc), c);
-    }
     let n = c.n_grid as usize;
     let z = T::zero();
     let mut bar = v_bar;
-    for (bc, vb) in bcs.iter().zip(before).rev() {
+    for (i, bc) in bcs.iter().enumerate().rev() {
+        // The velocity before condition i: replay the ones before it (few conditions, no
+        // allocation in this per-node hot loop).
+        let mut vb = v_in;
+        crate::transfer::apply_grid_bcs(ijk, &mut vb, &bcs[..i], c);
         let on = c.time >= bc.start && c.time < bc.end;
         match bc.kind {
             BC_BOUNDING_BOX if on => {
