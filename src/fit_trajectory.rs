@@ -4,12 +4,13 @@
 //! Each iteration runs the simulation forward with checkpoints, evaluates a
 //! [`TrajectoryLoss`] at every frame against the targets, sweeps backward through every
 //! substep ([`r4d_mpm::adjoint`]) and updates the free parameters with AdamW in the log
-//! domain ([`r4d_optim`]). The simulation runs on the host simulator in f64 (single-threaded):
-//! exact, but slower than the parallel backends; the backend adjoint kernels are not written
-//! yet.
+//! domain ([`r4d_optim`]). The simulation and its reverse sweep run in f64 on the CPU
+//! (`r4d_backend_cpu::adjoint::ParallelHost`, all cores); the backend-buffer adjoint kernels
+//! for GPUs are not written yet.
 
+use r4d_backend_cpu::adjoint::ParallelHost;
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing};
-use r4d_mpm::adjoint::host::{HostSim, HostStepper, PhysParams};
+use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
 use r4d_optim::{AdamW, LogDomainOptimizer, ParamKind};
@@ -193,7 +194,7 @@ pub fn fit_trajectory(
         }
     }
     let sim = HostSim::new(config, scene)?;
-    let stepper = HostStepper::<f64>::new(&sim);
+    let stepper = ParallelHost::<f64>::new(&sim);
     let mut parts = config.parts.clone();
     // Flat parameter vector: (part, kind) pairs, or one entry per kind for the whole object.
     let slots: Vec<(Option<usize>, ParamKind)> = match opts.granularity {

@@ -31,8 +31,10 @@ use rayon::prelude::*;
 use std::convert::Infallible;
 use std::sync::Arc;
 
-/// Width (in node layers along x) of the slabs scattered in parallel; must be >= 2.
-pub const SLAB: usize = 2;
+pub mod adjoint;
+pub mod slabs;
+
+pub use slabs::SLAB;
 
 /// Parallelism of the CPU backend.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -87,14 +89,6 @@ impl CpuBackend {
             None => f(),
         }
     }
-}
-
-/// One parallel scatter task: first node layer, particle ids, and the slab's nodes.
-type SlabTask<'a> = (usize, &'a [u32], &'a mut [[f32; 4]]);
-
-/// Node index range `[lo, hi)` (in x layers) written by slab `s`.
-fn slab_layers(s: usize, n: usize) -> (usize, usize) {
-    (s * SLAB, (s * SLAB + SLAB + 2).min(n))
 }
 
 /// Calls `f(bx, by, bz, block_nodes)` for each active block of an x-block slab.
@@ -164,7 +158,7 @@ impl MpmKernels for CpuBackend {
         let n = g.n;
         let np = p.count;
         let nb = blocks_per_axis(n);
-        let n_slabs = n.div_ceil(SLAB);
+        let n_slabs = slabs::slab_count(n);
         if g.scratch.len() != 2 * np + n_slabs + 1 {
             g.scratch = vec![0; 2 * np + n_slabs + 1];
         }
@@ -192,16 +186,14 @@ impl MpmKernels for CpuBackend {
                     };
                 });
 
-            // 3. Stable counting sort by slab of the base x index; mark active blocks.
+            // 3. Mark the active blocks; sort the particles by slab.
             g.active.fill(0);
-            starts.fill(0);
             for &k in keys.iter() {
                 if k == u32::MAX {
                     continue;
                 }
                 let k = k as usize;
                 let (bx, by, bz) = (k / (n * n), (k / n) % n, k % n);
-                starts[bx / SLAB + 1] += 1;
                 for ix in bx / BLOCK..=(bx + 2) / BLOCK {
                     for iy in by / BLOCK..=(by + 2) / BLOCK {
                         for iz in bz / BLOCK..=(bz + 2) / BLOCK {
@@ -210,47 +202,22 @@ impl MpmKernels for CpuBackend {
                     }
                 }
             }
-            for s in 0..n_slabs {
-                starts[s + 1] += starts[s];
-            }
-            let mut fill: Vec<u32> = starts[..n_slabs].to_vec();
-            for (i, &k) in keys.iter().enumerate() {
-                if k == u32::MAX {
-                    continue;
-                }
-                let s = k as usize / (n * n) / SLAB;
-                order[fill[s] as usize] = i as u32;
-                fill[s] += 1;
-            }
+            let base_x: Vec<Option<u32>> = keys
+                .iter()
+                .map(|&k| (k != u32::MAX).then(|| k / (n * n) as u32))
+                .collect();
+            slabs::sort_by_slab(&base_x, n, order, starts);
 
             // 4. Scatter: even slabs in parallel, then odd slabs.
             let (v, mass, stress) = (&p.v, &p.mass, &p.stress);
-            let layer = n * n;
-            for colour in 0..2 {
-                let mut tasks: Vec<SlabTask> = Vec::new();
-                let mut rest: &mut [[f32; 4]] = &mut g.nodes;
-                let mut rest_lo = 0usize;
-                for s in (colour..n_slabs).step_by(2) {
-                    let ids = &order[starts[s] as usize..starts[s + 1] as usize];
-                    let (lo, hi) = slab_layers(s, n);
-                    let tail = std::mem::take(&mut rest);
-                    let (_, tail) = tail.split_at_mut((lo - rest_lo) * layer);
-                    let (mine, tail) = tail.split_at_mut((hi - lo) * layer);
-                    rest = tail;
-                    rest_lo = hi;
-                    if !ids.is_empty() {
-                        tasks.push((lo, ids, mine));
-                    }
+            slabs::scatter_by_slab(&mut g.nodes, n * n, n, order, starts, |lo, ids, nodes| {
+                for &i in ids {
+                    let i = i as usize;
+                    let st = stencil(x[i], c.inv_dx);
+                    let a = damped_affine(&cm[i], c.rpic_damping);
+                    scatter(nodes, lo, n, &st, v[i], &a, mass[i], &stress[i], c);
                 }
-                tasks.into_par_iter().for_each(|(lo, ids, nodes)| {
-                    for &i in ids {
-                        let i = i as usize;
-                        let st = stencil(x[i], c.inv_dx);
-                        let a = damped_affine(&cm[i], c.rpic_damping);
-                        scatter(nodes, lo, n, &st, v[i], &a, mass[i], &stress[i], c);
-                    }
-                });
-            }
+            });
         });
         Ok(())
     }

@@ -191,7 +191,8 @@ impl HostSim {
         }
     }
 
-    fn masses<T: Real>(&self, params: &[PhysParams<T>]) -> Vec<T> {
+    /// Particle masses `density x V0` for the given parameters.
+    pub fn masses<T: Real>(&self, params: &[PhysParams<T>]) -> Vec<T> {
         self.vol0
             .iter()
             .zip(&self.part)
@@ -200,7 +201,7 @@ impl HostSim {
     }
 
     /// Constants of substep `k` (time `k dt`).
-    fn consts_at(&self, k_sub: u64) -> crate::StepConsts {
+    pub fn consts_at(&self, k_sub: u64) -> crate::StepConsts {
         self.setup
             .step_consts(k_sub as f64 * self.setup.config.time.substep_dt, k_sub)
     }
@@ -320,6 +321,7 @@ impl HostSim {
                 &adj.c[p],
                 &adj.f[p],
                 &mut grid_bar,
+                0,
             );
             x_bar[p] = g.x;
             fe_bar[p] = g.f_elastic;

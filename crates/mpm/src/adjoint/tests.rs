@@ -238,7 +238,7 @@ fn g2p_vjp_matches_finite_differences() {
                 + (0..9).map(|e| c2[e] * cb[e] + f2[e] * fb[e]).sum::<f64>()
         };
         let mut nodes_bar = vec![[0.0f64; 4]; N * N * N];
-        let out = g2p_vjp(&nodes, N, x, &fe, &c, xb, vb, &cb, &fb, &mut nodes_bar);
+        let out = g2p_vjp(&nodes, N, x, &fe, &c, xb, vb, &cb, &fb, &mut nodes_bar, 0);
         let scale = out
             .x
             .iter()

@@ -321,7 +321,8 @@ pub struct G2pBar<T> {
 
 /// Adjoint of [`crate::transfer::gather`] + [`crate::transfer::g2p_finish`] for one particle:
 /// given the adjoints of the new `x, v, C, F`, accumulates the adjoints of the grid node
-/// velocities into `nodes_bar[..][0..3]` and returns those of the old position and F_elastic.
+/// velocities into `nodes_bar[..][0..3]` (a slab of the grid starting at node layer `x_lo`,
+/// as in [`crate::transfer::scatter`]) and returns those of the old position and F_elastic.
 #[allow(clippy::too_many_arguments)]
 pub fn g2p_vjp<T: Real>(
     nodes: &[[T; 4]],
@@ -334,7 +335,9 @@ pub fn g2p_vjp<T: Real>(
     c_bar: &[T; 9],
     f_bar: &[T; 9],
     nodes_bar: &mut [[T; 4]],
+    x_lo: usize,
 ) -> G2pBar<T> {
+    let lo = x_lo * n * n;
     let dt = k::<T>(c.dt);
     let inv_dx = k::<T>(c.inv_dx);
     let st = crate::transfer::stencil(x, inv_dx);
@@ -369,7 +372,7 @@ pub fn g2p_vjp<T: Real>(
                 let vcd = (0..3).fold(T::zero(), |s, q| s + vi[q] * cd[q]);
                 let vvp = (0..3).fold(T::zero(), |s, q| s + vi[q] * vp_bar[q]);
                 for q in 0..3 {
-                    nodes_bar[idx][q] += w * vp_bar[q] + kc * w * cd[q];
+                    nodes_bar[idx - lo][q] += w * vp_bar[q] + kc * w * cd[q];
                 }
                 for ax in 0..3 {
                     let col = cm_bar.col(ax);
@@ -381,7 +384,7 @@ pub fn g2p_vjp<T: Real>(
                     let (gg, dg) = grad_and_hessian(&st, off);
                     let gb = g_bar.mul_vec(gg);
                     for q in 0..3 {
-                        nodes_bar[idx][q] += inv_dx * gb[q];
+                        nodes_bar[idx - lo][q] += inv_dx * gb[q];
                     }
                     for ax in 0..3 {
                         let dga = [dg[0][ax], dg[1][ax], dg[2][ax]];

@@ -1,0 +1,235 @@
+//! The parallel CPU adjoint (`r4d_backend_cpu::adjoint::ParallelHost`) against the f64
+//! reference reverse sweep of the single-threaded host simulator.
+
+use r4d_backend_cpu::adjoint::ParallelHost;
+use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
+use r4d_mpm::adjoint::host::{HostSim, HostState, HostStepper, PhysParams};
+use r4d_mpm::math::Real;
+use r4d_mpm::{
+    BoundaryCondition, Domain, ForceForm, Material, PartParams, ParticleSet, Shape, SimConfig,
+    SolverConfig, Surface, TimeConfig,
+};
+
+fn scene(part: PartParams) -> (SimConfig, ParticleSet) {
+    let n = 16;
+    let dx = 1.0 / n as f64;
+    let cfg = SimConfig {
+        domain: Domain {
+            grid_lim: 1.0,
+            n_grid: n,
+        },
+        time: TimeConfig {
+            substep_dt: 2e-4,
+            frame_dt: None,
+            substeps_per_frame: Some(20),
+            frames: 3,
+        },
+        solver: SolverConfig {
+            force: ForceForm::Classic,
+            rpic_damping: 0.1,
+            ..Default::default()
+        },
+        parts: vec![PartParams {
+            density_kg_m3: 800.0,
+            ..part
+        }],
+        shapes: vec![Shape::Box {
+            min: [0.3, 0.35, 3.0 * dx],
+            max: [0.55, 0.6, 3.0 * dx + 0.2],
+            part: 0,
+            per_cell: 1,
+        }],
+        particles: None,
+        boundary: vec![
+            BoundaryCondition::BoundingBox {
+                layers: 3,
+                surface: Surface::Slip,
+            },
+            BoundaryCondition::SurfaceCollider {
+                point: [0.0, 0.0, 3.5 * dx],
+                normal: [0.0, 0.0, 1.0],
+                surface: Surface::Friction,
+                friction: 0.4,
+                start_time: 0.0,
+                end_time: 1.0,
+            },
+            BoundaryCondition::ParticleImpulse {
+                force: [-0.2, 0.1, -0.5],
+                point: [0.5, 0.5, 0.35],
+                size: [0.1, 0.3, 0.1],
+                num_dt: 30,
+                start_time: 0.0,
+            },
+        ],
+    };
+    let scene = ParticleSet::from_shapes(&cfg.shapes, dx);
+    (cfg, scene)
+}
+
+fn grad<
+    T: Real,
+    D: Differentiable<State = HostState<T>, Params = Vec<PhysParams<T>>, Grad = Vec<PhysParams<T>>>,
+>(
+    d: &D,
+    sim: &HostSim,
+    part: &PartParams,
+) -> [f64; 6] {
+    let params = vec![PhysParams::<T>::of(part)];
+    let init = sim.init(&params, &vec![[T::zero(); 3]; sim.len()]);
+    let (_, adj0, mut g) = value_and_grad(
+        d,
+        &init,
+        &params,
+        60,
+        20,
+        Checkpointing::PerFrame,
+        vec![PhysParams::default()],
+        |_, _| 0.0,
+        |f, _, adj| {
+            for (p, a) in adj.x.iter_mut().enumerate() {
+                // A fixed, particle-dependent weight per frame.
+                let w = ((p * 7 + f * 3) % 11) as f64 / 11.0 - 0.5;
+                a[0] += T::c(w);
+                a[2] += T::c(0.5 - w);
+            }
+        },
+    );
+    sim.init_vjp(&adj0, &mut g);
+    let g = g[0];
+    [
+        g.youngs_modulus,
+        g.poisson_ratio,
+        g.yield_stress,
+        g.plastic_viscosity,
+        g.friction_angle_deg,
+        g.density,
+    ]
+    .map(|x| x.f64())
+}
+
+fn materials() -> Vec<(&'static str, PartParams)> {
+    let base = |m: Material| PartParams {
+        material: m,
+        youngs_modulus_pa: 3e4,
+        ..Default::default()
+    };
+    vec![
+        ("jelly", base(Material::Jelly)),
+        (
+            "metal",
+            PartParams {
+                yield_stress_pa: 20.0,
+                hardening: true,
+                xi: 0.3,
+                ..base(Material::Metal)
+            },
+        ),
+        (
+            "sand",
+            PartParams {
+                friction_angle_deg: 35.0,
+                ..base(Material::Sand)
+            },
+        ),
+        (
+            "foam",
+            PartParams {
+                yield_stress_pa: 20.0,
+                plastic_viscosity_pa_s: 2.0,
+                ..base(Material::Foam)
+            },
+        ),
+        (
+            "snow",
+            PartParams {
+                snow_critical_compression: 2e-3,
+                snow_critical_stretch: 1e-3,
+                ..base(Material::Snow)
+            },
+        ),
+        (
+            "plasticine",
+            PartParams {
+                yield_stress_pa: 20.0,
+                softening: 5.0,
+                ..base(Material::Plasticine)
+            },
+        ),
+    ]
+}
+
+const NAMES: [&str; 6] = [
+    "E",
+    "nu",
+    "yield_stress",
+    "plastic_viscosity",
+    "friction_angle",
+    "density",
+];
+
+fn rel(a: f64, b: f64) -> f64 {
+    let s = a.abs().max(b.abs());
+    if s == 0.0 {
+        0.0
+    } else {
+        (a - b).abs() / s
+    }
+}
+
+#[test]
+fn parallel_adjoint_in_f64_matches_the_reference_sweep() {
+    for (name, part) in materials() {
+        let (cfg, sc) = scene(part);
+        let sim = HostSim::new(&cfg, &sc).unwrap();
+        let reference = grad::<f64, _>(&HostStepper::<f64>::new(&sim), &sim, &cfg.parts[0]);
+        let parallel = grad::<f64, _>(&ParallelHost::<f64>::new(&sim), &sim, &cfg.parts[0]);
+        for i in 0..6 {
+            let r = rel(reference[i], parallel[i]);
+            assert!(
+                r < 1e-9,
+                "{name}: d/d{}: parallel {} vs reference {} (rel {r:e})",
+                NAMES[i],
+                parallel[i],
+                reference[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn parallel_adjoint_in_f32_matches_the_f64_reference_gradient() {
+    for (name, part) in materials() {
+        let (cfg, sc) = scene(part);
+        let sim = HostSim::new(&cfg, &sc).unwrap();
+        let reference = grad::<f64, _>(&HostStepper::<f64>::new(&sim), &sim, &cfg.parts[0]);
+        let f32_grad = grad::<f32, _>(&ParallelHost::<f32>::new(&sim), &sim, &cfg.parts[0]);
+        for i in 0..6 {
+            let r = rel(reference[i], f32_grad[i]);
+            eprintln!(
+                "{name}: d/d{}: f64 {:+.5e} parallel f32 {:+.5e} rel {r:.1e}",
+                NAMES[i], reference[i], f32_grad[i]
+            );
+            assert!(r < 1e-2, "{name}: d/d{}: rel {r:e}", NAMES[i]);
+        }
+    }
+}
+
+#[test]
+fn parallel_adjoint_does_not_depend_on_the_thread_count() {
+    let (cfg, sc) = scene(PartParams {
+        material: Material::Metal,
+        youngs_modulus_pa: 3e4,
+        yield_stress_pa: 20.0,
+        ..Default::default()
+    });
+    let sim = HostSim::new(&cfg, &sc).unwrap();
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| grad::<f32, _>(&ParallelHost::<f32>::new(&sim), &sim, &cfg.parts[0]))
+    };
+    assert_eq!(run(1), run(2));
+    assert_eq!(run(1), run(3));
+}
