@@ -2,12 +2,13 @@
 //! checkpointing strategy, next to `memory_plan`'s prediction.
 //!
 //! `cargo bench --bench adjoint [-- PARTICLES FRAMES SUBSTEPS_PER_FRAME]` (defaults: 10 000
-//! particles, 2 frames of 50 substeps, n_grid 64, f32). The adjoint runs on the
-//! single-threaded host simulator (the backend adjoint kernels are not written yet), so the
-//! paper's scale (16 frames x 400 substeps, 100k particles) takes hours here; pass larger
-//! arguments to measure it.
+//! particles, 2 frames of 50 substeps, n_grid 64, f32), for the single-threaded host
+//! simulator (the f64/f32 reference) and the parallel CPU adjoint (`ParallelHost`, all cores).
+//! The paper's scale (16 frames x 400 substeps, 100k particles) takes hours on this machine;
+//! pass larger arguments to measure it.
 
-use r4d_mpm::adjoint::checkpoint::{memory_plan, value_and_grad, Checkpointing};
+use r4d_backend_cpu::adjoint::ParallelHost;
+use r4d_mpm::adjoint::checkpoint::{memory_plan, value_and_grad, Checkpointing, Differentiable};
 use r4d_mpm::adjoint::host::{HostSim, HostStepper, PhysParams};
 use r4d_mpm::{
     BoundaryCondition, Domain, PartParams, ParticleSet, Shape, SimConfig, Surface, TimeConfig,
@@ -81,23 +82,63 @@ fn main() {
     let scene = ParticleSet::from_shapes(&cfg.shapes, dx);
     let np = scene.len();
     let sim = HostSim::new(&cfg, &scene).unwrap();
-    let stepper = HostStepper::<f32>::new(&sim);
     let params = vec![PhysParams::<f32>::of(&cfg.parts[0])];
     let substeps = frames as u64 * spf as u64;
-    println!("adjoint bench: {np} particles, n_grid {n}, {frames} frames x {spf} substeps, f32, host simulator (1 thread)");
-    println!("| strategy | forward (s) | forward+backward (s) | backward/forward | peak measured (MiB) | memory_plan (MiB) |");
-    println!("|---|---|---|---|---|---|");
+    println!("adjoint bench: {np} particles, n_grid {n}, {frames} frames x {spf} substeps, f32");
+    println!("| stepper | strategy | forward (s) | forward+backward (s) | backward/forward | peak measured (MiB) | memory_plan (MiB) |");
+    println!("|---|---|---|---|---|---|---|");
+    let host = HostStepper::<f32>::new(&sim);
+    let parallel = ParallelHost::<f32>::new(&sim);
+    measure(
+        "host (1 thread)",
+        &host,
+        &sim,
+        &params,
+        substeps,
+        spf,
+        np,
+        n,
+    );
+    measure(
+        "parallel CPU",
+        &parallel,
+        &sim,
+        &params,
+        substeps,
+        spf,
+        np,
+        n,
+    );
+}
+
+#[allow(clippy::too_many_arguments)]
+fn measure<D>(
+    label: &str,
+    stepper: &D,
+    sim: &HostSim,
+    params: &Vec<PhysParams<f32>>,
+    substeps: u64,
+    spf: u32,
+    np: usize,
+    n: usize,
+) where
+    D: Differentiable<
+        State = r4d_mpm::adjoint::host::HostState<f32>,
+        Params = Vec<PhysParams<f32>>,
+        Grad = Vec<PhysParams<f32>>,
+    >,
+{
     for strategy in [
         Checkpointing::StoreAll,
         Checkpointing::PerFrame,
         Checkpointing::EveryN(((substeps as f64).sqrt().round() as u32).max(1)),
     ] {
-        let init = sim.init(&params, &vec![[0.0f32; 3]; np]);
+        let init = sim.init(params, &vec![[0.0f32; 3]; np]);
         // Forward only, for the ratio.
         let t0 = Instant::now();
         let mut s = init.clone();
         for k in 0..substeps {
-            sim.substep(&mut s, &params, k);
+            stepper.step(&mut s, params, k);
         }
         let fwd = t0.elapsed().as_secs_f64();
         drop(s);
@@ -105,9 +146,9 @@ fn main() {
         PEAK.store(base, Ordering::Relaxed);
         let t1 = Instant::now();
         let (_, _, g) = value_and_grad(
-            &stepper,
+            stepper,
             &init,
-            &params,
+            params,
             substeps,
             spf,
             strategy,
@@ -121,7 +162,7 @@ fn main() {
             / 1048576.0;
         assert!(g[0].youngs_modulus.is_finite());
         println!(
-            "| {strategy:?} | {fwd:.2} | {total:.2} | {:.2} | {peak:.1} | {plan:.1} |",
+            "| {label} | {strategy:?} | {fwd:.2} | {total:.2} | {:.2} | {peak:.1} | {plan:.1} |",
             (total - fwd) / fwd
         );
     }
