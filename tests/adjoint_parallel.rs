@@ -233,3 +233,29 @@ fn parallel_adjoint_does_not_depend_on_the_thread_count() {
     assert_eq!(run(1), run(2));
     assert_eq!(run(1), run(3));
 }
+
+#[test]
+fn particles_leaving_the_grid_do_not_crash_the_adjoint() {
+    let (mut cfg, _) = scene(PartParams {
+        material: Material::Jelly,
+        youngs_modulus_pa: 3e4,
+        ..Default::default()
+    });
+    cfg.boundary.clear();
+    cfg.solver.gravity = [0.0, 0.0, -4000.0];
+    cfg.solver.max_cfl = 50.0;
+    let sc = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
+    let sim = HostSim::new(&cfg, &sc).unwrap();
+    // The block falls through the floor of the grid within the run.
+    let params = vec![PhysParams::<f64>::of(&cfg.parts[0])];
+    let mut st = sim.init(&params, &vec![[0.0; 3]; sim.len()]);
+    for k in 0..60 {
+        sim.substep(&mut st, &params, k);
+    }
+    assert!(
+        st.x.iter().any(|p| p[2] < 0.5 / 16.0),
+        "the test must push particles out of the grid"
+    );
+    let _ = grad::<f64, _>(&HostStepper::<f64>::new(&sim), &sim, &cfg.parts[0]);
+    let _ = grad::<f32, _>(&ParallelHost::<f32>::new(&sim), &sim, &cfg.parts[0]);
+}

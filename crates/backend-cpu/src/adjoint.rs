@@ -19,8 +19,8 @@ use r4d_mpm::adjoint::transfer_vjp::{
 use r4d_mpm::constitutive::{stress_update_with, MaterialParams};
 use r4d_mpm::math::{Mat3, Real};
 use r4d_mpm::transfer::{
-    damped_affine, g2p_finish, gather, grid_node_update, k, particle_bcs, scatter, stencil,
-    stress_scale,
+    damped_affine, g2p_finish, gather, grid_node_update, in_domain, k, particle_bcs, scatter,
+    stencil, stress_scale,
 };
 use r4d_mpm::StepConsts;
 use rayon::prelude::*;
@@ -81,9 +81,10 @@ impl<T: Real> ParallelHost<'_, T> {
     /// Particle ids sorted by slab of their stencil base (positions `x`).
     fn slab_order(&self, x: &[[T; 3]], inv_dx: T) -> (Vec<u32>, Vec<u32>) {
         let n = self.sim.setup.n;
+        // Particles outside the grid (or NaN) are left out of every transfer.
         let base: Vec<Option<u32>> = x
             .par_iter()
-            .map(|p| Some(stencil(*p, inv_dx).base[0] as u32))
+            .map(|p| in_domain(*p, inv_dx, n).then(|| stencil(*p, inv_dx).base[0] as u32))
             .collect();
         let mut order = vec![0u32; x.len()];
         let mut starts = vec![0u32; slabs::slab_count(n) + 1];
@@ -152,6 +153,9 @@ impl<T: Real> ParallelHost<'_, T> {
             .zip(s.c.par_iter_mut())
             .zip(s.f.par_iter_mut())
             .for_each(|(((x, v), cm), f)| {
+                if !in_domain(*x, inv_dx, n) {
+                    return;
+                }
                 let st = stencil(*x, inv_dx);
                 let g = gather(&grid, n, &st, &c);
                 let _ = g2p_finish(&g, x, v, cm, f, &c);
@@ -261,6 +265,17 @@ impl<T: Real> Differentiable for ParallelHost<'_, T> {
             .into_par_iter()
             .map(|p| {
                 let part = sim.part[p] as usize;
+                if !in_domain(fw.x_start[p], inv_dx, n) {
+                    let z = T::zero();
+                    let bar = HostParticleBar {
+                        x: [z; 3],
+                        v: [z; 3],
+                        c: [z; 9],
+                        f: [z; 9],
+                        plastic: [z; 2],
+                    };
+                    return (bar, PhysParams::default());
+                }
                 let st = stencil(fw.x_start[p], inv_dx);
                 let a = damped_affine(&before.c[p], c.rpic_damping);
                 let mut sb = ScatterBar::default();

@@ -10,7 +10,8 @@
 //! Differences from [`crate::MpmSim`]: the time of substep `k` is `k dt` (MpmSim accumulates
 //! `t += dt` like PhysGaussian; the two differ by round-off, which matters only when a
 //! boundary-condition window ends exactly on a substep), the out-of-domain clamp is not
-//! differentiated, and the fluid model has no adjoint yet.
+//! differentiated (a particle outside the grid is skipped by the transfers, never indexed out
+//! of bounds), and the fluid model has no adjoint yet.
 
 use super::constitutive_vjp::stress_update_vjp;
 use super::transfer_vjp::{
@@ -24,8 +25,8 @@ use crate::math::{Mat3, Real};
 use crate::scene::ParticleSet;
 use crate::sim::SimSetup;
 use crate::transfer::{
-    damped_affine, g2p_finish, gather, grid_node_update, k, particle_bcs, scatter, stencil,
-    stress_scale,
+    damped_affine, g2p_finish, gather, grid_node_update, in_domain, k, particle_bcs, scatter,
+    stencil, stress_scale,
 };
 
 /// The physical parameters of a part that receive gradients, in SI units.
@@ -246,6 +247,11 @@ impl HostSim {
         let mut grid_in = vec![[T::zero(); 4]; n * n * n];
         let inv_dx = k::<T>(c.inv_dx);
         for p in 0..np {
+            // A particle that left the grid (or went NaN) is skipped, never indexed out of
+            // bounds; the run's loss then shows it.
+            if !in_domain(s.x[p], inv_dx, n) {
+                continue;
+            }
             let st = stencil(s.x[p], inv_dx);
             let a = damped_affine(&s.c[p], c.rpic_damping);
             scatter(&mut grid_in, 0, n, &st, v1[p], &a, mass[p], &stress[p], &c);
@@ -264,6 +270,9 @@ impl HostSim {
         }
         let f_elastic = s.f.clone();
         for p in 0..np {
+            if !in_domain(s.x[p], inv_dx, n) {
+                continue;
+            }
             let st = stencil(s.x[p], inv_dx);
             let g = gather(&grid, n, &st, &c);
             let _ = g2p_finish(&g, &mut s.x[p], &mut s.v[p], &mut s.c[p], &mut s.f[p], &c);
@@ -310,6 +319,9 @@ impl HostSim {
         let mut x_bar = vec![[T::zero(); 3]; np];
         let mut fe_bar = vec![[T::zero(); 9]; np];
         for p in 0..np {
+            if !in_domain(it.x_start[p], inv_dx, n) {
+                continue;
+            }
             let g = g2p_vjp(
                 &it.grid,
                 n,
@@ -348,6 +360,9 @@ impl HostSim {
         // P2G, stress, particle conditions.
         let mut out = HostState::zeros(np);
         for p in 0..np {
+            if !in_domain(it.x_start[p], inv_dx, n) {
+                continue;
+            }
             let part = self.part[p] as usize;
             let st = stencil(it.x_start[p], inv_dx);
             let a = damped_affine(&before.c[p], c.rpic_damping);
