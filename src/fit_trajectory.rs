@@ -174,7 +174,34 @@ pub fn fit_trajectory(
     scene: &ParticleSet,
     targets: &[Vec<[f32; 3]>],
     opts: &FitOptions,
+    on_iter: impl FnMut(&IterLog),
+) -> Result<Vec<PartParams>, FitError> {
+    fit_trajectory_resumable(config, scene, targets, opts, None, on_iter, |_| {})
+}
+
+/// Everything a killed fit needs to continue exactly where it stopped: the optimiser with its
+/// moments, the iterations done and the best parameters so far.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct FitCheckpoint {
+    /// Iterations completed.
+    pub iters_done: usize,
+    /// The optimiser (log parameters, Adam moments, step count).
+    pub optimizer: LogDomainOptimizer,
+    /// Lowest loss so far and its parameters.
+    pub best: Option<(f64, Vec<PartParams>)>,
+}
+
+/// [`fit_trajectory`] that starts from `resume` when given and hands a [`FitCheckpoint`] to
+/// `on_checkpoint` after every iteration (to be written to disk).
+#[allow(clippy::too_many_arguments)]
+pub fn fit_trajectory_resumable(
+    config: &SimConfig,
+    scene: &ParticleSet,
+    targets: &[Vec<[f32; 3]>],
+    opts: &FitOptions,
+    resume: Option<FitCheckpoint>,
     mut on_iter: impl FnMut(&IterLog),
+    mut on_checkpoint: impl FnMut(&FitCheckpoint),
 ) -> Result<Vec<PartParams>, FitError> {
     if targets.is_empty() {
         return Err(FitError::Targets("no target frames".into()));
@@ -208,7 +235,23 @@ pub fn fit_trajectory(
         .map(|&(i, k)| get(&parts[i.unwrap_or(0)], k))
         .collect();
     let bounds: Vec<(f64, f64)> = slots.iter().map(|&(_, k)| k.default_bounds()).collect();
-    let mut opt = LogDomainOptimizer::new(theta, bounds, opts.adam, opts.clip_norm)?;
+    let (mut opt, first, mut best) = match resume {
+        Some(ck) => {
+            if ck.optimizer.theta().len() != theta.len() {
+                return Err(FitError::Targets(format!(
+                    "the checkpoint has {} free parameters, this run {}",
+                    ck.optimizer.theta().len(),
+                    theta.len()
+                )));
+            }
+            (ck.optimizer, ck.iters_done, ck.best)
+        }
+        None => (
+            LogDomainOptimizer::new(theta, bounds, opts.adam, opts.clip_norm)?,
+            0,
+            None,
+        ),
+    };
     let spf = sim.setup.substeps_per_frame;
     let frames = targets.len().min(config.time.frames.max(1));
     let substeps = frames as u64 * spf as u64;
@@ -220,10 +263,9 @@ pub fn fit_trajectory(
             }
         }
     };
-    // The parameters with the lowest loss evaluated so far (Adam's momentum can carry the
-    // last iterate past the minimum).
-    let mut best: Option<(f64, Vec<PartParams>)> = None;
-    for iter in 0..opts.iters {
+    // `best` holds the parameters with the lowest loss evaluated so far (Adam's momentum can
+    // carry the last iterate past the minimum).
+    for iter in first..opts.iters {
         let start = Instant::now();
         apply(&mut parts, &opt.theta());
         let phys: Vec<PhysParams<f64>> = parts.iter().map(PhysParams::of).collect();
@@ -283,6 +325,12 @@ pub fn fit_trajectory(
                 .collect(),
             time_s: start.elapsed().as_secs_f64(),
         });
+        on_checkpoint(&FitCheckpoint {
+            iters_done: iter + 1,
+            optimizer: opt.clone(),
+            best: best.clone(),
+        });
     }
+    apply(&mut parts, &opt.theta());
     Ok(best.map(|(_, p)| p).unwrap_or(parts))
 }

@@ -191,6 +191,28 @@ fn fit_trajectory_writes_params_json_and_a_log() {
     assert_eq!(log.lines().count(), 2);
     let first: serde_json::Value = serde_json::from_str(log.lines().next().unwrap()).unwrap();
     assert!(first["loss"].as_f64().unwrap() > 0.0 && first["grad_norm"].is_number());
+    // A run continued with --resume picks up after the last completed iteration.
+    let o = r4d(&[
+        "fit-trajectory",
+        "--config",
+        &repo("tests/fixtures/fit/beam_start.toml"),
+        "--target",
+        truth.to_str().unwrap(),
+        "--params",
+        "E,density",
+        "--out",
+        out.to_str().unwrap(),
+        "--iters",
+        "3",
+        "--frames",
+        "2",
+        "--resume",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("resuming after iteration 2"));
+    let log = std::fs::read_to_string(out.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), 3);
+    assert!(out.join("checkpoint.json").exists());
     // Bad parameter names are refused with the list of known ones.
     let o = r4d(&[
         "fit-trajectory",

@@ -81,3 +81,48 @@ fn recovers_both_parts_stiffness_to_density_ratios() {
         );
     }
 }
+
+#[test]
+fn a_resumed_fit_continues_exactly_where_it_stopped() {
+    use resonance4d::fit_trajectory::{fit_trajectory_resumable, FitCheckpoint};
+    let mut truth = SimConfig::load(&fixture("fit/beam.toml")).unwrap();
+    truth.time.frames = 2;
+    let scene = ParticleSet::from_shapes(&truth.shapes, truth.domain.dx());
+    let target = targets(&truth, &scene);
+    let mut start = truth.clone();
+    start.parts[0].youngs_modulus_pa = 2e6;
+    let opts = FitOptions {
+        iters: 4,
+        ..Default::default()
+    };
+    let mut at2: Option<FitCheckpoint> = None;
+    let full = fit_trajectory_resumable(
+        &start,
+        &scene,
+        &target,
+        &opts,
+        None,
+        |_| {},
+        |ck| {
+            if ck.iters_done == 2 {
+                // What a run killed after its second iteration leaves on disk.
+                let json = serde_json::to_string(ck).unwrap();
+                at2 = Some(serde_json::from_str(&json).unwrap());
+            }
+        },
+    )
+    .unwrap();
+    let mut iters_run = Vec::new();
+    let resumed = fit_trajectory_resumable(
+        &start,
+        &scene,
+        &target,
+        &opts,
+        at2,
+        |it| iters_run.push(it.iter),
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!(iters_run, vec![2, 3]);
+    assert_eq!(full, resumed);
+}

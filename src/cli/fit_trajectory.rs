@@ -6,7 +6,9 @@ use r4d_mpm::adjoint::checkpoint::Checkpointing;
 use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
 use r4d_mpm::ply::read_ply;
 use r4d_optim::{AdamW, ParamKind};
-use resonance4d::fit_trajectory::{fit_trajectory, FitOptions, Granularity, PartRecord};
+use resonance4d::fit_trajectory::{
+    fit_trajectory_resumable, FitCheckpoint, FitOptions, Granularity, PartRecord,
+};
 use serde_json::json;
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
@@ -52,6 +54,9 @@ pub struct FitTrajectoryArgs {
     /// Number of frames to fit (default: all target frames the config's frames allow).
     #[arg(long)]
     frames: Option<usize>,
+    /// Continue a killed run from OUT/checkpoint.json (written after every iteration).
+    #[arg(long)]
+    resume: bool,
 }
 
 fn read_targets(dir: &Path, max: usize) -> Result<Vec<Vec<[f32; 3]>>> {
@@ -118,8 +123,28 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     let targets = read_targets(&a.target, config.time.frames)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let log_path = a.out.join("log.jsonl");
-    let mut log = std::fs::File::create(&log_path)
-        .with_context(|| format!("creating {}", log_path.display()))?;
+    let ck_path = a.out.join("checkpoint.json");
+    let resume: Option<FitCheckpoint> = if a.resume && ck_path.exists() {
+        let text = std::fs::read_to_string(&ck_path)
+            .with_context(|| format!("reading {}", ck_path.display()))?;
+        let ck: FitCheckpoint = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a fit checkpoint", ck_path.display()))?;
+        eprintln!(
+            "resuming after iteration {} from {}",
+            ck.iters_done,
+            ck_path.display()
+        );
+        Some(ck)
+    } else {
+        None
+    };
+    let mut log = std::fs::OpenOptions::new()
+        .create(true)
+        .write(true)
+        .append(resume.is_some())
+        .truncate(resume.is_none())
+        .open(&log_path)
+        .with_context(|| format!("opening {}", log_path.display()))?;
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::new(a.iters as u64)
     } else {
@@ -144,16 +169,41 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         ..Default::default()
     };
     let mut io_error = None;
-    let fitted = fit_trajectory(&config, &loaded.scene, &targets, &opts, |it| {
-        bar.inc(1);
-        bar.set_message(format!("loss {:.3e}", it.loss));
-        if let Err(e) = serde_json::to_writer(&mut log, it)
-            .map(|_| ())
-            .and_then(|_| writeln!(log).map_err(serde_json::Error::io))
-        {
-            io_error.get_or_insert(e);
-        }
-    })?;
+    let mut ck_error = None;
+    if let Some(ck) = &resume {
+        bar.set_position(ck.iters_done as u64);
+    }
+    let save = |ck: &FitCheckpoint| -> Result<()> {
+        let tmp = a.out.join("checkpoint.json.tmp");
+        std::fs::write(&tmp, serde_json::to_string(ck)?)?;
+        std::fs::rename(&tmp, &ck_path)?;
+        Ok(())
+    };
+    let fitted = fit_trajectory_resumable(
+        &config,
+        &loaded.scene,
+        &targets,
+        &opts,
+        resume,
+        |it| {
+            bar.inc(1);
+            bar.set_message(format!("loss {:.3e}", it.loss));
+            if let Err(e) = serde_json::to_writer(&mut log, it)
+                .map(|_| ())
+                .and_then(|_| writeln!(log).map_err(serde_json::Error::io))
+            {
+                io_error.get_or_insert(e);
+            }
+        },
+        |ck| {
+            if let Err(e) = save(ck) {
+                ck_error.get_or_insert(e);
+            }
+        },
+    )?;
+    if let Some(e) = ck_error {
+        return Err(e).with_context(|| format!("writing {}", ck_path.display()));
+    }
     bar.finish_and_clear();
     if let Some(e) = io_error {
         return Err(e).with_context(|| format!("writing {}", log_path.display()));
