@@ -42,6 +42,19 @@ pub enum Granularity {
     Part,
     /// One value for the whole object, shared by all parts.
     Object,
+    /// One value per particle (the paper's ablation); `params.json` then holds each part's
+    /// geometric mean and the per-particle values go to a PLY beside it.
+    Particle,
+}
+
+/// The result of a fit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fitted {
+    /// Parameters per part (for per-particle fits: the geometric mean over each part's
+    /// particles).
+    pub parts: Vec<PartParams>,
+    /// Per-particle parameters, for per-particle fits.
+    pub per_particle: Option<Vec<PartParams>>,
 }
 
 /// Options of [`fit_trajectory`].
@@ -176,7 +189,29 @@ pub fn fit_trajectory(
     opts: &FitOptions,
     on_iter: impl FnMut(&IterLog),
 ) -> Result<Vec<PartParams>, FitError> {
-    fit_trajectory_resumable(config, scene, targets, opts, None, on_iter, |_| {})
+    fit_trajectory_resumable(config, scene, targets, opts, None, on_iter, |_| {}).map(|f| f.parts)
+}
+
+/// Per-part geometric means of per-particle parameters (`part` gives each particle's part).
+fn part_means(config: &SimConfig, part: &[u32], values: &[PartParams]) -> Vec<PartParams> {
+    (0..config.parts.len())
+        .map(|i| {
+            let mine: Vec<&PartParams> = values
+                .iter()
+                .zip(part)
+                .filter(|(_, &p)| p as usize == i)
+                .map(|(v, _)| v)
+                .collect();
+            let mut out = config.parts[i];
+            if !mine.is_empty() {
+                for k in ParamKind::ALL {
+                    let mean = mine.iter().map(|v| get(v, k).ln()).sum::<f64>() / mine.len() as f64;
+                    set(&mut out, k, mean.exp());
+                }
+            }
+            out
+        })
+        .collect()
 }
 
 /// Everything a killed fit needs to continue exactly where it stopped: the optimiser with its
@@ -202,7 +237,7 @@ pub fn fit_trajectory_resumable(
     resume: Option<FitCheckpoint>,
     mut on_iter: impl FnMut(&IterLog),
     mut on_checkpoint: impl FnMut(&FitCheckpoint),
-) -> Result<Vec<PartParams>, FitError> {
+) -> Result<Fitted, FitError> {
     if targets.is_empty() {
         return Err(FitError::Targets("no target frames".into()));
     }
@@ -220,12 +255,33 @@ pub fn fit_trajectory_resumable(
             )));
         }
     }
-    let sim = HostSim::new(config, scene)?;
+    let per_particle = opts.granularity == Granularity::Particle;
+    let sim = if per_particle {
+        HostSim::new(config, scene)?.per_particle()
+    } else {
+        HostSim::new(config, scene)?
+    };
     let stepper = ParallelHost::<f64>::new(&sim);
-    let mut parts = config.parts.clone();
-    // Flat parameter vector: (part, kind) pairs, or one entry per kind for the whole object.
+    // Parameter values per slot: per part, or per particle.
+    let mut parts: Vec<PartParams> = if per_particle {
+        scene
+            .part
+            .iter()
+            .map(|&p| config.parts[p as usize])
+            .collect()
+    } else {
+        config.parts.clone()
+    };
+    let summarize = |values: &[PartParams]| {
+        if per_particle {
+            part_means(config, &scene.part, values)
+        } else {
+            values.to_vec()
+        }
+    };
+    // Flat parameter vector: (slot, kind) pairs, or one entry per kind for the whole object.
     let slots: Vec<(Option<usize>, ParamKind)> = match opts.granularity {
-        Granularity::Part => (0..parts.len())
+        Granularity::Part | Granularity::Particle => (0..parts.len())
             .flat_map(|i| opts.params.iter().map(move |&k| (Some(i), k)))
             .collect(),
         Granularity::Object => opts.params.iter().map(|&k| (None, k)).collect(),
@@ -318,7 +374,7 @@ pub fn fit_trajectory_resumable(
             iter,
             loss,
             grad_norm,
-            parts: parts
+            parts: summarize(&parts)
                 .iter()
                 .enumerate()
                 .map(|(i, p)| PartRecord::of(i, p))
@@ -332,5 +388,9 @@ pub fn fit_trajectory_resumable(
         });
     }
     apply(&mut parts, &opt.theta());
-    Ok(best.map(|(_, p)| p).unwrap_or(parts))
+    let values = best.map(|(_, p)| p).unwrap_or(parts);
+    Ok(Fitted {
+        parts: summarize(&values),
+        per_particle: per_particle.then_some(values),
+    })
 }

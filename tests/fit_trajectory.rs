@@ -125,4 +125,5 @@ fn a_resumed_fit_continues_exactly_where_it_stopped() {
     .unwrap();
     assert_eq!(iters_run, vec![2, 3]);
     assert_eq!(full, resumed);
+    assert!(full.per_particle.is_none());
 }

@@ -45,7 +45,8 @@ pub struct FitTrajectoryArgs {
     /// Loss: position (corresponding particles) or chamfer.
     #[arg(long, default_value = "position")]
     loss: String,
-    /// Parameter granularity: part or object.
+    /// Parameter granularity: part, object or particle (per-particle values are written to
+    /// OUT/params_particles.ply).
     #[arg(long, default_value = "part")]
     granularity: String,
     /// Checkpointing: per-frame, store-all or every:N.
@@ -107,8 +108,8 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     let granularity = match a.granularity.as_str() {
         "part" => Granularity::Part,
         "object" => Granularity::Object,
-        "particle" => bail!("--granularity particle is not implemented yet (part, object)"),
-        o => bail!("--granularity: unknown '{o}' (part, object)"),
+        "particle" => Granularity::Particle,
+        o => bail!("--granularity: unknown '{o}' (part, object, particle)"),
     };
     let checkpointing = match a.checkpointing.as_str() {
         "per-frame" => Checkpointing::PerFrame,
@@ -208,7 +209,41 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     if let Some(e) = io_error {
         return Err(e).with_context(|| format!("writing {}", log_path.display()));
     }
+    if let Some(per) = &fitted.per_particle {
+        let x = &loaded.scene.x;
+        let col = |f: &dyn Fn(&r4d_mpm::PartParams) -> f64| -> Vec<f32> {
+            per.iter().map(|p| f(p) as f32).collect()
+        };
+        let cols: Vec<Vec<f32>> = vec![
+            x.iter().map(|p| p[0]).collect(),
+            x.iter().map(|p| p[1]).collect(),
+            x.iter().map(|p| p[2]).collect(),
+            loaded.scene.part.iter().map(|&p| p as f32).collect(),
+            col(&|p| p.youngs_modulus_pa),
+            col(&|p| p.poisson_ratio),
+            col(&|p| p.density_kg_m3),
+            col(&|p| p.yield_stress_pa),
+            col(&|p| p.plastic_viscosity_pa_s),
+            col(&|p| p.friction_angle_deg),
+        ];
+        let refs: Vec<&[f32]> = cols.iter().map(|c| c.as_slice()).collect();
+        let names = [
+            "x",
+            "y",
+            "z",
+            "part",
+            "E",
+            "nu",
+            "density",
+            "yield_stress",
+            "plastic_viscosity",
+            "friction_angle",
+        ];
+        let path = a.out.join("params_particles.ply");
+        r4d_mpm::ply::write_ply(&path, &names, &refs)?;
+    }
     let records: Vec<PartRecord> = fitted
+        .parts
         .iter()
         .enumerate()
         .map(|(i, p)| PartRecord::of(i, p))

@@ -112,9 +112,9 @@ impl<T: Real> ParallelHost<'_, T> {
             .enumerate()
             .for_each(|(p, (((v, f), pl), st))| {
                 particle_bcs(sim.x0[p], v, mass[p], &sim.setup.particle_bcs, &c);
-                let part = sim.part[p] as usize;
+                let (part, slot) = (sim.part[p] as usize, sim.slot[p] as usize);
                 let (fe, tau) =
-                    stress_update_with(Mat3::from_array(*f), &sim.consts[part], pl, mats[part], dt);
+                    stress_update_with(Mat3::from_array(*f), &sim.consts[part], pl, mats[slot], dt);
                 *f = fe.to_array();
                 *st = tau
                     .sym()
@@ -264,7 +264,7 @@ impl<T: Real> Differentiable for ParallelHost<'_, T> {
         let per_particle: Vec<(HostParticleBar<T>, PhysParams<T>)> = (0..np)
             .into_par_iter()
             .map(|p| {
-                let part = sim.part[p] as usize;
+                let (part, slot) = (sim.part[p] as usize, sim.slot[p] as usize);
                 if !in_domain(fw.x_start[p], inv_dx, n) {
                     let z = T::zero();
                     let bar = HostParticleBar {
@@ -295,14 +295,14 @@ impl<T: Real> Differentiable for ParallelHost<'_, T> {
                     Mat3::from_array(fw.f_trial[p]),
                     &sim.consts[part],
                     fw.plastic_in[p],
-                    fw.mats[part],
+                    fw.mats[slot],
                     dt,
                     Mat3::from_array(fe_bar[p]),
                     Mat3::from_array(sb.s).scaled(scale),
                     adj.plastic[p],
                 );
                 let mut g = PhysParams::default();
-                params[part].add_material_vjp(&cb.params, &mut g);
+                params[slot].add_material_vjp(&cb.params, &mut g);
                 let mut v_bar = sb.v;
                 let mut m_bar = sb.mass;
                 particle_bcs_vjp(
@@ -327,7 +327,7 @@ impl<T: Real> Differentiable for ParallelHost<'_, T> {
         self.put_grid(grid_bar);
         self.put_grid(grid_in_bar);
         for (p, (bar, g)) in per_particle.into_iter().enumerate() {
-            let gp = &mut grad[sim.part[p] as usize];
+            let gp = &mut grad[sim.slot[p] as usize];
             gp.youngs_modulus += g.youngs_modulus;
             gp.poisson_ratio += g.poisson_ratio;
             gp.plastic_viscosity += g.plastic_viscosity;

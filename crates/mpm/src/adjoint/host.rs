@@ -139,6 +139,10 @@ pub struct HostSim {
     pub vol0: Vec<f64>,
     /// Part of each particle.
     pub part: Vec<u32>,
+    /// Parameter slot of each particle: its part (the default) or its own index (per-particle
+    /// parameters, see [`HostSim::per_particle`]). Parameter vectors and gradients are indexed
+    /// by slot.
+    pub slot: Vec<u32>,
 }
 
 impl HostSim {
@@ -161,8 +165,21 @@ impl HostSim {
             x0: scene.x.clone(),
             vol0: scene.volume.iter().map(|&v| v as f64).collect(),
             part: scene.part.clone(),
+            slot: scene.part.clone(),
             setup,
         })
+    }
+
+    /// Gives every particle its own parameter slot (the paper's per-particle ablation):
+    /// parameter vectors then have one entry per particle.
+    pub fn per_particle(mut self) -> Self {
+        self.slot = (0..self.x0.len() as u32).collect();
+        self
+    }
+
+    /// Number of parameter slots (parts, or particles after [`HostSim::per_particle`]).
+    pub fn slots(&self) -> usize {
+        self.slot.iter().map(|&s| s as usize + 1).max().unwrap_or(0)
     }
 
     /// Number of particles.
@@ -185,7 +202,7 @@ impl HostSim {
             c: vec![[z; 9]; n],
             f: vec![[o, z, z, z, o, z, z, z, o]; n],
             plastic: self
-                .part
+                .slot
                 .iter()
                 .map(|&p| [params[p as usize].yield_stress, o])
                 .collect(),
@@ -196,7 +213,7 @@ impl HostSim {
     pub fn masses<T: Real>(&self, params: &[PhysParams<T>]) -> Vec<T> {
         self.vol0
             .iter()
-            .zip(&self.part)
+            .zip(&self.slot)
             .map(|(&v, &p)| params[p as usize].density * T::c(v))
             .collect()
     }
@@ -231,11 +248,12 @@ impl HostSim {
         for p in 0..np {
             particle_bcs(self.x0[p], &mut v1[p], mass[p], pbcs, &c);
             let part = self.part[p] as usize;
+            let slot = self.slot[p] as usize;
             let (fe, tau) = stress_update_with(
                 Mat3::from_array(s.f[p]),
                 &self.consts[part],
                 &mut s.plastic[p],
-                mats[part],
+                mats[slot],
                 dt,
             );
             s.f[p] = fe.to_array();
@@ -364,6 +382,7 @@ impl HostSim {
                 continue;
             }
             let part = self.part[p] as usize;
+            let slot = self.slot[p] as usize;
             let st = stencil(it.x_start[p], inv_dx);
             let a = damped_affine(&before.c[p], c.rpic_damping);
             let mut sb = ScatterBar::default();
@@ -384,13 +403,13 @@ impl HostSim {
                 Mat3::from_array(it.f_trial[p]),
                 &self.consts[part],
                 it.plastic_in[p],
-                it.mats[part],
+                it.mats[slot],
                 dt,
                 Mat3::from_array(fe_bar[p]),
                 tau_bar,
                 adj.plastic[p],
             );
-            params[part].add_material_vjp(&cb.params, &mut grad[part]);
+            params[slot].add_material_vjp(&cb.params, &mut grad[slot]);
             let mut v_bar = sb.v;
             let mut m_bar = sb.mass;
             particle_bcs_vjp(
@@ -401,7 +420,7 @@ impl HostSim {
                 &mut v_bar,
                 &mut m_bar,
             );
-            grad[part].density += m_bar * T::c(self.vol0[p]);
+            grad[slot].density += m_bar * T::c(self.vol0[p]);
             out.x[p] = std::array::from_fn(|q| x_bar[p][q] + sb.x[q]);
             out.v[p] = v_bar;
             out.c[p] = damped_affine_vjp(&sb.a, c.rpic_damping);
@@ -414,8 +433,8 @@ impl HostSim {
     /// Adds the gradient of the initial state's dependence on the parameters (the initial
     /// plastic yield stress) to `grad`, given the adjoint of the initial state.
     pub fn init_vjp<T: Real>(&self, adj0: &HostState<T>, grad: &mut [PhysParams<T>]) {
-        for (p, &part) in self.part.iter().enumerate() {
-            grad[part as usize].yield_stress += adj0.plastic[p][0];
+        for (p, &slot) in self.slot.iter().enumerate() {
+            grad[slot as usize].yield_stress += adj0.plastic[p][0];
         }
     }
 }

@@ -17,10 +17,14 @@
 //!   Whole trajectories (3 frames x 20 substeps, boundary conditions and plasticity active)
 //!   match f64 finite differences to better than 1e-4 for every material (tests below).
 //!
-//! Not done yet (tracked in issue 3): the `_vjp` kernel methods of the backends (the parallel
-//! CPU path) and their f32-vs-f64 checks, the checkpointing strategies with `memory_plan`,
-//! parameter granularity (object, particle), trajectory losses and `r4d fit-trajectory`, the
-//! fluid's adjoint.
+//! * [`checkpoint`]: the checkpointed reverse sweep over a trajectory (`StoreAll`,
+//!   `PerFrame`, `EveryN`) and `memory_plan`.
+//! * [`trajectory_loss`]: position and Chamfer losses with gradients.
+//!
+//! The parallel CPU version of the host sweep is `r4d_backend_cpu::adjoint::ParallelHost`.
+//! Not done yet (tracked in issue 3): `_vjp` kernel methods on
+//! [`MpmKernels`](crate::MpmKernels) so GPU backends run the sweep on their own buffers, and
+//! the fluid's adjoint.
 
 pub mod checkpoint;
 pub mod constitutive_vjp;
