@@ -13,29 +13,11 @@ use r4d_mpm::adjoint::host::{HostSim, HostStepper, PhysParams};
 use r4d_mpm::{
     BoundaryCondition, Domain, PartParams, ParticleSet, Shape, SimConfig, Surface, TimeConfig,
 };
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+#[path = "common/alloc.rs"]
+mod alloc;
+use alloc::{peak_since, reset_peak, Counting};
 use std::time::Instant;
 
-struct Counting;
-static LIVE: AtomicUsize = AtomicUsize::new(0);
-static PEAK: AtomicUsize = AtomicUsize::new(0);
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        // SAFETY: forwarded to the system allocator with the caller's layout.
-        let p = unsafe { System.alloc(l) };
-        if !p.is_null() {
-            let now = LIVE.fetch_add(l.size(), Ordering::Relaxed) + l.size();
-            PEAK.fetch_max(now, Ordering::Relaxed);
-        }
-        p
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        // SAFETY: `p` was allocated by `alloc` above with this layout.
-        unsafe { System.dealloc(p, l) };
-        LIVE.fetch_sub(l.size(), Ordering::Relaxed);
-    }
-}
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
@@ -142,8 +124,7 @@ fn measure<D>(
         }
         let fwd = t0.elapsed().as_secs_f64();
         drop(s);
-        let base = LIVE.load(Ordering::Relaxed);
-        PEAK.store(base, Ordering::Relaxed);
+        let base = reset_peak();
         let t1 = Instant::now();
         let (_, _, g) = value_and_grad(
             stepper,
@@ -157,7 +138,7 @@ fn measure<D>(
             |_, _, adj| adj.x.iter_mut().for_each(|a| a[2] += 1.0),
         );
         let total = t1.elapsed().as_secs_f64();
-        let peak = (PEAK.load(Ordering::Relaxed) - base) as f64 / 1048576.0;
+        let peak = peak_since(base) as f64 / 1048576.0;
         let plan = memory_plan(np as u64, n as u64, substeps, spf, strategy, 4).peak_bytes as f64
             / 1048576.0;
         assert!(g[0].youngs_modulus.is_finite());

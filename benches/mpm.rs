@@ -15,29 +15,10 @@ use r4d_mpm::{
     reference::ReferenceBackend, BoundaryCondition, MpmKernels, MpmSim, PartParams, ParticleSet,
     Shape, SimConfig, Simulator, Surface,
 };
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+#[path = "common/alloc.rs"]
+mod alloc;
+use alloc::{peak_since, reset_peak, Counting};
 
-/// Counts live and peak heap bytes.
-struct Counting;
-static LIVE: AtomicUsize = AtomicUsize::new(0);
-static PEAK: AtomicUsize = AtomicUsize::new(0);
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        // SAFETY: forwarded to the system allocator with the caller's layout.
-        let p = unsafe { System.alloc(l) };
-        if !p.is_null() {
-            let now = LIVE.fetch_add(l.size(), Ordering::Relaxed) + l.size();
-            PEAK.fetch_max(now, Ordering::Relaxed);
-        }
-        p
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        // SAFETY: `p` was allocated by `alloc` above with this layout.
-        unsafe { System.dealloc(p, l) };
-        LIVE.fetch_sub(l.size(), Ordering::Relaxed);
-    }
-}
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
@@ -91,8 +72,7 @@ fn bench_backend<B: MpmKernels>(
         let cfg = config(target);
         let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
         let np = scene.len();
-        PEAK.store(LIVE.load(Ordering::Relaxed), Ordering::Relaxed);
-        let base = LIVE.load(Ordering::Relaxed);
+        let base = reset_peak();
         let mut sim = MpmSim::new(make(), &cfg, scene, "bench").unwrap();
         let mut state = sim.init_state(&cfg.parts).unwrap();
         // Warm up: let the block fall a little so velocities and stresses are non-trivial.
@@ -103,7 +83,7 @@ fn bench_backend<B: MpmKernels>(
         group.bench_with_input(BenchmarkId::from_parameter(np), &np, |b, _| {
             b.iter(|| sim.substep(&mut state).unwrap())
         });
-        let peak = PEAK.load(Ordering::Relaxed) - base;
+        let peak = peak_since(base);
         eprintln!(
             "substep/{name}/{np}: peak host memory {:.1} MiB ({:.0} B/particle)",
             peak as f64 / 1048576.0,
