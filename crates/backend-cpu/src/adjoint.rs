@@ -10,17 +10,14 @@
 
 use crate::slabs;
 use r4d_mpm::adjoint::checkpoint::Differentiable;
-use r4d_mpm::adjoint::constitutive_vjp::stress_update_vjp;
-use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
-use r4d_mpm::adjoint::transfer_vjp::{
-    damped_affine_vjp, g2p_vjp, grid_node_update_vjp, particle_bcs_vjp, scatter_vjp, G2pBar,
-    ScatterBar,
+use r4d_mpm::adjoint::host::{
+    add_grad, HostSim, HostState, ParticleBar, PhysParams, SubstepRecord,
 };
-use r4d_mpm::constitutive::{stress_update_with, MaterialParams};
-use r4d_mpm::math::{Mat3, Real};
+use r4d_mpm::adjoint::transfer_vjp::{g2p_vjp, grid_node_update_vjp, G2pBar};
+use r4d_mpm::constitutive::MaterialParams;
+use r4d_mpm::math::Real;
 use r4d_mpm::transfer::{
-    damped_affine, g2p_finish, gather, grid_node_update, in_domain, k, particle_bcs, scatter,
-    stencil, stress_scale,
+    damped_affine, g2p_finish, gather, grid_node_update, in_domain, k, scatter, stencil,
 };
 use r4d_mpm::StepConsts;
 use rayon::prelude::*;
@@ -62,19 +59,10 @@ impl<'a, T: Real> ParallelHost<'a, T> {
     }
 }
 
-/// What the reverse sweep needs from a substep's forward pass.
+/// A substep's forward record and its constants.
 struct Forward<T> {
     c: StepConsts,
-    mats: Vec<MaterialParams<T>>,
-    mass: Vec<T>,
-    v1: Vec<[T; 3]>,
-    stress: Vec<[T; 9]>,
-    x_start: Vec<[T; 3]>,
-    f_trial: Vec<[T; 9]>,
-    f_elastic: Vec<[T; 9]>,
-    plastic_in: Vec<[T; 2]>,
-    grid_in: Vec<[T; 4]>,
-    grid: Vec<[T; 4]>,
+    rec: SubstepRecord<T>,
 }
 
 impl<T: Real> ParallelHost<'_, T> {
@@ -98,7 +86,6 @@ impl<T: Real> ParallelHost<'_, T> {
         let n = sim.setup.n;
         let mats: Vec<MaterialParams<T>> = params.iter().map(|p| p.material()).collect();
         let mass = sim.masses(params);
-        let dt = k::<T>(c.dt);
         let inv_dx = k::<T>(c.inv_dx);
         let x_start = s.x.clone();
         let f_trial = s.f.clone();
@@ -111,15 +98,7 @@ impl<T: Real> ParallelHost<'_, T> {
             .zip(stress.par_iter_mut())
             .enumerate()
             .for_each(|(p, (((v, f), pl), st))| {
-                particle_bcs(sim.x0[p], v, mass[p], &sim.setup.particle_bcs, &c);
-                let (part, slot) = (sim.part[p] as usize, sim.slot[p] as usize);
-                let (fe, tau) =
-                    stress_update_with(Mat3::from_array(*f), &sim.consts[part], pl, mats[slot], dt);
-                *f = fe.to_array();
-                *st = tau
-                    .sym()
-                    .scaled(stress_scale(T::c(sim.vol0[p]), &c))
-                    .to_array();
+                *st = sim.particle_stage(p, &c, &mats, mass[p], v, f, pl);
             });
         let (order, starts) = self.slab_order(&s.x, inv_dx);
         let mut grid_in = self.take_grid();
@@ -162,16 +141,18 @@ impl<T: Real> ParallelHost<'_, T> {
             });
         Forward {
             c,
-            mats,
-            mass,
-            v1,
-            stress,
-            x_start,
-            f_trial,
-            f_elastic,
-            plastic_in,
-            grid_in,
-            grid,
+            rec: SubstepRecord {
+                mass,
+                v1,
+                stress,
+                x_start,
+                f_trial,
+                f_elastic,
+                plastic_in,
+                grid_in,
+                grid,
+                mats,
+            },
         }
     }
 }
@@ -183,8 +164,8 @@ impl<T: Real> Differentiable for ParallelHost<'_, T> {
 
     fn step(&self, s: &mut HostState<T>, p: &Vec<PhysParams<T>>, k_sub: u64) {
         let fw = self.forward(s, p, k_sub);
-        self.put_grid(fw.grid_in);
-        self.put_grid(fw.grid);
+        self.put_grid(fw.rec.grid_in);
+        self.put_grid(fw.rec.grid);
     }
 
     fn step_vjp(
@@ -201,10 +182,9 @@ impl<T: Real> Differentiable for ParallelHost<'_, T> {
         let c = fw.c;
         let n = sim.setup.n;
         let np = sim.len();
-        let dt = k::<T>(c.dt);
         let inv_dx = k::<T>(c.inv_dx);
         // G2P: node adjoints by slabs, per-particle adjoints returned per slab.
-        let (order, starts) = self.slab_order(&fw.x_start, inv_dx);
+        let (order, starts) = self.slab_order(&fw.rec.x_start, inv_dx);
         let mut grid_bar = self.take_grid();
         let per_slab: Vec<Vec<(u32, G2pBar<T>)>> = slabs::scatter_by_slab(
             &mut grid_bar,
@@ -217,10 +197,10 @@ impl<T: Real> Differentiable for ParallelHost<'_, T> {
                     .map(|&i| {
                         let p = i as usize;
                         let g = g2p_vjp(
-                            &fw.grid,
+                            &fw.rec.grid,
                             n,
-                            fw.x_start[p],
-                            &fw.f_elastic[p],
+                            fw.rec.x_start[p],
+                            &fw.rec.f_elastic[p],
                             &c,
                             adj.x[p],
                             adj.v[p],
@@ -252,7 +232,7 @@ impl<T: Real> Differentiable for ParallelHost<'_, T> {
                     if vb.iter().any(|x| *x != T::zero()) {
                         *out = grid_node_update_vjp(
                             [i, jk / n, jk % n],
-                            fw.grid_in[idx],
+                            fw.rec.grid_in[idx],
                             &sim.setup.grid_bcs,
                             &c,
                             vb,
@@ -261,98 +241,37 @@ impl<T: Real> Differentiable for ParallelHost<'_, T> {
                 }
             });
         // P2G, stress and particle conditions, per particle.
-        let per_particle: Vec<(HostParticleBar<T>, PhysParams<T>)> = (0..np)
+        let per_particle: Vec<(ParticleBar<T>, PhysParams<T>)> = (0..np)
             .into_par_iter()
             .map(|p| {
-                let (part, slot) = (sim.part[p] as usize, sim.slot[p] as usize);
-                if !in_domain(fw.x_start[p], inv_dx, n) {
-                    let z = T::zero();
-                    let bar = HostParticleBar {
-                        x: [z; 3],
-                        v: [z; 3],
-                        c: [z; 9],
-                        f: [z; 9],
-                        plastic: [z; 2],
-                    };
-                    return (bar, PhysParams::default());
-                }
-                let st = stencil(fw.x_start[p], inv_dx);
-                let a = damped_affine(&before.c[p], c.rpic_damping);
-                let mut sb = ScatterBar::default();
-                scatter_vjp(
+                sim.particle_stage_vjp(
+                    p,
+                    &c,
+                    &fw.rec,
+                    &before.c[p],
                     &grid_in_bar,
-                    n,
-                    &st,
-                    fw.v1[p],
-                    &a,
-                    fw.mass[p],
-                    &fw.stress[p],
-                    &c,
-                    &mut sb,
-                );
-                let scale = stress_scale(T::c(sim.vol0[p]), &c);
-                let cb = stress_update_vjp(
-                    Mat3::from_array(fw.f_trial[p]),
-                    &sim.consts[part],
-                    fw.plastic_in[p],
-                    fw.mats[slot],
-                    dt,
-                    Mat3::from_array(fe_bar[p]),
-                    Mat3::from_array(sb.s).scaled(scale),
-                    adj.plastic[p],
-                );
-                let mut g = PhysParams::default();
-                params[slot].add_material_vjp(&cb.params, &mut g);
-                let mut v_bar = sb.v;
-                let mut m_bar = sb.mass;
-                particle_bcs_vjp(
-                    sim.x0[p],
-                    fw.mass[p],
-                    &sim.setup.particle_bcs,
-                    &c,
-                    &mut v_bar,
-                    &mut m_bar,
-                );
-                g.density += m_bar * T::c(sim.vol0[p]);
-                let bar = HostParticleBar {
-                    x: std::array::from_fn(|q| x_bar[p][q] + sb.x[q]),
-                    v: v_bar,
-                    c: damped_affine_vjp(&sb.a, c.rpic_damping),
-                    f: cb.f_trial.to_array(),
-                    plastic: cb.state,
-                };
-                (bar, g)
+                    &fe_bar[p],
+                    &x_bar[p],
+                    &adj.plastic[p],
+                    params,
+                )
             })
             .collect();
         self.put_grid(grid_bar);
         self.put_grid(grid_in_bar);
         for (p, (bar, g)) in per_particle.into_iter().enumerate() {
-            let gp = &mut grad[sim.slot[p] as usize];
-            gp.youngs_modulus += g.youngs_modulus;
-            gp.poisson_ratio += g.poisson_ratio;
-            gp.plastic_viscosity += g.plastic_viscosity;
-            gp.friction_angle_deg += g.friction_angle_deg;
-            gp.density += g.density;
+            add_grad(&mut grad[sim.slot[p] as usize], &g);
             adj.x[p] = bar.x;
             adj.v[p] = bar.v;
             adj.c[p] = bar.c;
             adj.f[p] = bar.f;
             adj.plastic[p] = bar.plastic;
         }
-        self.put_grid(fw.grid_in);
-        self.put_grid(fw.grid);
+        self.put_grid(fw.rec.grid_in);
+        self.put_grid(fw.rec.grid);
     }
 
     fn zero_adjoint(&self, s: &HostState<T>) -> HostState<T> {
         HostState::zeros(s.x.len())
     }
-}
-
-/// One particle's adjoint state.
-struct HostParticleBar<T> {
-    x: [T; 3],
-    v: [T; 3],
-    c: [T; 9],
-    f: [T; 9],
-    plastic: [T; 2],
 }

@@ -232,13 +232,11 @@ impl HostSim {
         s: &mut HostState<T>,
         params: &[PhysParams<T>],
         k_sub: u64,
-    ) -> Intermediates<T> {
+    ) -> SubstepRecord<T> {
         let c = self.consts_at(k_sub);
         let n = self.setup.n;
         let mats: Vec<MaterialParams<T>> = params.iter().map(|p| p.material()).collect();
         let mass = self.masses(params);
-        let pbcs = &self.setup.particle_bcs;
-        let dt = k::<T>(c.dt);
         let np = self.len();
         let mut v1 = s.v.clone();
         let mut stress = vec![[T::zero(); 9]; np];
@@ -246,21 +244,15 @@ impl HostSim {
         let f_trial = s.f.clone();
         let plastic_in = s.plastic.clone();
         for p in 0..np {
-            particle_bcs(self.x0[p], &mut v1[p], mass[p], pbcs, &c);
-            let part = self.part[p] as usize;
-            let slot = self.slot[p] as usize;
-            let (fe, tau) = stress_update_with(
-                Mat3::from_array(s.f[p]),
-                &self.consts[part],
+            stress[p] = self.particle_stage(
+                p,
+                &c,
+                &mats,
+                mass[p],
+                &mut v1[p],
+                &mut s.f[p],
                 &mut s.plastic[p],
-                mats[slot],
-                dt,
             );
-            s.f[p] = fe.to_array();
-            stress[p] = tau
-                .sym()
-                .scaled(stress_scale(T::c(self.vol0[p]), &c))
-                .to_array();
         }
         let mut grid_in = vec![[T::zero(); 4]; n * n * n];
         let inv_dx = k::<T>(c.inv_dx);
@@ -295,7 +287,7 @@ impl HostSim {
             let g = gather(&grid, n, &st, &c);
             let _ = g2p_finish(&g, &mut s.x[p], &mut s.v[p], &mut s.c[p], &mut s.f[p], &c);
         }
-        Intermediates {
+        SubstepRecord {
             mass,
             v1,
             stress,
@@ -307,6 +299,113 @@ impl HostSim {
             grid,
             mats,
         }
+    }
+
+    /// The particle stage of a substep for particle `p`: boundary conditions on its velocity
+    /// `v` (becoming the scatter's velocity), return mapping of `f` and `plastic` in place;
+    /// returns the scatter's stress term.
+    #[allow(clippy::too_many_arguments)]
+    pub fn particle_stage<T: Real>(
+        &self,
+        p: usize,
+        c: &crate::StepConsts,
+        mats: &[MaterialParams<T>],
+        mass: T,
+        v: &mut [T; 3],
+        f: &mut [T; 9],
+        plastic: &mut [T; 2],
+    ) -> [T; 9] {
+        particle_bcs(self.x0[p], v, mass, &self.setup.particle_bcs, c);
+        let (part, slot) = (self.part[p] as usize, self.slot[p] as usize);
+        let (fe, tau) = stress_update_with(
+            Mat3::from_array(*f),
+            &self.consts[part],
+            plastic,
+            mats[slot],
+            k(c.dt),
+        );
+        *f = fe.to_array();
+        tau.sym()
+            .scaled(stress_scale(T::c(self.vol0[p]), c))
+            .to_array()
+    }
+
+    /// Reverse of the P2G, stress and particle-condition stages for particle `p`: from the
+    /// scattered grid's adjoint, the adjoints of F_elastic and of the plastic state (after the
+    /// substep), and the position adjoint gathered by G2P, returns the particle's adjoint state
+    /// before the substep and its parameter gradient (for its slot).
+    #[allow(clippy::too_many_arguments)]
+    pub fn particle_stage_vjp<T: Real>(
+        &self,
+        p: usize,
+        c: &crate::StepConsts,
+        rec: &SubstepRecord<T>,
+        c_before: &[T; 9],
+        grid_in_bar: &[[T; 4]],
+        fe_bar: &[T; 9],
+        x_bar_g2p: &[T; 3],
+        plastic_bar: &[T; 2],
+        params: &[PhysParams<T>],
+    ) -> (ParticleBar<T>, PhysParams<T>) {
+        let z = T::zero();
+        let inv_dx = k::<T>(c.inv_dx);
+        let mut g = PhysParams::default();
+        if !in_domain(rec.x_start[p], inv_dx, self.setup.n) {
+            let bar = ParticleBar {
+                x: [z; 3],
+                v: [z; 3],
+                c: [z; 9],
+                f: [z; 9],
+                plastic: [z; 2],
+            };
+            return (bar, g);
+        }
+        let (part, slot) = (self.part[p] as usize, self.slot[p] as usize);
+        let st = stencil(rec.x_start[p], inv_dx);
+        let a = damped_affine(c_before, c.rpic_damping);
+        let mut sb = ScatterBar::default();
+        scatter_vjp(
+            grid_in_bar,
+            self.setup.n,
+            &st,
+            rec.v1[p],
+            &a,
+            rec.mass[p],
+            &rec.stress[p],
+            c,
+            &mut sb,
+        );
+        let tau_bar = Mat3::from_array(sb.s).scaled(stress_scale(T::c(self.vol0[p]), c));
+        let cb = stress_update_vjp(
+            Mat3::from_array(rec.f_trial[p]),
+            &self.consts[part],
+            rec.plastic_in[p],
+            rec.mats[slot],
+            k(c.dt),
+            Mat3::from_array(*fe_bar),
+            tau_bar,
+            *plastic_bar,
+        );
+        params[slot].add_material_vjp(&cb.params, &mut g);
+        let mut v_bar = sb.v;
+        let mut m_bar = sb.mass;
+        particle_bcs_vjp(
+            self.x0[p],
+            rec.mass[p],
+            &self.setup.particle_bcs,
+            c,
+            &mut v_bar,
+            &mut m_bar,
+        );
+        g.density += m_bar * T::c(self.vol0[p]);
+        let bar = ParticleBar {
+            x: std::array::from_fn(|q| x_bar_g2p[q] + sb.x[q]),
+            v: v_bar,
+            c: damped_affine_vjp(&sb.a, c.rpic_damping),
+            f: cb.f_trial.to_array(),
+            plastic: cb.state,
+        };
+        (bar, g)
     }
 
     /// Advances one substep (`k_sub` is its global index).
@@ -330,7 +429,6 @@ impl HostSim {
         let c = self.consts_at(k_sub);
         let n = self.setup.n;
         let np = self.len();
-        let dt = k::<T>(c.dt);
         let inv_dx = k::<T>(c.inv_dx);
         // G2P.
         let mut grid_bar = vec![[T::zero(); 4]; n * n * n];
@@ -378,54 +476,23 @@ impl HostSim {
         // P2G, stress, particle conditions.
         let mut out = HostState::zeros(np);
         for p in 0..np {
-            if !in_domain(it.x_start[p], inv_dx, n) {
-                continue;
-            }
-            let part = self.part[p] as usize;
-            let slot = self.slot[p] as usize;
-            let st = stencil(it.x_start[p], inv_dx);
-            let a = damped_affine(&before.c[p], c.rpic_damping);
-            let mut sb = ScatterBar::default();
-            scatter_vjp(
+            let (bar, g) = self.particle_stage_vjp(
+                p,
+                &c,
+                &it,
+                &before.c[p],
                 &grid_in_bar,
-                n,
-                &st,
-                it.v1[p],
-                &a,
-                it.mass[p],
-                &it.stress[p],
-                &c,
-                &mut sb,
+                &fe_bar[p],
+                &x_bar[p],
+                &adj.plastic[p],
+                params,
             );
-            let scale = stress_scale(T::c(self.vol0[p]), &c);
-            let tau_bar = Mat3::from_array(sb.s).scaled(scale);
-            let cb = stress_update_vjp(
-                Mat3::from_array(it.f_trial[p]),
-                &self.consts[part],
-                it.plastic_in[p],
-                it.mats[slot],
-                dt,
-                Mat3::from_array(fe_bar[p]),
-                tau_bar,
-                adj.plastic[p],
-            );
-            params[slot].add_material_vjp(&cb.params, &mut grad[slot]);
-            let mut v_bar = sb.v;
-            let mut m_bar = sb.mass;
-            particle_bcs_vjp(
-                self.x0[p],
-                it.mass[p],
-                &self.setup.particle_bcs,
-                &c,
-                &mut v_bar,
-                &mut m_bar,
-            );
-            grad[slot].density += m_bar * T::c(self.vol0[p]);
-            out.x[p] = std::array::from_fn(|q| x_bar[p][q] + sb.x[q]);
-            out.v[p] = v_bar;
-            out.c[p] = damped_affine_vjp(&sb.a, c.rpic_damping);
-            out.f[p] = cb.f_trial.to_array();
-            out.plastic[p] = cb.state;
+            add_grad(&mut grad[self.slot[p] as usize], &g);
+            out.x[p] = bar.x;
+            out.v[p] = bar.v;
+            out.c[p] = bar.c;
+            out.f[p] = bar.f;
+            out.plastic[p] = bar.plastic;
         }
         *adj = out;
     }
@@ -439,18 +506,53 @@ impl HostSim {
     }
 }
 
-/// What a substep's reverse sweep needs from its forward pass.
-struct Intermediates<T> {
-    mass: Vec<T>,
-    v1: Vec<[T; 3]>,
-    stress: Vec<[T; 9]>,
-    x_start: Vec<[T; 3]>,
-    f_trial: Vec<[T; 9]>,
-    f_elastic: Vec<[T; 9]>,
-    plastic_in: Vec<[T; 2]>,
-    grid_in: Vec<[T; 4]>,
-    grid: Vec<[T; 4]>,
-    mats: Vec<MaterialParams<T>>,
+/// What a substep's reverse sweep needs from its forward pass (per particle unless noted).
+pub struct SubstepRecord<T> {
+    /// Masses.
+    pub mass: Vec<T>,
+    /// Velocities after the particle boundary conditions.
+    pub v1: Vec<[T; 3]>,
+    /// Stress terms of the scatter.
+    pub stress: Vec<[T; 9]>,
+    /// Positions at the start of the substep.
+    pub x_start: Vec<[T; 3]>,
+    /// Trial deformation gradients (before the return mapping).
+    pub f_trial: Vec<[T; 9]>,
+    /// Elastic deformation gradients (after it).
+    pub f_elastic: Vec<[T; 9]>,
+    /// Plastic state before the substep.
+    pub plastic_in: Vec<[T; 2]>,
+    /// Scattered grid (momentum, mass).
+    pub grid_in: Vec<[T; 4]>,
+    /// Updated grid (velocity, mass).
+    pub grid: Vec<[T; 4]>,
+    /// Material constants per parameter slot.
+    pub mats: Vec<MaterialParams<T>>,
+}
+
+/// One particle's adjoint state.
+#[derive(Clone, Copy, Debug)]
+pub struct ParticleBar<T> {
+    /// Position adjoint.
+    pub x: [T; 3],
+    /// Velocity adjoint.
+    pub v: [T; 3],
+    /// APIC matrix adjoint.
+    pub c: [T; 9],
+    /// Deformation gradient adjoint.
+    pub f: [T; 9],
+    /// Plastic state adjoint.
+    pub plastic: [T; 2],
+}
+
+/// Adds one particle's parameter gradient to a slot's.
+pub fn add_grad<T: Real>(acc: &mut PhysParams<T>, g: &PhysParams<T>) {
+    acc.youngs_modulus += g.youngs_modulus;
+    acc.poisson_ratio += g.poisson_ratio;
+    acc.yield_stress += g.yield_stress;
+    acc.plastic_viscosity += g.plastic_viscosity;
+    acc.friction_angle_deg += g.friction_angle_deg;
+    acc.density += g.density;
 }
 
 /// [`HostSim`] as a [`Differentiable`](super::checkpoint::Differentiable) stepper in scalar
