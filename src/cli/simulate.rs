@@ -31,6 +31,10 @@ pub struct SimulateArgs {
     /// Override the number of frames.
     #[arg(long)]
     frames: Option<usize>,
+    /// Continue a killed run from OUT/state.r4d (the state after the last written frame,
+    /// saved after every frame); frames already on disk are kept.
+    #[arg(long)]
+    resume: bool,
 }
 
 /// Runs the command.
@@ -78,7 +82,20 @@ fn simulate<B: MpmKernels>(
     let backend_name = backend.name();
     let mut sim = MpmSim::new(backend, &config, scene, source)?;
     let params = config.parts.clone();
-    let mut state = sim.init_state(&params)?;
+    let snap_path = a.out.join("state.r4d");
+    let resumed = a.resume && snap_path.exists();
+    let mut state = if resumed {
+        let snap = r4d_mpm::Snapshot::read(&snap_path, n)?;
+        eprintln!(
+            "resuming after frame {} from {}",
+            snap.frame,
+            snap_path.display()
+        );
+        sim.restore(&snap, &params)?
+    } else {
+        sim.init_state(&params)?
+    };
+    let first_frame = state.frame;
     let frames = config.time.frames;
     let spf = sim.setup().substeps_per_frame;
     let bar = if std::io::stderr().is_terminal() {
@@ -100,19 +117,25 @@ fn simulate<B: MpmKernels>(
         };
         write_frame(&a.out, k, &x, f.as_deref())
     };
-    write(&sim, &state, 0)?;
+    if !resumed {
+        write(&sim, &state, 0)?;
+    }
+    bar.set_position(first_frame as u64);
     let mut error = None;
-    for k in 1..=frames {
+    for k in first_frame + 1..=frames {
         if let Err(e) = sim.step_frame(&mut state, &params) {
             error = Some(e);
             break;
         }
         write(&sim, &state, k)?;
+        sim.snapshot(&state)?.write(&snap_path)?;
         bar.inc(1);
     }
     bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();
     let done = state.frame;
+    // Substeps run by this invocation (a resumed run started after `first_frame`).
+    let run_substeps = state.substep - first_frame as u64 * spf as u64;
     let summary = json!({
         "config": config,
         "config_file": a.scene.config,
@@ -122,12 +145,13 @@ fn simulate<B: MpmKernels>(
         "particles": n,
         "frames": done + 1,
         "frames_simulated": done,
+        "resumed_after_frame": resumed.then_some(first_frame),
         "substeps_per_frame": spf,
         "substeps": state.substep,
         "substep_dt": config.time.substep_dt,
         "simulated_time_s": state.time_s,
         "wall_time_s": wall,
-        "particle_substeps_per_s": if wall > 0.0 { n as f64 * state.substep as f64 / wall } else { 0.0 },
+        "particle_substeps_per_s": if wall > 0.0 { n as f64 * run_substeps as f64 / wall } else { 0.0 },
         "write_f": a.write_f,
         "warnings": warnings,
         "error": error.as_ref().map(|e| e.to_string()),
@@ -145,7 +169,7 @@ fn simulate<B: MpmKernels>(
         done + 1,
         a.out.display(),
         wall,
-        n as f64 * state.substep as f64 / wall.max(1e-9),
+        n as f64 * run_substeps as f64 / wall.max(1e-9),
         sp.display()
     );
     Ok(())

@@ -52,6 +52,7 @@ pub mod ply;
 pub mod reference;
 pub mod scene;
 pub mod sim;
+pub mod snapshot;
 pub mod transfer;
 
 pub use boundary::{BoundaryCondition, Surface};
@@ -61,3 +62,4 @@ pub use kernels::{Grid, MemoryUsage, MpmKernels, Particles, StepConsts};
 pub use material::{Material, PartConsts, PartParams};
 pub use scene::{ParticleSet, Shape};
 pub use sim::{MpmSim, SimSetup, SimState, Simulator};
+pub use snapshot::Snapshot;

@@ -237,6 +237,48 @@ impl<B: MpmKernels> MpmSim<B> {
         Ok(())
     }
 
+    /// A host copy of the state (for [`crate::Snapshot::write`]).
+    pub fn snapshot(&self, state: &SimState<B>) -> Result<crate::Snapshot> {
+        let b = &self.backend;
+        let p = &state.particles;
+        Ok(crate::Snapshot {
+            frame: state.frame,
+            substep: state.substep,
+            time_s: state.time_s,
+            x: b.download(&p.x).map_err(be)?,
+            v: b.download(&p.v).map_err(be)?,
+            c: b.download(&p.c).map_err(be)?,
+            f: b.download(&p.f).map_err(be)?,
+            plastic: b.download(&p.plastic).map_err(be)?,
+        })
+    }
+
+    /// A state restored from a snapshot, with the given part parameters.
+    pub fn restore(&self, snap: &crate::Snapshot, params: &[PartParams]) -> Result<SimState<B>> {
+        let mut st = self.init_state(params)?;
+        if snap.x.len() != self.scene.len() {
+            return Err(Error::Scene {
+                what: "snapshot".into(),
+                message: format!(
+                    "{} particles, the scene has {}",
+                    snap.x.len(),
+                    self.scene.len()
+                ),
+            });
+        }
+        let b = &self.backend;
+        let p = &mut st.particles;
+        b.write(&mut p.x, &snap.x).map_err(be)?;
+        b.write(&mut p.v, &snap.v).map_err(be)?;
+        b.write(&mut p.c, &snap.c).map_err(be)?;
+        b.write(&mut p.f, &snap.f).map_err(be)?;
+        b.write(&mut p.plastic, &snap.plastic).map_err(be)?;
+        st.frame = snap.frame;
+        st.substep = snap.substep;
+        st.time_s = snap.time_s;
+        Ok(st)
+    }
+
     /// Runs one substep (no health check; [`Simulator::step_frame`] checks at frame end).
     pub fn substep(&mut self, state: &mut SimState<B>) -> Result<()> {
         let c = self.setup.step_consts(state.time_s, state.substep);
