@@ -4,8 +4,10 @@
 //! `cargo bench --bench adjoint [-- PARTICLES FRAMES SUBSTEPS_PER_FRAME]` (defaults: 10 000
 //! particles, 2 frames of 50 substeps, n_grid 64, f32), for the single-threaded host
 //! simulator (the f64/f32 reference) and the parallel CPU adjoint (`ParallelHost`, all cores).
-//! The paper's scale (16 frames x 400 substeps, 100k particles) takes hours on this machine;
-//! pass larger arguments to measure it.
+//! The paper's scale (16 frames x 400 substeps, 10k and 100k particles) takes an hour on a
+//! 2-core machine: `cargo bench --bench adjoint -- 100000 16 400 --parallel-only`.
+//! `--parallel-only` skips the single-threaded host stepper; a strategy whose
+//! `memory_plan` exceeds 60% of the machine's memory is skipped (its plan is still printed).
 
 use r4d_backend_cpu::adjoint::ParallelHost;
 use r4d_mpm::adjoint::checkpoint::{memory_plan, value_and_grad, Checkpointing, Differentiable};
@@ -22,10 +24,9 @@ use std::time::Instant;
 static GLOBAL: Counting = Counting;
 
 fn main() {
-    let args: Vec<usize> = std::env::args()
-        .skip(1)
-        .filter_map(|a| a.parse().ok())
-        .collect();
+    let raw: Vec<String> = std::env::args().skip(1).collect();
+    let parallel_only = raw.iter().any(|a| a == "--parallel-only");
+    let args: Vec<usize> = raw.iter().filter_map(|a| a.parse().ok()).collect();
     let target = args.first().copied().unwrap_or(10_000);
     let frames = args.get(1).copied().unwrap_or(2);
     let spf = args.get(2).copied().unwrap_or(50) as u32;
@@ -69,18 +70,20 @@ fn main() {
     println!("adjoint bench: {np} particles, n_grid {n}, {frames} frames x {spf} substeps, f32");
     println!("| stepper | strategy | forward (s) | forward+backward (s) | backward/forward | peak measured (MiB) | memory_plan (MiB) |");
     println!("|---|---|---|---|---|---|---|");
-    let host = HostStepper::<f32>::new(&sim);
+    if !parallel_only {
+        let host = HostStepper::<f32>::new(&sim);
+        measure(
+            "host (1 thread)",
+            &host,
+            &sim,
+            &params,
+            substeps,
+            spf,
+            np,
+            n,
+        );
+    }
     let parallel = ParallelHost::<f32>::new(&sim);
-    measure(
-        "host (1 thread)",
-        &host,
-        &sim,
-        &params,
-        substeps,
-        spf,
-        np,
-        n,
-    );
     measure(
         "parallel CPU",
         &parallel,
@@ -115,6 +118,12 @@ fn measure<D>(
         Checkpointing::PerFrame,
         Checkpointing::EveryN(((substeps as f64).sqrt().round() as u32).max(1)),
     ] {
+        let plan = memory_plan(np as u64, n as u64, substeps, spf, strategy, 4).peak_bytes as f64
+            / 1048576.0;
+        if plan > 0.6 * machine_memory_mib() {
+            println!("| {label} | {strategy:?} | - | - | - | skipped | {plan:.1} |");
+            continue;
+        }
         let init = sim.init(params, &vec![[0.0f32; 3]; np]);
         // Forward only, for the ratio.
         let t0 = Instant::now();
@@ -139,12 +148,24 @@ fn measure<D>(
         );
         let total = t1.elapsed().as_secs_f64();
         let peak = peak_since(base) as f64 / 1048576.0;
-        let plan = memory_plan(np as u64, n as u64, substeps, spf, strategy, 4).peak_bytes as f64
-            / 1048576.0;
         assert!(g[0].youngs_modulus.is_finite());
         println!(
             "| {label} | {strategy:?} | {fwd:.2} | {total:.2} | {:.2} | {peak:.1} | {plan:.1} |",
             (total - fwd) / fwd
         );
     }
+}
+
+/// Total memory of this machine in MiB (`/proc/meminfo`; 16 GiB where it cannot be read).
+fn machine_memory_mib() -> f64 {
+    std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|m| {
+            m.lines()
+                .find(|l| l.starts_with("MemTotal:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<f64>().ok())
+        })
+        .map(|kb| kb / 1024.0)
+        .unwrap_or(16384.0)
 }

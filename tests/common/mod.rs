@@ -47,7 +47,7 @@ pub fn read_npz(path: &Path) -> HashMap<String, Array> {
     out
 }
 
-fn parse_npy(b: &[u8]) -> Array {
+pub fn parse_npy(b: &[u8]) -> Array {
     assert_eq!(&b[..6], b"\x93NUMPY");
     let (hlen, start) = if b[6] == 1 {
         (u16::from_le_bytes([b[8], b[9]]) as usize, 10)
@@ -104,4 +104,10 @@ fn parse_npy(b: &[u8]) -> Array {
     };
     assert_eq!(data.len(), n);
     Array { shape, data }
+}
+
+/// Reads one `.npy` file.
+pub fn read_npy(path: &Path) -> Array {
+    let b = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    parse_npy(&b)
 }

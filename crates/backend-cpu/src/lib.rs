@@ -33,6 +33,7 @@ use std::sync::Arc;
 
 pub mod adjoint;
 pub mod slabs;
+pub mod splat;
 
 pub use slabs::SLAB;
 

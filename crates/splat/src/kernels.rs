@@ -1,0 +1,186 @@
+//! The kernel-level backend trait: one method per stage of the renderer and its VJP, over
+//! backend-owned buffers. A new backend implements [`SplatKernels`]; everything above it
+//! ([`crate::SplatRenderer`]) is written once.
+
+use crate::camera::{Camera, RasterizeMode, RenderSettings};
+use crate::project::{CamParams, Projected, ProjectedGrad};
+use bytemuck::{Pod, Zeroable};
+
+// SAFETY: `repr(C)`, ten f32 and two u32: no padding, every bit pattern valid.
+unsafe impl Zeroable for Projected<f32> {}
+unsafe impl Pod for Projected<f32> {}
+// SAFETY: `repr(C)`, nine f32: no padding, every bit pattern valid.
+unsafe impl Zeroable for ProjectedGrad<f32> {}
+unsafe impl Pod for ProjectedGrad<f32> {}
+
+/// The camera and settings of one render, as the kernels see them (f32, shader-friendly).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct CameraConsts {
+    /// World-to-camera rotation rows (4th entry unused).
+    pub rot: [[f32; 4]; 3],
+    /// Translation (4th entry unused).
+    pub trans: [f32; 4],
+    /// Camera centre (4th entry unused).
+    pub campos: [f32; 4],
+    /// Background colour (4th entry unused).
+    pub background: [f32; 4],
+    /// fx, fy, cx, cy.
+    pub intrinsics: [f32; 4],
+    /// Near and far planes.
+    pub near_far: [f32; 2],
+    /// Image width and height.
+    pub size: [u32; 2],
+    /// Tiles along x and y.
+    pub tiles: [u32; 2],
+    /// 1 for antialiased mode.
+    pub antialiased: u32,
+    /// SH degree.
+    pub sh_degree: u32,
+}
+
+impl CameraConsts {
+    /// From a camera, settings and the SH degree.
+    pub fn new(cam: &Camera, s: &RenderSettings, sh_degree: u32) -> Self {
+        let p = CamParams::<f32>::new(cam, s.mode);
+        let t = crate::camera::consts::TILE;
+        CameraConsts {
+            rot: [0, 1, 2].map(|i| [p.rot[i][0], p.rot[i][1], p.rot[i][2], 0.0]),
+            trans: [p.trans[0], p.trans[1], p.trans[2], 0.0],
+            campos: [p.campos[0], p.campos[1], p.campos[2], 0.0],
+            background: [s.background[0], s.background[1], s.background[2], 0.0],
+            intrinsics: [p.fx, p.fy, p.cx, p.cy],
+            near_far: [p.near, p.far],
+            size: [cam.width, cam.height],
+            tiles: [cam.width.div_ceil(t), cam.height.div_ceil(t)],
+            antialiased: (s.mode == RasterizeMode::Antialiased) as u32,
+            sh_degree,
+        }
+    }
+
+    /// The camera as the shared per-Gaussian math takes it.
+    pub fn params(&self) -> CamParams<f32> {
+        CamParams {
+            rot: [0, 1, 2].map(|i| [self.rot[i][0], self.rot[i][1], self.rot[i][2]]),
+            trans: [self.trans[0], self.trans[1], self.trans[2]],
+            campos: [self.campos[0], self.campos[1], self.campos[2]],
+            fx: self.intrinsics[0],
+            fy: self.intrinsics[1],
+            cx: self.intrinsics[2],
+            cy: self.intrinsics[3],
+            width: self.size[0],
+            height: self.size[1],
+            near: self.near_far[0],
+            far: self.near_far[1],
+            antialiased: self.antialiased != 0,
+        }
+    }
+
+    /// Background as an array.
+    pub fn bg(&self) -> [f32; 3] {
+        [self.background[0], self.background[1], self.background[2]]
+    }
+}
+
+/// A scene in backend buffers.
+pub struct SceneBufs<B: SplatKernels> {
+    /// Number of Gaussians.
+    pub n: usize,
+    /// SH degree.
+    pub sh_degree: u32,
+    /// Centres (deformed centres when `f` is given).
+    pub means: B::Buf<[f32; 3]>,
+    /// Log-scales.
+    pub log_scales: B::Buf<[f32; 3]>,
+    /// Quaternions.
+    pub quats: B::Buf<[f32; 4]>,
+    /// Opacity logits.
+    pub opacity_logits: B::Buf<f32>,
+    /// SH `[n][k][c]`.
+    pub sh: B::Buf<f32>,
+    /// Deformation gradients.
+    pub f: Option<B::Buf<[[f32; 3]; 3]>>,
+}
+
+/// Tile lists in backend buffers (see [`crate::raster::TileBins`]).
+pub struct TileBufs<B: SplatKernels> {
+    /// Offsets, `tiles + 1` entries.
+    pub offsets: B::Buf<u32>,
+    /// Gaussian ids, front to back per tile.
+    pub ids: B::Buf<u32>,
+    /// Number of (tile, Gaussian) pairs.
+    pub intersections: usize,
+}
+
+/// Rendered images in backend buffers.
+pub struct ImageBufs<B: SplatKernels> {
+    /// `[H][W][3]`.
+    pub rgb: B::Buf<f32>,
+    /// `[H][W]`.
+    pub alpha: B::Buf<f32>,
+    /// `[H][W]`.
+    pub depth: B::Buf<f32>,
+}
+
+/// Scene gradients in backend buffers.
+pub struct SceneGradBufs<B: SplatKernels> {
+    /// dL/dmean.
+    pub means: B::Buf<[f32; 3]>,
+    /// dL/dlog_scale.
+    pub log_scales: B::Buf<[f32; 3]>,
+    /// dL/dquat.
+    pub quats: B::Buf<[f32; 4]>,
+    /// dL/dopacity_logit.
+    pub opacity_logits: B::Buf<f32>,
+    /// dL/dsh.
+    pub sh: B::Buf<f32>,
+    /// dL/dF.
+    pub f: Option<B::Buf<[[f32; 3]; 3]>>,
+}
+
+/// The stages of the renderer on one backend.
+pub trait SplatKernels: Sized + Send + Sync + 'static {
+    /// A typed buffer owned by the backend (CPU: `Vec<T>`).
+    type Buf<T: Pod + Send + Sync>: Send + Sync;
+    /// The backend's error.
+    type Error: std::error::Error + Send + Sync + 'static;
+    /// Copies host data into a buffer.
+    fn upload<T: Pod + Send + Sync>(&self, data: &[T]) -> Result<Self::Buf<T>, Self::Error>;
+    /// Copies a buffer back to the host.
+    fn download<T: Pod + Send + Sync>(&self, buf: &Self::Buf<T>) -> Result<Vec<T>, Self::Error>;
+    /// Projects every Gaussian (culled ones get radii (0, 0)).
+    fn project(
+        &self,
+        scene: &SceneBufs<Self>,
+        cam: &CameraConsts,
+    ) -> Result<Self::Buf<Projected<f32>>, Self::Error>;
+    /// Depth-sorts the visible Gaussians and bins them into 16x16 tiles.
+    fn bin_tiles(
+        &self,
+        proj: &Self::Buf<Projected<f32>>,
+        cam: &CameraConsts,
+    ) -> Result<TileBufs<Self>, Self::Error>;
+    /// Composites every pixel.
+    fn rasterize(
+        &self,
+        proj: &Self::Buf<Projected<f32>>,
+        bins: &TileBufs<Self>,
+        cam: &CameraConsts,
+    ) -> Result<ImageBufs<Self>, Self::Error>;
+    /// VJP of [`SplatKernels::rasterize`] for `dL/drgb`.
+    fn rasterize_vjp(
+        &self,
+        proj: &Self::Buf<Projected<f32>>,
+        bins: &TileBufs<Self>,
+        cam: &CameraConsts,
+        d_rgb: &Self::Buf<f32>,
+    ) -> Result<Self::Buf<ProjectedGrad<f32>>, Self::Error>;
+    /// VJP of [`SplatKernels::project`].
+    fn project_vjp(
+        &self,
+        scene: &SceneBufs<Self>,
+        cam: &CameraConsts,
+        proj: &Self::Buf<Projected<f32>>,
+        d_proj: &Self::Buf<ProjectedGrad<f32>>,
+    ) -> Result<SceneGradBufs<Self>, Self::Error>;
+}

@@ -1,0 +1,226 @@
+//! Tile binning and front-to-back alpha compositing of one pixel, and its VJP, written once
+//! for every backend (gsplat's conventions: pixel centres at `+0.5`, `s < 0` or
+//! `alpha < 1/255` skipped, alpha capped at 0.999, exclusive stop at `T <= 1e-4`).
+
+use crate::camera::consts;
+use crate::project::{Projected, ProjectedGrad};
+use crate::real::Real;
+
+/// Per-tile lists of Gaussian indices, each sorted front to back (depth as f32, then index).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TileBins {
+    /// Tiles along x.
+    pub tiles_x: u32,
+    /// Tiles along y.
+    pub tiles_y: u32,
+    /// `offsets[t] .. offsets[t + 1]` indexes `ids` for tile `t = ty * tiles_x + tx`.
+    pub offsets: Vec<u32>,
+    /// Gaussian indices.
+    pub ids: Vec<u32>,
+}
+
+impl TileBins {
+    /// The Gaussians of tile `t`, front to back.
+    pub fn tile(&self, t: usize) -> &[u32] {
+        &self.ids[self.offsets[t] as usize..self.offsets[t + 1] as usize]
+    }
+}
+
+/// The tile rectangle `[x0, x1) x [y0, y1)` a projected Gaussian touches (gsplat's rule).
+pub fn tile_rect<T: Real>(p: &Projected<T>, tiles_x: u32, tiles_y: u32) -> [u32; 4] {
+    let ts = consts::TILE as f64;
+    let (u, v) = (p.mean2d[0].f64(), p.mean2d[1].f64());
+    let (rx, ry) = (p.radii[0] as f64, p.radii[1] as f64);
+    let cl = |a: f64, n: u32| a.clamp(0.0, n as f64) as u32;
+    [
+        cl(((u - rx) / ts).floor(), tiles_x),
+        cl(((u + rx) / ts).ceil(), tiles_x),
+        cl(((v - ry) / ts).floor(), tiles_y),
+        cl(((v + ry) / ts).ceil(), tiles_y),
+    ]
+}
+
+/// The depth sort order of visible Gaussians: by depth rounded to f32, ties by index.
+pub fn depth_order<T: Real>(proj: &[Projected<T>]) -> Vec<u32> {
+    let mut order: Vec<u32> = (0..proj.len() as u32)
+        .filter(|&i| proj[i as usize].radii != [0, 0])
+        .collect();
+    order.sort_by(|&a, &b| {
+        let (da, db) = (
+            proj[a as usize].depth.f64() as f32,
+            proj[b as usize].depth.f64() as f32,
+        );
+        da.total_cmp(&db).then(a.cmp(&b))
+    });
+    order
+}
+
+/// Bins Gaussians (in `order`, front to back) into `tiles_x * tiles_y` tiles.
+pub fn bin_tiles<T: Real>(
+    proj: &[Projected<T>],
+    order: &[u32],
+    width: u32,
+    height: u32,
+) -> TileBins {
+    let tiles_x = width.div_ceil(consts::TILE);
+    let tiles_y = height.div_ceil(consts::TILE);
+    let nt = (tiles_x * tiles_y) as usize;
+    let mut counts = vec![0u32; nt + 1];
+    for &g in order {
+        let [x0, x1, y0, y1] = tile_rect(&proj[g as usize], tiles_x, tiles_y);
+        for ty in y0..y1 {
+            for tx in x0..x1 {
+                counts[(ty * tiles_x + tx) as usize + 1] += 1;
+            }
+        }
+    }
+    for t in 0..nt {
+        counts[t + 1] += counts[t];
+    }
+    let offsets = counts;
+    let mut fill = offsets.clone();
+    let mut ids = vec![0u32; offsets[nt] as usize];
+    for &g in order {
+        let [x0, x1, y0, y1] = tile_rect(&proj[g as usize], tiles_x, tiles_y);
+        for ty in y0..y1 {
+            for tx in x0..x1 {
+                let t = (ty * tiles_x + tx) as usize;
+                ids[fill[t] as usize] = g;
+                fill[t] += 1;
+            }
+        }
+    }
+    TileBins {
+        tiles_x,
+        tiles_y,
+        offsets,
+        ids,
+    }
+}
+
+/// The result of compositing one pixel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PixelOut<T> {
+    /// Colour including the background.
+    pub rgb: [T; 3],
+    /// Accumulated opacity `1 - T_final`.
+    pub alpha: T,
+    /// Expected depth (0 where nothing was hit).
+    pub depth: T,
+}
+
+/// One composited contribution, kept for the VJP.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Contribution<T> {
+    /// Gaussian index.
+    pub id: u32,
+    /// Alpha at this pixel.
+    pub alpha: T,
+    /// Transmittance before this Gaussian.
+    pub t: T,
+    /// `exp(-s)`.
+    pub g: T,
+    /// Offsets `(u - px, v - py)`.
+    pub d: [T; 2],
+    /// Alpha hit the 0.999 cap (no gradient through opacity and shape).
+    pub capped: bool,
+}
+
+/// Composites pixel `(i, j)` over the front-to-back list `ids`; pushes each composited
+/// Gaussian onto `trace` when given. Returns the pixel and the final transmittance.
+pub fn composite_pixel<T: Real>(
+    i: u32,
+    j: u32,
+    ids: &[u32],
+    proj: &[Projected<T>],
+    background: &[T; 3],
+    mut trace: Option<&mut Vec<Contribution<T>>>,
+) -> (PixelOut<T>, T) {
+    let c = T::c;
+    let (px, py) = (c(i as f64 + 0.5), c(j as f64 + 0.5));
+    let (amax, amin, tmin) = (c(consts::ALPHA_MAX), c(consts::ALPHA_MIN), c(consts::T_MIN));
+    let half = c(0.5);
+    let mut t = T::one();
+    let mut rgb = [T::zero(); 3];
+    let mut depth = T::zero();
+    for &id in ids {
+        let p = &proj[id as usize];
+        let dx = p.mean2d[0] - px;
+        let dy = p.mean2d[1] - py;
+        let s = half * (p.conic[0] * dx * dx + p.conic[2] * dy * dy) + p.conic[1] * dx * dy;
+        if s < T::zero() {
+            continue;
+        }
+        let g = (-s).exp();
+        let raw = p.opacity * g;
+        let capped = raw > amax;
+        let alpha = if capped { amax } else { raw };
+        if alpha < amin {
+            continue;
+        }
+        let t_next = t * (T::one() - alpha);
+        if t_next <= tmin {
+            break;
+        }
+        let w = alpha * t;
+        for ch in 0..3 {
+            rgb[ch] += w * p.color[ch];
+        }
+        depth += w * p.depth;
+        if let Some(tr) = trace.as_deref_mut() {
+            tr.push(Contribution {
+                id,
+                alpha,
+                t,
+                g,
+                d: [dx, dy],
+                capped,
+            });
+        }
+        t = t_next;
+    }
+    for ch in 0..3 {
+        rgb[ch] += t * background[ch];
+    }
+    let alpha = T::one() - t;
+    let depth = depth / alpha.max(c(1e-10));
+    (PixelOut { rgb, alpha, depth }, t)
+}
+
+/// VJP of [`composite_pixel`] for the colour output: `trace` is the forward's list and
+/// `t_final` its final transmittance; `emit(id, grad)` receives each Gaussian's gradient.
+pub fn composite_pixel_vjp<T: Real>(
+    trace: &[Contribution<T>],
+    t_final: T,
+    proj: &[Projected<T>],
+    background: &[T; 3],
+    d_rgb: &[T; 3],
+    mut emit: impl FnMut(u32, &ProjectedGrad<T>),
+) {
+    let dotc = |a: &[T; 3], b: &[T; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let half = T::c(0.5);
+    // Sum over everything behind the current Gaussian (and the background) of its share.
+    let mut behind = t_final * dotc(d_rgb, background);
+    for k in trace.iter().rev() {
+        let p = &proj[k.id as usize];
+        let w = k.alpha * k.t;
+        let gc = dotc(d_rgb, &p.color);
+        let d_alpha = k.t * gc - behind / (T::one() - k.alpha);
+        behind += w * gc;
+        let mut gr = ProjectedGrad {
+            color: d_rgb.map(|v| v * w),
+            ..Default::default()
+        };
+        if !k.capped {
+            gr.opacity = d_alpha * k.g;
+            let d_s = -d_alpha * k.alpha;
+            let [dx, dy] = k.d;
+            gr.mean2d = [
+                d_s * (p.conic[0] * dx + p.conic[1] * dy),
+                d_s * (p.conic[2] * dy + p.conic[1] * dx),
+            ];
+            gr.conic = [d_s * half * dx * dx, d_s * dx * dy, d_s * half * dy * dy];
+        }
+        emit(k.id, &gr);
+    }
+}
