@@ -61,3 +61,6 @@ pub use error::{Error, Result};
 pub use gaussians::{Deformation, GaussianGrads, Gaussians};
 pub use kernels::{CameraConsts, SplatKernels};
 pub use renderer::{Image, RenderStats, Renderer, SplatRenderer};
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,207 @@
+//! Finite-difference checks of every gradient of the reference renderer in f64, and unit
+//! checks of the polar decomposition.
+
+use crate::camera::{Camera, RasterizeMode, RenderSettings};
+use crate::covariance::*;
+use crate::real::*;
+use crate::reference::{render, render_vjp, Scene};
+
+/// Small deterministic generator (tests only).
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn range(&mut self, a: f64, b: f64) -> f64 {
+        a + (b - a) * self.next()
+    }
+}
+
+fn scene(n: usize, degree: u32, deformed: bool, seed: u64) -> Scene<f64> {
+    let mut r = Lcg(seed);
+    let k = ((degree + 1) * (degree + 1)) as usize;
+    let mut s = Scene::<f64> {
+        sh_degree: degree,
+        ..Default::default()
+    };
+    for _ in 0..n {
+        s.means
+            .push([r.range(-0.6, 0.6), r.range(-0.6, 0.6), r.range(-0.4, 0.4)]);
+        s.log_scales.push([
+            r.range(-2.6, -1.6),
+            r.range(-2.6, -1.6),
+            r.range(-2.6, -1.6),
+        ]);
+        s.quats.push([
+            r.range(-1.0, 1.0),
+            r.range(-1.0, 1.0),
+            r.range(-1.0, 1.0),
+            r.range(0.2, 1.0),
+        ]);
+        s.opacity_logits.push(r.range(-1.5, 0.5));
+        for _ in 0..k * 3 {
+            s.sh.push(r.range(-0.4, 0.4));
+        }
+    }
+    if deformed {
+        s.f = Some(
+            (0..n)
+                .map(|_| {
+                    let mut m = eye3::<f64>();
+                    for row in m.iter_mut() {
+                        for v in row.iter_mut() {
+                            *v += r.range(-0.35, 0.35);
+                        }
+                    }
+                    m
+                })
+                .collect(),
+        );
+    }
+    s
+}
+
+fn camera() -> Camera {
+    let mut c = Camera::look_at(40, 30, 50.0, [0.3, -3.0, 0.8], [0.0; 3], [0.0, 0.0, 1.0]);
+    c.cx = 21.3; // off-centre principal point
+    c.fy = c.fx * 1.1;
+    c
+}
+
+fn loss(s: &Scene<f64>, cam: &Camera, set: &RenderSettings, w: &[f64]) -> f64 {
+    let (img, _) = render(s, cam, set);
+    img.rgb.iter().zip(w).map(|(a, b)| a * b).sum()
+}
+
+/// Central differences of every parameter of a few Gaussians against the VJP.
+fn fd_check(deformed: bool, mode: RasterizeMode, degree: u32) {
+    let cam = camera();
+    let set = RenderSettings {
+        background: [0.2, 0.5, 0.9],
+        mode,
+    };
+    let s = scene(24, degree, deformed, 7 + degree as u64);
+    let mut r = Lcg(99);
+    let w: Vec<f64> = (0..cam.width * cam.height * 3)
+        .map(|_| r.range(-1.0, 1.0))
+        .collect();
+    let g = render_vjp(&s, &cam, &set, &w);
+    let h = 1e-6;
+    let k = ((degree + 1) * (degree + 1)) as usize * 3;
+    let mut worst = 0.0f64;
+    let mut checked = 0;
+    let mut significant = 0;
+    let mut check = |label: String, an: f64, perturb: &dyn Fn(&mut Scene<f64>, f64)| {
+        let mut p = s.clone();
+        perturb(&mut p, h);
+        let lp = loss(&p, &cam, &set, &w);
+        let mut m = s.clone();
+        perturb(&mut m, -h);
+        let lm = loss(&m, &cam, &set, &w);
+        let fd = (lp - lm) / (2.0 * h);
+        let err = (fd - an).abs() / (an.abs().max(fd.abs()).max(1e-3));
+        assert!(err < 1e-4, "{label}: analytic {an:.8e} vs FD {fd:.8e}");
+        worst = worst.max(err);
+        checked += 1;
+        significant += (an.abs() > 1e-3) as usize;
+    };
+    for i in [0usize, 5, 11, 17] {
+        for a in 0..3 {
+            check(format!("mean[{i}][{a}]"), g.means[i][a], &|p, d| {
+                p.means[i][a] += d
+            });
+            check(format!("log_scale[{i}][{a}]"), g.log_scales[i][a], &|p, d| {
+                p.log_scales[i][a] += d
+            });
+        }
+        for a in 0..4 {
+            check(format!("quat[{i}][{a}]"), g.quats[i][a], &|p, d| {
+                p.quats[i][a] += d
+            });
+        }
+        check(format!("opacity[{i}]"), g.opacity_logits[i], &|p, d| {
+            p.opacity_logits[i] += d
+        });
+        for j in [0, k / 2, k - 1] {
+            check(format!("sh[{i}][{j}]"), g.sh[i * k + j], &|p, d| {
+                p.sh[i * k + j] += d
+            });
+        }
+        if deformed {
+            for a in 0..3 {
+                for b in 0..3 {
+                    check(format!("F[{i}][{a}][{b}]"), g.f[i][a][b], &|p, d| {
+                        p.f.as_mut().unwrap()[i][a][b] += d
+                    });
+                }
+            }
+        }
+    }
+    // The check must not pass on zeros: most entries carry a real gradient.
+    assert!(checked > 50 && significant * 4 > checked * 3, "{significant} of {checked}");
+    println!("FD check ({deformed}, {mode:?}, degree {degree}): {checked} entries, worst rel {worst:.2e}");
+}
+
+#[test]
+fn every_gradient_matches_finite_differences_in_f64() {
+    fd_check(false, RasterizeMode::Classic, 3);
+    fd_check(false, RasterizeMode::Antialiased, 2);
+}
+
+#[test]
+fn deformation_gradient_matches_finite_differences_in_f64() {
+    fd_check(true, RasterizeMode::Classic, 3);
+    fd_check(true, RasterizeMode::Antialiased, 1);
+}
+
+#[test]
+fn polar_rotation_is_a_rotation_and_its_vjp_matches_fd() {
+    let mut r = Lcg(3);
+    for case in 0..20 {
+        let mut f = eye3::<f64>();
+        for row in f.iter_mut() {
+            for v in row.iter_mut() {
+                *v = r.range(-1.0, 1.0) + *v * 0.5;
+            }
+        }
+        if case == 0 {
+            f = [[2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 0.5]]; // repeated singular values
+        }
+        let rot = polar_rotation(&f);
+        assert!((det(&rot) - 1.0).abs() < 1e-12, "det R");
+        let s = mul_at(&rot, &f);
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((s[i][j] - s[j][i]).abs() < 1e-10, "S symmetric");
+            }
+        }
+        if det(&f) <= 0.0 {
+            continue; // sign convention: S has a negative eigenvalue, still a valid factor
+        }
+        let mut g = zero3::<f64>();
+        for row in g.iter_mut() {
+            for v in row.iter_mut() {
+                *v = r.range(-1.0, 1.0);
+            }
+        }
+        let an = polar_rotation_vjp(&f, &rot, &g);
+        let l = |f: &M3<f64>| {
+            let r = polar_rotation(f);
+            (0..9).map(|k| r[k / 3][k % 3] * g[k / 3][k % 3]).sum::<f64>()
+        };
+        for a in 0..3 {
+            for b in 0..3 {
+                let mut p = f;
+                p[a][b] += 1e-6;
+                let mut m = f;
+                m[a][b] -= 1e-6;
+                let fd = (l(&p) - l(&m)) / 2e-6;
+                assert!((fd - an[a][b]).abs() < 1e-6 * (1.0 + fd.abs()), "{fd} vs {}", an[a][b]);
+            }
+        }
+    }
+}
