@@ -1,9 +1,9 @@
 //! Renderer inputs: INRIA PLY round trip and malformed files (typed errors, bounded memory),
 //! and the four camera formats agreeing on the same cameras.
 
-mod common;
 #[path = "../benches/common/alloc.rs"]
 mod alloc;
+mod common;
 
 use alloc::{peak_since, reset_peak, Counting};
 use common::fixture;
@@ -58,8 +58,11 @@ fn ply_round_trip_keeps_every_value() {
 
 #[test]
 fn malformed_plys_give_typed_errors_naming_the_problem() {
-    let ok = [header(2, &float_props()).into_bytes(), body(2, |_, p| p as f32 * 0.1 + 0.1)]
-        .concat();
+    let ok = [
+        header(2, &float_props()).into_bytes(),
+        body(2, |_, p| p as f32 * 0.1 + 0.1),
+    ]
+    .concat();
     parse_gaussians(&ok, "ok.ply").unwrap();
     let expect = |bytes: &[u8], words: &[&str]| {
         let e = parse_gaussians(bytes, "bad.ply").unwrap_err();
@@ -73,7 +76,10 @@ fn malformed_plys_give_typed_errors_naming_the_problem() {
     // Truncated body.
     expect(&ok[..ok.len() - 10], &["ends early"]);
     // Truncated header.
-    expect(b"ply\nformat binary_little_endian 1.0\nelement vertex 2\n", &["end_header"]);
+    expect(
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 2\n",
+        &["end_header"],
+    );
     // Wrong property type.
     let mut props = float_props();
     props[6] = ("uchar", "opacity");
@@ -115,7 +121,11 @@ fn absurd_vertex_counts_fail_without_allocating_for_them() {
         assert!(e.contains("huge.ply"), "{e}");
         // The header asks for terabytes; parsing must stay near the file's own size
         // (other tests of this binary may allocate concurrently: allow 64 MiB).
-        assert!(peak < 64 << 20, "peak {peak} bytes for a {}-byte file", b.len());
+        assert!(
+            peak < 64 << 20,
+            "peak {peak} bytes for a {}-byte file",
+            b.len()
+        );
     }
 }
 
@@ -213,16 +223,36 @@ fn the_four_camera_formats_agree() {
         let tr = r[0][0] + r[1][1] + r[2][2];
         let (w, x, y, z) = if tr > 0.0 {
             let s = 0.5 / (tr + 1.0).sqrt();
-            (0.25 / s, (r[2][1] - r[1][2]) * s, (r[0][2] - r[2][0]) * s, (r[1][0] - r[0][1]) * s)
+            (
+                0.25 / s,
+                (r[2][1] - r[1][2]) * s,
+                (r[0][2] - r[2][0]) * s,
+                (r[1][0] - r[0][1]) * s,
+            )
         } else if r[0][0] > r[1][1] && r[0][0] > r[2][2] {
             let s = 2.0 * (1.0 + r[0][0] - r[1][1] - r[2][2]).sqrt();
-            ((r[2][1] - r[1][2]) / s, 0.25 * s, (r[0][1] + r[1][0]) / s, (r[0][2] + r[2][0]) / s)
+            (
+                (r[2][1] - r[1][2]) / s,
+                0.25 * s,
+                (r[0][1] + r[1][0]) / s,
+                (r[0][2] + r[2][0]) / s,
+            )
         } else if r[1][1] > r[2][2] {
             let s = 2.0 * (1.0 + r[1][1] - r[0][0] - r[2][2]).sqrt();
-            ((r[0][2] - r[2][0]) / s, (r[0][1] + r[1][0]) / s, 0.25 * s, (r[1][2] + r[2][1]) / s)
+            (
+                (r[0][2] - r[2][0]) / s,
+                (r[0][1] + r[1][0]) / s,
+                0.25 * s,
+                (r[1][2] + r[2][1]) / s,
+            )
         } else {
             let s = 2.0 * (1.0 + r[2][2] - r[0][0] - r[1][1]).sqrt();
-            ((r[1][0] - r[0][1]) / s, (r[0][2] + r[2][0]) / s, (r[1][2] + r[2][1]) / s, 0.25 * s)
+            (
+                (r[1][0] - r[0][1]) / s,
+                (r[0][2] + r[2][0]) / s,
+                (r[1][2] + r[2][1]) / s,
+                0.25 * s,
+            )
         };
         let t = c.translation();
         imgs += &format!(

@@ -1,6 +1,9 @@
 //! Command-line interface: argument parsing and backend selection at runtime.
 
 mod fit_trajectory;
+mod npy;
+mod prepare;
+mod render;
 mod scene;
 mod simulate;
 
@@ -20,6 +23,10 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     /// Fit part parameters to target particle trajectories (exact adjoint gradients).
     FitTrajectory(fit_trajectory::FitTrajectoryArgs),
+    /// Render a 3DGS scene, one simulated frame of it, or a whole simulated sequence.
+    Render(render::RenderArgs),
+    /// Preprocess a captured 3DGS scene into simulation particles (PhysGaussian's keys).
+    Prepare(prepare::PrepareArgs),
 }
 
 /// Compute backend.
@@ -37,6 +44,8 @@ pub fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Simulate(a) => simulate::run(a),
         Command::FitTrajectory(a) => fit_trajectory::run(a),
+        Command::Render(a) => render::run(a),
+        Command::Prepare(a) => prepare::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

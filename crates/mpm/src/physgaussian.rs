@@ -10,10 +10,11 @@
 //!   intended. `sticky` is unchanged. The hard-coded `"cut"` surface is refused.
 //! * **Snow is a real model** (Stomakhin et al. 2013); PhysGaussian's snow branch computes no
 //!   stress.
-//! * **Scene preprocessing is not applied.** `rotation_degree`, `sim_area`, `scale`,
+//! * **Scene preprocessing is a separate step.** `rotation_degree`, `sim_area`, `scale`,
 //!   `opacity_threshold` and `particle_filling` act on Gaussians in PhysGaussian's
-//!   `gs_simulation.py`; here particles are taken as given, in MPM space (as the solver's
-//!   `load_from_sampling` takes them). Such keys are reported as warnings.
+//!   `gs_simulation.py`; here that is `r4d prepare` (`r4d_splat::prepare`), which writes the
+//!   particles in MPM space. The simulator takes particles as given (as the solver's
+//!   `load_from_sampling` does) and notes such keys in a warning.
 //! * **Safety checks.** A substep that violates the CFL bound is refused up front, and a run
 //!   that produces NaN, exceeds the CFL speed or leaves the grid stops with a typed error.
 //! * `enforce_particle_velocity_rotation` is not supported (a typed error says so).
@@ -392,7 +393,7 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
     for key in map.keys() {
         if PREPROCESSING_KEYS.contains(&key.as_str()) {
             warnings.push(format!(
-                "{key}: Gaussian-scene preprocessing is not applied; particles are taken in MPM space"
+                "{key}: Gaussian-scene preprocessing is done by `r4d prepare`; the particles are taken as given, in MPM space"
             ));
         } else if !known.contains(&key.as_str()) && !IGNORED_RENDER_KEYS.contains(&key.as_str()) {
             warnings.push(format!("{key}: unknown key, ignored"));

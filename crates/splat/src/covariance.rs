@@ -119,7 +119,7 @@ pub fn deform_covariance_vjp<T: Real>(f: &M3<T>, sigma: &M3<T>, g: &M3<T>) -> (M
 
 /// Symmetric 3x3 eigen-decomposition by cyclic Jacobi: eigenvalues descending and the
 /// eigenvectors as the columns of a proper rotation.
-fn sym_eigen(mut a: M3<f64>) -> ([f64; 3], M3<f64>) {
+pub(crate) fn sym_eigen(mut a: M3<f64>) -> ([f64; 3], M3<f64>) {
     let mut v = eye3::<f64>();
     let scale = a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
     for _ in 0..60 {

@@ -47,7 +47,9 @@ pub mod covariance;
 pub mod error;
 pub mod gaussians;
 pub mod kernels;
+pub mod link;
 pub mod ply;
+pub mod prepare;
 pub mod project;
 pub mod raster;
 pub mod real;
@@ -60,6 +62,8 @@ pub use camera_io::{load_cameras, CameraSet};
 pub use error::{Error, Result};
 pub use gaussians::{Deformation, GaussianGrads, Gaussians};
 pub use kernels::{CameraConsts, SplatKernels};
+pub use link::SimLink;
+pub use prepare::{prepare, PrepareConfig, Prepared};
 pub use renderer::{Image, RenderStats, Renderer, SplatRenderer};
 
 #[cfg(test)]

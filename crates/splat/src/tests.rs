@@ -114,9 +114,11 @@ fn fd_check(deformed: bool, mode: RasterizeMode, degree: u32) {
             check(format!("mean[{i}][{a}]"), g.means[i][a], &|p, d| {
                 p.means[i][a] += d
             });
-            check(format!("log_scale[{i}][{a}]"), g.log_scales[i][a], &|p, d| {
-                p.log_scales[i][a] += d
-            });
+            check(
+                format!("log_scale[{i}][{a}]"),
+                g.log_scales[i][a],
+                &|p, d| p.log_scales[i][a] += d,
+            );
         }
         for a in 0..4 {
             check(format!("quat[{i}][{a}]"), g.quats[i][a], &|p, d| {
@@ -142,7 +144,10 @@ fn fd_check(deformed: bool, mode: RasterizeMode, degree: u32) {
         }
     }
     // The check must not pass on zeros: most entries carry a real gradient.
-    assert!(checked > 50 && significant * 4 > checked * 3, "{significant} of {checked}");
+    assert!(
+        checked > 50 && significant * 4 > checked * 3,
+        "{significant} of {checked}"
+    );
     println!("FD check ({deformed}, {mode:?}, degree {degree}): {checked} entries, worst rel {worst:.2e}");
 }
 
@@ -191,7 +196,9 @@ fn polar_rotation_is_a_rotation_and_its_vjp_matches_fd() {
         let an = polar_rotation_vjp(&f, &rot, &g);
         let l = |f: &M3<f64>| {
             let r = polar_rotation(f);
-            (0..9).map(|k| r[k / 3][k % 3] * g[k / 3][k % 3]).sum::<f64>()
+            (0..9)
+                .map(|k| r[k / 3][k % 3] * g[k / 3][k % 3])
+                .sum::<f64>()
         };
         for a in 0..3 {
             for b in 0..3 {
@@ -200,7 +207,11 @@ fn polar_rotation_is_a_rotation_and_its_vjp_matches_fd() {
                 let mut m = f;
                 m[a][b] -= 1e-6;
                 let fd = (l(&p) - l(&m)) / 2e-6;
-                assert!((fd - an[a][b]).abs() < 1e-6 * (1.0 + fd.abs()), "{fd} vs {}", an[a][b]);
+                assert!(
+                    (fd - an[a][b]).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "{fd} vs {}",
+                    an[a][b]
+                );
             }
         }
     }
