@@ -5,14 +5,15 @@
 //! * `project` / `project_vjp`: parallel over Gaussians.
 //! * `bin_tiles`: parallel depth sort (stable order: f32 depth, then index), then a counting
 //!   pass and a fill pass that keep each tile's list front to back.
-//! * `rasterize`: parallel over rows of tiles; each thread writes its own band of the image.
+//! * `rasterize`: parallel over rows of tiles; each thread writes its own band of the image;
+//!   a tile's Gaussians are gathered into contiguous arrays once for its 256 pixels.
 //! * `rasterize_vjp`: rows of tiles are dealt round-robin to `min(threads, 8)` workers, each
 //!   with its own per-Gaussian accumulator (36 bytes per Gaussian); the accumulators are
 //!   summed in a fixed order, so the result does not depend on scheduling.
 
 use r4d_splat::kernels::{ImageBufs, SceneBufs, SceneGradBufs, TileBufs};
 use r4d_splat::project::{self as pj, GaussianIn, Projected, ProjectedGrad};
-use r4d_splat::raster::{self, Contribution};
+use r4d_splat::raster::{self, Contribution, TileSplats};
 use r4d_splat::{CameraConsts, SplatKernels};
 use rayon::prelude::*;
 use std::convert::Infallible;
@@ -112,17 +113,23 @@ impl SplatKernels for CpuSplat {
             .enumerate()
             .for_each(|(ty, ((rgb, alpha), depth))| {
                 let rows = alpha.len() / w;
-                for r in 0..rows {
-                    let j = ty * 16 + r;
-                    for i in 0..w {
-                        let t = ty * tiles_x + i / 16;
-                        let ids = &bins.ids[bins.offsets[t] as usize..bins.offsets[t + 1] as usize];
-                        let (px, _) =
-                            raster::composite_pixel(i as u32, j as u32, ids, proj, &bg, None);
-                        let k = r * w + i;
-                        rgb[3 * k..3 * k + 3].copy_from_slice(&px.rgb);
-                        alpha[k] = px.alpha;
-                        depth[k] = px.depth;
+                let mut tile = TileSplats::default();
+                for tx in 0..tiles_x {
+                    let t = ty * tiles_x + tx;
+                    tile.gather(
+                        &bins.ids[bins.offsets[t] as usize..bins.offsets[t + 1] as usize],
+                        proj,
+                    );
+                    for r in 0..rows {
+                        let j = ty * 16 + r;
+                        for i in tx * 16..((tx + 1) * 16).min(w) {
+                            let (px, _) =
+                                raster::composite_pixel(i as u32, j as u32, &tile, &bg, None);
+                            let k = r * w + i;
+                            rgb[3 * k..3 * k + 3].copy_from_slice(&px.rgb);
+                            alpha[k] = px.alpha;
+                            depth[k] = px.depth;
+                        }
                     }
                 }
             });
@@ -146,29 +153,33 @@ impl SplatKernels for CpuSplat {
             .map(|wk| {
                 let mut acc = vec![ProjectedGrad::<f32>::default(); proj.len()];
                 let mut trace: Vec<Contribution<f32>> = Vec::new();
+                let mut tile = TileSplats::default();
                 for ty in (wk..tiles_y).step_by(workers) {
-                    for j in ty * 16..((ty + 1) * 16).min(h) {
-                        for i in 0..w {
-                            let t = ty * tiles_x + i / 16;
-                            let ids =
-                                &bins.ids[bins.offsets[t] as usize..bins.offsets[t + 1] as usize];
-                            trace.clear();
-                            let (_, tf) = raster::composite_pixel(
-                                i as u32,
-                                j as u32,
-                                ids,
-                                proj,
-                                &bg,
-                                Some(&mut trace),
-                            );
-                            let k = 3 * (j * w + i);
-                            let d = [d_rgb[k], d_rgb[k + 1], d_rgb[k + 2]];
-                            if d == [0.0; 3] {
-                                continue;
+                    for tx in 0..tiles_x {
+                        let t = ty * tiles_x + tx;
+                        tile.gather(
+                            &bins.ids[bins.offsets[t] as usize..bins.offsets[t + 1] as usize],
+                            proj,
+                        );
+                        for j in ty * 16..((ty + 1) * 16).min(h) {
+                            for i in tx * 16..((tx + 1) * 16).min(w) {
+                                let k = 3 * (j * w + i);
+                                let d = [d_rgb[k], d_rgb[k + 1], d_rgb[k + 2]];
+                                if d == [0.0; 3] {
+                                    continue;
+                                }
+                                trace.clear();
+                                let (_, tf) = raster::composite_pixel(
+                                    i as u32,
+                                    j as u32,
+                                    &tile,
+                                    &bg,
+                                    Some(&mut trace),
+                                );
+                                raster::composite_pixel_vjp(&trace, tf, &tile, &bg, &d, |id, g| {
+                                    acc[id as usize].add(g)
+                                });
                             }
-                            raster::composite_pixel_vjp(&trace, tf, proj, &bg, &d, |id, g| {
-                                acc[id as usize].add(g)
-                            });
                         }
                     }
                 }

@@ -109,11 +109,68 @@ pub struct PixelOut<T> {
     pub depth: T,
 }
 
+/// The Gaussians of one tile, front to back, gathered into contiguous arrays (the pixels of a
+/// tile all walk the same list), with each Gaussian's cut-off exponent: a Gaussian is skipped
+/// without evaluating `exp` where `s > ln(255 o) + 1e-3`, which implies `alpha < 1/255` with
+/// room to spare for rounding, so results equal the plain test's.
+#[derive(Clone, Debug, Default)]
+pub struct TileSplats<T> {
+    /// Gaussian indices.
+    pub ids: Vec<u32>,
+    /// Centres.
+    pub mean2d: Vec<[T; 2]>,
+    /// Conics.
+    pub conic: Vec<[T; 3]>,
+    /// Opacities.
+    pub opacity: Vec<T>,
+    /// `ln(255 o) + 1e-3`.
+    pub s_cut: Vec<T>,
+    /// Colours.
+    pub color: Vec<[T; 3]>,
+    /// Depths.
+    pub depth: Vec<T>,
+}
+
+impl<T: Real> TileSplats<T> {
+    /// Refills from a tile's id list (buffers are reused).
+    pub fn gather(&mut self, ids: &[u32], proj: &[Projected<T>]) {
+        self.ids.clear();
+        self.mean2d.clear();
+        self.conic.clear();
+        self.opacity.clear();
+        self.s_cut.clear();
+        self.color.clear();
+        self.depth.clear();
+        let k255 = T::c(255.0);
+        let margin = T::c(1e-3);
+        for &id in ids {
+            let p = &proj[id as usize];
+            self.ids.push(id);
+            self.mean2d.push(p.mean2d);
+            self.conic.push(p.conic);
+            self.opacity.push(p.opacity);
+            self.s_cut.push((k255 * p.opacity).ln() + margin);
+            self.color.push(p.color);
+            self.depth.push(p.depth);
+        }
+    }
+
+    /// Number of Gaussians.
+    pub fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.ids.is_empty()
+    }
+}
+
 /// One composited contribution, kept for the VJP.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Contribution<T> {
-    /// Gaussian index.
-    pub id: u32,
+    /// Index into the tile's lists.
+    pub k: u32,
     /// Alpha at this pixel.
     pub alpha: T,
     /// Transmittance before this Gaussian.
@@ -126,33 +183,37 @@ pub struct Contribution<T> {
     pub capped: bool,
 }
 
-/// Composites pixel `(i, j)` over the front-to-back list `ids`; pushes each composited
-/// Gaussian onto `trace` when given. Returns the pixel and the final transmittance.
+/// Composites pixel `(i, j)` over its tile's Gaussians; pushes each composited Gaussian onto
+/// `trace` when given. Returns the pixel and the final transmittance.
 pub fn composite_pixel<T: Real>(
     i: u32,
     j: u32,
-    ids: &[u32],
-    proj: &[Projected<T>],
+    tile: &TileSplats<T>,
     background: &[T; 3],
     mut trace: Option<&mut Vec<Contribution<T>>>,
 ) -> (PixelOut<T>, T) {
     let c = T::c;
     let (px, py) = (c(i as f64 + 0.5), c(j as f64 + 0.5));
-    let (amax, amin, tmin) = (c(consts::ALPHA_MAX), c(consts::ALPHA_MIN), c(consts::T_MIN));
+    let (amax, amin, tmin) = (
+        c(consts::ALPHA_MAX),
+        c(consts::ALPHA_MIN),
+        c(consts::T_MIN),
+    );
     let half = c(0.5);
     let mut t = T::one();
     let mut rgb = [T::zero(); 3];
     let mut depth = T::zero();
-    for &id in ids {
-        let p = &proj[id as usize];
-        let dx = p.mean2d[0] - px;
-        let dy = p.mean2d[1] - py;
-        let s = half * (p.conic[0] * dx * dx + p.conic[2] * dy * dy) + p.conic[1] * dx * dy;
-        if s < T::zero() {
+    for k in 0..tile.len() {
+        let m = tile.mean2d[k];
+        let q = tile.conic[k];
+        let dx = m[0] - px;
+        let dy = m[1] - py;
+        let s = half * (q[0] * dx * dx + q[2] * dy * dy) + q[1] * dx * dy;
+        if s < T::zero() || s > tile.s_cut[k] {
             continue;
         }
         let g = (-s).exp();
-        let raw = p.opacity * g;
+        let raw = tile.opacity[k] * g;
         let capped = raw > amax;
         let alpha = if capped { amax } else { raw };
         if alpha < amin {
@@ -163,13 +224,14 @@ pub fn composite_pixel<T: Real>(
             break;
         }
         let w = alpha * t;
+        let col = tile.color[k];
         for ch in 0..3 {
-            rgb[ch] += w * p.color[ch];
+            rgb[ch] += w * col[ch];
         }
-        depth += w * p.depth;
+        depth += w * tile.depth[k];
         if let Some(tr) = trace.as_deref_mut() {
             tr.push(Contribution {
-                id,
+                k: k as u32,
                 alpha,
                 t,
                 g,
@@ -192,7 +254,7 @@ pub fn composite_pixel<T: Real>(
 pub fn composite_pixel_vjp<T: Real>(
     trace: &[Contribution<T>],
     t_final: T,
-    proj: &[Projected<T>],
+    tile: &TileSplats<T>,
     background: &[T; 3],
     d_rgb: &[T; 3],
     mut emit: impl FnMut(u32, &ProjectedGrad<T>),
@@ -201,26 +263,24 @@ pub fn composite_pixel_vjp<T: Real>(
     let half = T::c(0.5);
     // Sum over everything behind the current Gaussian (and the background) of its share.
     let mut behind = t_final * dotc(d_rgb, background);
-    for k in trace.iter().rev() {
-        let p = &proj[k.id as usize];
-        let w = k.alpha * k.t;
-        let gc = dotc(d_rgb, &p.color);
-        let d_alpha = k.t * gc - behind / (T::one() - k.alpha);
+    for e in trace.iter().rev() {
+        let k = e.k as usize;
+        let q = tile.conic[k];
+        let w = e.alpha * e.t;
+        let gc = dotc(d_rgb, &tile.color[k]);
+        let d_alpha = e.t * gc - behind / (T::one() - e.alpha);
         behind += w * gc;
         let mut gr = ProjectedGrad {
             color: d_rgb.map(|v| v * w),
             ..Default::default()
         };
-        if !k.capped {
-            gr.opacity = d_alpha * k.g;
-            let d_s = -d_alpha * k.alpha;
-            let [dx, dy] = k.d;
-            gr.mean2d = [
-                d_s * (p.conic[0] * dx + p.conic[1] * dy),
-                d_s * (p.conic[2] * dy + p.conic[1] * dx),
-            ];
+        if !e.capped {
+            gr.opacity = d_alpha * e.g;
+            let d_s = -d_alpha * e.alpha;
+            let [dx, dy] = e.d;
+            gr.mean2d = [d_s * (q[0] * dx + q[1] * dy), d_s * (q[2] * dy + q[1] * dx)];
             gr.conic = [d_s * half * dx * dx, d_s * dx * dy, d_s * half * dy * dy];
         }
-        emit(k.id, &gr);
+        emit(tile.ids[k], &gr);
     }
 }

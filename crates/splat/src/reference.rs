@@ -7,7 +7,7 @@
 use crate::camera::{Camera, RenderSettings};
 use crate::gaussians::{sh_coeffs, Deformation, GaussianGrads, Gaussians};
 use crate::project::{self as pj, CamParams, GaussianIn, Projected, ProjectedGrad};
-use crate::raster::{self, Contribution, TileBins};
+use crate::raster::{self, Contribution, TileBins, TileSplats};
 use crate::real::*;
 
 /// A scene in the scalar type of the computation (see [`Gaussians`] and [`Deformation`]).
@@ -166,14 +166,19 @@ pub fn rasterize<T: Real>(
         alpha: vec![T::zero(); (w * h) as usize],
         depth: vec![T::zero(); (w * h) as usize],
     };
-    for j in 0..h {
-        for i in 0..w {
-            let t = (j / 16 * bins.tiles_x + i / 16) as usize;
-            let (px, _) = raster::composite_pixel(i, j, bins.tile(t), proj, background, None);
-            let k = (j * w + i) as usize;
-            img.rgb[3 * k..3 * k + 3].copy_from_slice(&px.rgb);
-            img.alpha[k] = px.alpha;
-            img.depth[k] = px.depth;
+    let mut tile = TileSplats::default();
+    for ty in 0..bins.tiles_y {
+        for tx in 0..bins.tiles_x {
+            tile.gather(bins.tile((ty * bins.tiles_x + tx) as usize), proj);
+            for j in ty * 16..((ty + 1) * 16).min(h) {
+                for i in tx * 16..((tx + 1) * 16).min(w) {
+                    let (px, _) = raster::composite_pixel(i, j, &tile, background, None);
+                    let k = (j * w + i) as usize;
+                    img.rgb[3 * k..3 * k + 3].copy_from_slice(&px.rgb);
+                    img.alpha[k] = px.alpha;
+                    img.depth[k] = px.depth;
+                }
+            }
         }
     }
     img
@@ -189,18 +194,23 @@ pub fn rasterize_vjp<T: Real>(
 ) -> Vec<ProjectedGrad<T>> {
     let mut out = vec![ProjectedGrad::default(); proj.len()];
     let mut trace: Vec<Contribution<T>> = Vec::new();
-    let w = cam.width;
-    for j in 0..cam.height {
-        for i in 0..w {
-            let t = (j / 16 * bins.tiles_x + i / 16) as usize;
-            trace.clear();
-            let (_, tf) =
-                raster::composite_pixel(i, j, bins.tile(t), proj, background, Some(&mut trace));
-            let k = (j * w + i) as usize;
-            let d = [d_rgb[3 * k], d_rgb[3 * k + 1], d_rgb[3 * k + 2]];
-            raster::composite_pixel_vjp(&trace, tf, proj, background, &d, |id, g| {
-                out[id as usize].add(g)
-            });
+    let (w, h) = (cam.width, cam.height);
+    let mut tile = TileSplats::default();
+    for ty in 0..bins.tiles_y {
+        for tx in 0..bins.tiles_x {
+            tile.gather(bins.tile((ty * bins.tiles_x + tx) as usize), proj);
+            for j in ty * 16..((ty + 1) * 16).min(h) {
+                for i in tx * 16..((tx + 1) * 16).min(w) {
+                    trace.clear();
+                    let (_, tf) =
+                        raster::composite_pixel(i, j, &tile, background, Some(&mut trace));
+                    let k = (j * w + i) as usize;
+                    let d = [d_rgb[3 * k], d_rgb[3 * k + 1], d_rgb[3 * k + 2]];
+                    raster::composite_pixel_vjp(&trace, tf, &tile, background, &d, |id, g| {
+                        out[id as usize].add(g)
+                    });
+                }
+            }
         }
     }
     out

@@ -1,0 +1,115 @@
+//! Renderer benchmarks: forward (`render`) and forward + backward (`render_vjp`, which re-runs
+//! projection and binning) of 100k and 300k Gaussians (SH degree 3, deformed by a per-Gaussian
+//! F as in a simulated frame) at 1280x720 and 1920x1080 on the rayon CPU backend.
+//!
+//! The synthetic scene: centres uniform in a ball of radius 1, scales log-uniform in
+//! [0.003, 0.03], opacities sigmoid(U[-2, 4]), seen from distance 3 with a 60 degree field of
+//! view, so the object fills most of the frame like a captured object does. Each case prints
+//! its tile intersections and the peak host memory (counting allocator) of one call.
+
+#![expect(
+    missing_docs,
+    reason = "criterion's macros generate undocumented public items"
+)]
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use r4d_backend_cpu::splat::CpuSplat;
+use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SplatRenderer};
+#[path = "common/alloc.rs"]
+mod alloc;
+use alloc::{peak_since, reset_peak, Counting};
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    }
+    fn range(&mut self, a: f32, b: f32) -> f32 {
+        a + (b - a) * self.next()
+    }
+}
+
+fn scene(n: usize) -> (Gaussians, Deformation) {
+    let mut r = Rng(42);
+    let mut g = Gaussians {
+        sh_degree: 3,
+        ..Default::default()
+    };
+    let mut d = Deformation::default();
+    while g.len() < n {
+        let p = [r.range(-1.0, 1.0), r.range(-1.0, 1.0), r.range(-1.0, 1.0)];
+        if p.iter().map(|v| v * v).sum::<f32>() > 1.0 {
+            continue;
+        }
+        g.means.push(p);
+        let (lo, hi) = (0.003f32.ln(), 0.03f32.ln());
+        g.log_scales
+            .push([r.range(lo, hi), r.range(lo, hi), r.range(lo, hi)]);
+        g.quats.push([
+            r.range(-1.0, 1.0),
+            r.range(-1.0, 1.0),
+            r.range(-1.0, 1.0),
+            r.range(-1.0, 1.0) + 1.5,
+        ]);
+        g.opacity_logits.push(r.range(-2.0, 4.0));
+        for _ in 0..48 {
+            g.sh.push(r.range(-0.3, 0.3));
+        }
+        // A simulated frame: displaced centres and F near identity.
+        d.means.push(p.map(|v| v + r.range(-0.01, 0.01)));
+        let mut f = [[1.0f32, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        for row in f.iter_mut() {
+            for v in row.iter_mut() {
+                *v += r.range(-0.1, 0.1);
+            }
+        }
+        d.f.push(f);
+    }
+    (g, d)
+}
+
+fn bench(c: &mut Criterion) {
+    let mut group = c.benchmark_group("splat");
+    group.sample_size(10);
+    for n in [100_000usize, 300_000] {
+        let (g, d) = scene(n);
+        for (w, h) in [(1280u32, 720u32), (1920, 1080)] {
+            let cam = Camera::look_at(w, h, 60.0, [0.0, -3.0, 0.5], [0.0; 3], [0.0, 0.0, 1.0]);
+            let set = RenderSettings::default();
+            let mut r = SplatRenderer::new(CpuSplat);
+            let id = format!("{n}/{w}x{h}");
+            let base = reset_peak();
+            r.render(&g, Some(&d), &cam, &set).unwrap();
+            let fwd_peak = peak_since(base);
+            let stats = r.stats;
+            let d_rgb = vec![1e-3f32; (w * h * 3) as usize];
+            let base = reset_peak();
+            r.render_vjp(&g, Some(&d), &cam, &set, &d_rgb).unwrap();
+            let bwd_peak = peak_since(base);
+            println!(
+                "splat {id}: {} visible, {} tile intersections, peak host memory: forward {:.1} MiB, forward+backward {:.1} MiB",
+                stats.visible,
+                stats.intersections,
+                fwd_peak as f64 / 1048576.0,
+                bwd_peak as f64 / 1048576.0
+            );
+            group.bench_function(BenchmarkId::new("forward", &id), |b| {
+                b.iter(|| r.render(&g, Some(&d), &cam, &set).unwrap())
+            });
+            group.bench_function(BenchmarkId::new("forward_backward", &id), |b| {
+                b.iter(|| r.render_vjp(&g, Some(&d), &cam, &set, &d_rgb).unwrap())
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
