@@ -194,11 +194,7 @@ pub fn composite_pixel<T: Real>(
 ) -> (PixelOut<T>, T) {
     let c = T::c;
     let (px, py) = (c(i as f64 + 0.5), c(j as f64 + 0.5));
-    let (amax, amin, tmin) = (
-        c(consts::ALPHA_MAX),
-        c(consts::ALPHA_MIN),
-        c(consts::T_MIN),
-    );
+    let (amax, amin, tmin) = (c(consts::ALPHA_MAX), c(consts::ALPHA_MIN), c(consts::T_MIN));
     let half = c(0.5);
     let mut t = T::one();
     let mut rgb = [T::zero(); 3];
