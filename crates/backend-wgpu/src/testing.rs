@@ -1,0 +1,26 @@
+//! Helpers for tests that need a device.
+
+use crate::WgpuContext;
+
+/// The device for a GPU test, or `None` (the test then returns early) when no adapter exists.
+/// With `R4D_REQUIRE_GPU=1` (set in CI) a missing adapter panics instead, so GPU tests can
+/// never pass by skipping.
+pub fn gpu_or_skip(test: &str) -> Option<WgpuContext> {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        // Mesa's drivers warn without it; any writable folder will do.
+        let d = std::env::temp_dir().join("r4d-xdg-runtime");
+        let _ = std::fs::create_dir_all(&d);
+        // SAFETY: tests set this before any thread reads the environment through wgpu.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", d) };
+    }
+    match WgpuContext::new() {
+        Ok(c) => Some(c),
+        Err(e) => {
+            if std::env::var("R4D_REQUIRE_GPU").is_ok_and(|v| v == "1") {
+                panic!("{test}: R4D_REQUIRE_GPU=1 but {e}");
+            }
+            eprintln!("{test}: skipped: {e}");
+            None
+        }
+    }
+}
