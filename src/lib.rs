@@ -9,6 +9,7 @@
 pub mod fit_trajectory;
 
 pub use r4d_backend_cpu as backend_cpu;
+pub use r4d_backend_wgpu as backend_wgpu;
 pub use r4d_mpm as mpm;
 pub use r4d_optim as optim;
 pub use r4d_splat as splat;

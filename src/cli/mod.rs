@@ -36,6 +36,8 @@ pub enum BackendKind {
     Cpu,
     /// Single-threaded reference kernels (slow; for checking).
     Reference,
+    /// wgpu (WGSL compute on Vulkan, Metal or DX12; `R4D_WGPU_ADAPTER` picks an adapter).
+    Wgpu,
 }
 
 /// Entry point.

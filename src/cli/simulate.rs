@@ -48,6 +48,12 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     match a.backend {
         BackendKind::Cpu => simulate(CpuBackend::default(), &a, config, scene, &source, &warnings),
         BackendKind::Reference => simulate(ReferenceBackend, &a, config, scene, &source, &warnings),
+        BackendKind::Wgpu => {
+            let ctx = r4d_backend_wgpu::WgpuContext::new()?;
+            eprintln!("wgpu adapter: {} ({:?})", ctx.info.name, ctx.info.backend);
+            let backend = r4d_backend_wgpu::WgpuMpm::new(std::sync::Arc::new(ctx));
+            simulate(backend, &a, config, scene, &source, &warnings)
+        }
     }
 }
 

@@ -91,17 +91,25 @@ impl<T> GpuBuffer<T> {
 }
 
 impl WgpuContext {
-    /// Opens the default adapter (or the one named by `R4D_WGPU_ADAPTER`).
+    /// Opens the default adapter (or the one named by `R4D_WGPU_ADAPTER`); native float
+    /// atomics are used when the adapter has them, unless `R4D_WGPU_NO_FLOAT_ATOMICS` is set.
     pub fn new() -> Result<Self, WgpuError> {
-        let instance = wgpu::Instance::new(
-            wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
-        );
+        Self::with_float_atomics(std::env::var_os("R4D_WGPU_NO_FLOAT_ATOMICS").is_none())
+    }
+
+    /// Like [`Self::new`]; `allow = false` forces the compare-exchange scatter even where the
+    /// adapter has float atomics (tests use it to cover both paths).
+    pub fn with_float_atomics(allow: bool) -> Result<Self, WgpuError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let wanted = std::env::var("R4D_WGPU_ADAPTER").ok();
         let adapter = match &wanted {
             Some(name) => pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
                 .into_iter()
                 .find(|a| a.get_info().name.contains(name.as_str()))
-                .ok_or_else(|| WgpuError::NoAdapter(format!(" matching R4D_WGPU_ADAPTER={name}")))?,
+                .ok_or_else(|| {
+                    WgpuError::NoAdapter(format!(" matching R4D_WGPU_ADAPTER={name}"))
+                })?,
             None => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
                 power_preference: wgpu::PowerPreference::HighPerformance,
                 force_fallback_adapter: false,
@@ -114,7 +122,7 @@ impl WgpuContext {
         let float_atomics = adapter
             .features()
             .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
-            && std::env::var("R4D_WGPU_NO_FLOAT_ATOMICS").is_err();
+            && allow;
         let mut features = wgpu::Features::empty();
         if float_atomics {
             features |= wgpu::Features::SHADER_FLOAT32_ATOMIC;
@@ -156,8 +164,15 @@ impl WgpuContext {
         self.peak.store(self.bytes_in_use(), Ordering::Relaxed);
     }
 
-    fn alloc<T>(&self, label: &'static str, len: usize, usage: wgpu::BufferUsages) -> Result<GpuBuffer<T>, WgpuError> {
-        let bytes = ((len * std::mem::size_of::<T>()) as u64).max(16).next_multiple_of(4);
+    fn alloc<T>(
+        &self,
+        label: &'static str,
+        len: usize,
+        usage: wgpu::BufferUsages,
+    ) -> Result<GpuBuffer<T>, WgpuError> {
+        let bytes = ((len * std::mem::size_of::<T>()) as u64)
+            .max(16)
+            .next_multiple_of(4);
         let limit = self.limits.max_storage_buffer_binding_size as u64;
         if usage.contains(wgpu::BufferUsages::STORAGE) && bytes > limit {
             return Err(WgpuError::TooLarge {
@@ -185,17 +200,27 @@ impl WgpuContext {
     }
 
     /// A zero-filled storage buffer of `len` elements.
-    pub fn zeros<T: Pod>(&self, label: &'static str, len: usize) -> Result<GpuBuffer<T>, WgpuError> {
+    pub fn zeros<T: Pod>(
+        &self,
+        label: &'static str,
+        len: usize,
+    ) -> Result<GpuBuffer<T>, WgpuError> {
         // wgpu zero-initialises new buffers.
         self.alloc(
             label,
             len,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
         )
     }
 
     /// A storage buffer holding `data`.
-    pub fn upload<T: Pod>(&self, label: &'static str, data: &[T]) -> Result<GpuBuffer<T>, WgpuError> {
+    pub fn upload<T: Pod>(
+        &self,
+        label: &'static str,
+        data: &[T],
+    ) -> Result<GpuBuffer<T>, WgpuError> {
         let b = self.zeros(label, data.len())?;
         self.write(&b, data);
         Ok(b)
@@ -217,9 +242,18 @@ impl WgpuContext {
     }
 
     /// A uniform buffer holding one record.
-    pub fn uniform<T: Pod>(&self, label: &'static str, value: &T) -> Result<GpuBuffer<T>, WgpuError> {
-        let b = self.alloc(label, 1, wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST)?;
-        self.queue.write_buffer(&b.buffer, 0, bytemuck::bytes_of(value));
+    pub fn uniform<T: Pod>(
+        &self,
+        label: &'static str,
+        value: &T,
+    ) -> Result<GpuBuffer<T>, WgpuError> {
+        let b = self.alloc(
+            label,
+            1,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        )?;
+        self.queue
+            .write_buffer(&b.buffer, 0, bytemuck::bytes_of(value));
         Ok(b)
     }
 
@@ -239,11 +273,9 @@ impl WgpuContext {
         enc.copy_buffer_to_buffer(&b.buffer, 0, &staging.buffer, 0, size);
         self.queue.submit([enc.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
-        staging
-            .buffer
-            .map_async(wgpu::MapMode::Read, .., move |r| {
-                let _ = tx.send(r);
-            });
+        staging.buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
         self.device
             .poll(wgpu::PollType::Wait {
                 submission_index: None,
@@ -267,29 +299,35 @@ impl WgpuContext {
 
     /// The pipeline of a kernel (built once); scatter kernels pick their float-atomic variant.
     pub fn pipeline(&self, name: &str) -> Result<Arc<wgpu::ComputePipeline>, WgpuError> {
-        let full = if !self.float_atomics && crate::shaders::source(&format!("{name}_cas")).is_some()
-        {
-            format!("{name}_cas")
-        } else {
-            name.to_string()
-        };
+        let full =
+            if !self.float_atomics && crate::shaders::source(&format!("{name}_cas")).is_some() {
+                format!("{name}_cas")
+            } else {
+                name.to_string()
+            };
         let mut cache = self.pipelines.lock().expect("pipeline cache");
         if let Some(p) = cache.get(&full) {
             return Ok(p.clone());
         }
-        let src = crate::shaders::source(&full).ok_or_else(|| WgpuError::UnknownKernel(full.clone()))?;
-        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(&full),
-            source: wgpu::ShaderSource::Wgsl(src.into()),
-        });
-        let p = Arc::new(self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(&full),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        }));
+        let src =
+            crate::shaders::source(&full).ok_or_else(|| WgpuError::UnknownKernel(full.clone()))?;
+        let module = self
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(&full),
+                source: wgpu::ShaderSource::Wgsl(src.into()),
+            });
+        let p = Arc::new(
+            self.device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(&full),
+                    layout: None,
+                    module: &module,
+                    entry_point: Some("main"),
+                    compilation_options: Default::default(),
+                    cache: None,
+                }),
+        );
         cache.insert(full, p.clone());
         Ok(p)
     }

@@ -6,7 +6,9 @@
 //! path. See [`context`] for device selection and memory tracking.
 
 pub mod context;
+pub mod mpm;
 pub mod shaders;
 pub mod testing;
 
 pub use context::{GpuBuffer, WgpuContext, WgpuError};
+pub use mpm::WgpuMpm;

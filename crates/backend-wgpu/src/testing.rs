@@ -6,6 +6,12 @@ use crate::WgpuContext;
 /// With `R4D_REQUIRE_GPU=1` (set in CI) a missing adapter panics instead, so GPU tests can
 /// never pass by skipping.
 pub fn gpu_or_skip(test: &str) -> Option<WgpuContext> {
+    gpu_or_skip_with(test, true)
+}
+
+/// [`gpu_or_skip`] with the choice of native float atomics (`false`: the compare-exchange
+/// scatter).
+pub fn gpu_or_skip_with(test: &str, float_atomics: bool) -> Option<WgpuContext> {
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         // Mesa's drivers warn without it; any writable folder will do.
         let d = std::env::temp_dir().join("r4d-xdg-runtime");
@@ -13,7 +19,7 @@ pub fn gpu_or_skip(test: &str) -> Option<WgpuContext> {
         // SAFETY: tests set this before any thread reads the environment through wgpu.
         unsafe { std::env::set_var("XDG_RUNTIME_DIR", d) };
     }
-    match WgpuContext::new() {
+    match WgpuContext::with_float_atomics(float_atomics) {
         Ok(c) => Some(c),
         Err(e) => {
             if std::env::var("R4D_REQUIRE_GPU").is_ok_and(|v| v == "1") {

@@ -1,10 +1,11 @@
-// Scatter-add without float atomics: a compare-exchange loop on the bit pattern.
+// Scatter-add without float atomics: a compare-exchange loop on the bit pattern. The kernel
+// declares `grid_atomic: array<AtomicF32>`.
 alias AtomicF32 = atomic<u32>;
 
-fn atomic_add_f32(p: ptr<storage, atomic<u32>, read_write>, v: f32) {
-    var old = atomicLoad(p);
+fn grid_add(i: u32, v: f32) {
+    var old = atomicLoad(&grid_atomic[i]);
     loop {
-        let r = atomicCompareExchangeWeak(p, old, bitcast<u32>(bitcast<f32>(old) + v));
+        let r = atomicCompareExchangeWeak(&grid_atomic[i], old, bitcast<u32>(bitcast<f32>(old) + v));
         if r.exchanged {
             break;
         }

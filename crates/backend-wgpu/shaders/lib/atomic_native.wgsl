@@ -1,6 +1,7 @@
-// Scatter-add with native float atomics (adapter feature SHADER_FLOAT32_ATOMIC).
+// Scatter-add with native float atomics (adapter feature SHADER_FLOAT32_ATOMIC). The kernel
+// declares `grid_atomic: array<AtomicF32>`.
 alias AtomicF32 = atomic<f32>;
 
-fn atomic_add_f32(p: ptr<storage, atomic<f32>, read_write>, v: f32) {
-    atomicAdd(p, v);
+fn grid_add(i: u32, v: f32) {
+    atomicAdd(&grid_atomic[i], v);
 }

@@ -91,3 +91,16 @@ const MAT_FOAM: u32 = 3u;
 const MAT_SNOW: u32 = 4u;
 const MAT_PLASTICINE: u32 = 5u;
 const MAT_FLUID: u32 = 6u;
+
+// Per-dispatch sizes (backend-internal, not a Rust kernel record).
+struct Counts {
+    particles: u32,
+    n_grid: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+// Linear thread index of a 1D dispatch split over x and y (workgroups of `wg` threads).
+fn linear_id(gid: vec3<u32>, nwg: vec3<u32>, wg: u32) -> u32 {
+    return gid.x + gid.y * nwg.x * wg;
+}
