@@ -1,5 +1,6 @@
 //! MPM substep benchmarks: one substep of a jelly block at 10k, 32k and 100k particles,
-//! n_grid 64, dt 1e-4, on the CPU backend (all cores) and the single-threaded reference.
+//! n_grid 64, dt 1e-4, on the CPU backend (all cores), the single-threaded reference, and the
+//! wgpu backend when an adapter exists (32k and 100k; also its peak device memory).
 //!
 //! Reports time per substep; particle-substeps per second = particles / time. A counting
 //! global allocator reports the peak host memory of each case after its run.
@@ -11,6 +12,8 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use r4d_backend_cpu::CpuBackend;
+use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
+use std::sync::Arc;
 use r4d_mpm::{
     reference::ReferenceBackend, BoundaryCondition, MpmKernels, MpmSim, PartParams, ParticleSet,
     Shape, SimConfig, Simulator, Surface,
@@ -64,6 +67,7 @@ fn bench_backend<B: MpmKernels>(
     c: &mut Criterion,
     name: &str,
     make: impl Fn() -> B,
+    sync: impl Fn(&B),
     sizes: &[usize],
 ) {
     let mut group = c.benchmark_group(format!("substep/{name}"));
@@ -81,21 +85,52 @@ fn bench_backend<B: MpmKernels>(
         }
         group.throughput(Throughput::Elements(np as u64));
         group.bench_with_input(BenchmarkId::from_parameter(np), &np, |b, _| {
-            b.iter(|| sim.substep(&mut state).unwrap())
+            b.iter(|| {
+                sim.substep(&mut state).unwrap();
+                sync(sim.backend());
+            })
         });
         let peak = peak_since(base);
+        let dev = sim.backend().memory_usage().peak_bytes;
         eprintln!(
-            "substep/{name}/{np}: peak host memory {:.1} MiB ({:.0} B/particle)",
+            "substep/{name}/{np}: peak host memory {:.1} MiB ({:.0} B/particle){}",
             peak as f64 / 1048576.0,
-            peak as f64 / np as f64
+            peak as f64 / np as f64,
+            if dev > 0 {
+                format!(", peak device memory {:.1} MiB", dev as f64 / 1048576.0)
+            } else {
+                String::new()
+            }
         );
     }
     group.finish();
 }
 
 fn benches(c: &mut Criterion) {
-    bench_backend(c, "cpu", CpuBackend::default, &[10_000, 32_000, 100_000]);
-    bench_backend(c, "reference", || ReferenceBackend, &[10_000]);
+    bench_backend(c, "cpu", CpuBackend::default, |_| {}, &[10_000, 32_000, 100_000]);
+    bench_backend(c, "reference", || ReferenceBackend, |_| {}, &[10_000]);
+    // The wgpu backend on whatever adapter is present (on a machine without a GPU: lavapipe,
+    // a software rasterizer; its figures say nothing about GPU speed). Each substep waits for
+    // the device, so the time is the real execution time.
+    match WgpuContext::new() {
+        Ok(ctx) => {
+            let ctx = Arc::new(ctx);
+            eprintln!("wgpu adapter: {} ({:?}, {:?})", ctx.info.name, ctx.info.device_type, ctx.info.backend);
+            bench_backend(
+                c,
+                "wgpu",
+                || WgpuMpm::new(ctx.clone()),
+                |b: &WgpuMpm| {
+                    let _ = b.context().device.poll(wgpu::PollType::Wait {
+                        submission_index: None,
+                        timeout: None,
+                    });
+                },
+                &[32_000, 100_000],
+            );
+        }
+        Err(e) => eprintln!("substep/wgpu skipped: {e}"),
+    }
 }
 
 criterion_group!(mpm, benches);

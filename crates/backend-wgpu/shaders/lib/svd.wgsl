@@ -9,9 +9,9 @@
 //
 // Storage: the Jacobi matrix S and the rotation V are kept as arrays of rows, `s[row][col]`,
 // exactly as the Rust arrays are indexed, so every update happens in the same order.
-// The only deliberate difference: when |tau| > 1e18 the Rust `1 + tau * tau` overflows to +inf
-// and gives t = 0 (IEEE); GPUs need not honour infinities, so that case uses t = 0.5 / tau
-// (the finite limit, < 5e-19: the same rotation to f32 precision).
+// Infinities: for |tau| >= 2^64 the Rust `1 + tau * tau` overflows to +inf and IEEE arithmetic
+// gives t = 1 / (tau + inf) = 0. WGSL does not promise IEEE infinities, so that case is tested
+// explicitly (t = 0, as in Rust); below 2^64 nothing overflows and the formula is the same.
 
 struct Svd3 {
     u: mat3x3<f32>,
@@ -68,8 +68,8 @@ fn svd3(f: mat3x3<f32>) -> Svd3 {
             // Classic symmetric Schur rotation (Golub & Van Loan 8.4.2).
             let tau = (s[q][q] - s[p][p]) / (2.0 * apq);
             var t: f32;
-            if abs(tau) > 1e18 {
-                t = 0.5 / tau;
+            if abs(tau) >= 18446744073709551616.0 {
+                t = 0.0;
             } else if tau >= 0.0 {
                 t = 1.0 / (tau + sqrt(1.0 + tau * tau));
             } else {
