@@ -13,11 +13,11 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use r4d_backend_cpu::CpuBackend;
 use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
-use std::sync::Arc;
 use r4d_mpm::{
     reference::ReferenceBackend, BoundaryCondition, MpmKernels, MpmSim, PartParams, ParticleSet,
     Shape, SimConfig, Simulator, Surface,
 };
+use std::sync::Arc;
 #[path = "common/alloc.rs"]
 mod alloc;
 use alloc::{peak_since, reset_peak, Counting};
@@ -107,7 +107,13 @@ fn bench_backend<B: MpmKernels>(
 }
 
 fn benches(c: &mut Criterion) {
-    bench_backend(c, "cpu", CpuBackend::default, |_| {}, &[10_000, 32_000, 100_000]);
+    bench_backend(
+        c,
+        "cpu",
+        CpuBackend::default,
+        |_| {},
+        &[10_000, 32_000, 100_000],
+    );
     bench_backend(c, "reference", || ReferenceBackend, |_| {}, &[10_000]);
     // The wgpu backend on whatever adapter is present (on a machine without a GPU: lavapipe,
     // a software rasterizer; its figures say nothing about GPU speed). Each substep waits for
@@ -115,7 +121,10 @@ fn benches(c: &mut Criterion) {
     match WgpuContext::new() {
         Ok(ctx) => {
             let ctx = Arc::new(ctx);
-            eprintln!("wgpu adapter: {} ({:?}, {:?})", ctx.info.name, ctx.info.device_type, ctx.info.backend);
+            eprintln!(
+                "wgpu adapter: {} ({:?}, {:?})",
+                ctx.info.name, ctx.info.device_type, ctx.info.backend
+            );
             bench_backend(
                 c,
                 "wgpu",

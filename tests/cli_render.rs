@@ -57,6 +57,33 @@ fn render_writes_png_and_raw_npy_matching_gsplat() {
         .sum::<f64>()
         / raw.data.len() as f64;
     assert!(mean < 1e-5, "mean abs error {mean}");
+    // The wgpu backend (when an adapter exists) writes the same image.
+    if r4d_backend_wgpu::testing::gpu_or_skip("render --backend wgpu").is_some() {
+        ok(&r4d(&[
+            "render",
+            "--scene",
+            &s(&f.join("scene.ply")),
+            "--camera",
+            &s(&f.join("cameras.json")),
+            "--camera-index",
+            "1",
+            "--out",
+            &s(&d.join("gpu.png")),
+            "--out-raw",
+            &s(&d.join("gpu.npy")),
+            "--backend",
+            "wgpu",
+        ]));
+        let gpu = read_npy(&d.join("gpu.npy"));
+        let m: f64 = gpu
+            .data
+            .iter()
+            .zip(&raw.data)
+            .map(|(a, b)| (a - b).abs())
+            .sum::<f64>()
+            / raw.data.len() as f64;
+        assert!(m < 1e-5, "wgpu vs cpu mean abs error {m}");
+    }
     let png = std::fs::read(d.join("img.png")).unwrap();
     assert_eq!(&png[1..4], b"PNG");
     // A camera index past the file is a clear error.

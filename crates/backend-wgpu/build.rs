@@ -13,9 +13,14 @@ use std::collections::HashSet;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-fn preprocess(root: &Path, file: &Path, atomic: &str, seen: &mut HashSet<PathBuf>, out: &mut String) {
-    let text = std::fs::read_to_string(file)
-        .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+fn preprocess(
+    root: &Path,
+    file: &Path,
+    atomic: &str,
+    seen: &mut HashSet<PathBuf>,
+    out: &mut String,
+) {
+    let text = std::fs::read_to_string(file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
     for line in text.lines() {
         let t = line.trim();
         if let Some(rest) = t.strip_prefix("#import ") {
@@ -45,13 +50,15 @@ fn main() {
         "/// Preprocessed WGSL kernels: (name, source).\npub const KERNELS: &[(&str, &str)] = &[\n",
     );
     let mut layouts = String::from(
-        "/// Struct layouts reflected by naga: (name, size, [(member, offset)]).\npub const LAYOUTS: &[(&str, u32, &[(&str, u32)])] = &[\n",
+        "/// A struct layout reflected by naga: (name, size, [(member, offset)]).\npub type StructLayout = (&'static str, u32, &'static [(&'static str, u32)]);\n/// Struct layouts reflected by naga.\npub const LAYOUTS: &[StructLayout] = &[\n",
     );
     let mut layout_seen = HashSet::new();
     let mut errors = Vec::new();
     for group in ["mpm", "splat"] {
         let dir = root.join(group);
-        let Ok(rd) = std::fs::read_dir(&dir) else { continue };
+        let Ok(rd) = std::fs::read_dir(&dir) else {
+            continue;
+        };
         let mut files: Vec<PathBuf> = rd
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.extension().is_some_and(|e| e == "wgsl"))

@@ -21,6 +21,8 @@ pub enum RenderBackend {
     Cpu,
     /// Single-threaded reference renderer (slow; for checking).
     Reference,
+    /// wgpu (WGSL compute on Vulkan, Metal or DX12; `R4D_WGPU_ADAPTER` picks an adapter).
+    Wgpu,
 }
 
 /// Rasterize mode flag.
@@ -109,6 +111,13 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let mut renderer: Box<dyn Renderer> = match a.backend {
         RenderBackend::Cpu => Box::new(SplatRenderer::new(CpuSplat)),
         RenderBackend::Reference => Box::new(SplatRenderer::new(ReferenceSplat)),
+        RenderBackend::Wgpu => {
+            let ctx = r4d_backend_wgpu::WgpuContext::new()?;
+            eprintln!("wgpu adapter: {} ({:?})", ctx.info.name, ctx.info.backend);
+            Box::new(SplatRenderer::new(r4d_backend_wgpu::splat::WgpuSplat::new(
+                std::sync::Arc::new(ctx),
+            )))
+        }
     };
     let link_default = |dir: Option<&Path>| -> Result<Option<SimLink>> {
         let path = match (&a.link, dir) {

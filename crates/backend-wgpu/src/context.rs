@@ -173,7 +173,7 @@ impl WgpuContext {
         let bytes = ((len * std::mem::size_of::<T>()) as u64)
             .max(16)
             .next_multiple_of(4);
-        let limit = self.limits.max_storage_buffer_binding_size as u64;
+        let limit = self.limits.max_storage_buffer_binding_size;
         if usage.contains(wgpu::BufferUsages::STORAGE) && bytes > limit {
             return Err(WgpuError::TooLarge {
                 label: label.to_string(),

@@ -8,6 +8,7 @@
 pub mod context;
 pub mod mpm;
 pub mod shaders;
+pub mod splat;
 pub mod testing;
 
 pub use context::{GpuBuffer, WgpuContext, WgpuError};
