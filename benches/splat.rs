@@ -1,6 +1,7 @@
 //! Renderer benchmarks: forward (`render`) and forward + backward (`render_vjp`, which re-runs
 //! projection and binning) of 100k and 300k Gaussians (SH degree 3, deformed by a per-Gaussian
-//! F as in a simulated frame) at 1280x720 and 1920x1080 on the rayon CPU backend.
+//! F as in a simulated frame) at 1280x720 and 1920x1080 on the rayon CPU backend, and the
+//! forward pass on the wgpu backend when an adapter exists.
 //!
 //! The synthetic scene: centres uniform in a ball of radius 1, scales log-uniform in
 //! [0.003, 0.03], opacities sigmoid(U[-2, 4]), seen from distance 3 with a 60 degree field of
@@ -14,7 +15,9 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use r4d_backend_cpu::splat::CpuSplat;
+use r4d_backend_wgpu::{splat::WgpuSplat, WgpuContext};
 use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SplatRenderer};
+use std::sync::Arc;
 #[path = "common/alloc.rs"]
 mod alloc;
 use alloc::{peak_since, reset_peak, Counting};
@@ -105,6 +108,44 @@ fn bench(c: &mut Criterion) {
             });
             group.bench_function(BenchmarkId::new("forward_backward", &id), |b| {
                 b.iter(|| r.render_vjp(&g, Some(&d), &cam, &set, &d_rgb).unwrap())
+            });
+        }
+    }
+    group.finish();
+    // The wgpu forward renderer on whatever adapter is present (without a GPU: lavapipe, a
+    // software rasterizer, whose figures say nothing about GPU speed). `render` downloads the
+    // image, so the time includes the device work. Its backward pass still runs on the host
+    // (a later issue), so only the forward is measured.
+    let ctx = match WgpuContext::new() {
+        Ok(c) => Arc::new(c),
+        Err(e) => {
+            eprintln!("splat/wgpu skipped: {e}");
+            return;
+        }
+    };
+    eprintln!(
+        "wgpu adapter: {} ({:?})",
+        ctx.info.name, ctx.info.device_type
+    );
+    let mut group = c.benchmark_group("splat_wgpu");
+    group.sample_size(10);
+    for n in [100_000usize, 300_000] {
+        let (g, d) = scene(n);
+        for (w, h) in [(1280u32, 720u32), (1920, 1080)] {
+            let cam = Camera::look_at(w, h, 60.0, [0.0, -3.0, 0.5], [0.0; 3], [0.0, 0.0, 1.0]);
+            let set = RenderSettings::default();
+            let mut r = SplatRenderer::new(WgpuSplat::new(ctx.clone()));
+            let id = format!("{n}/{w}x{h}");
+            ctx.reset_peak();
+            let base = reset_peak();
+            r.render(&g, Some(&d), &cam, &set).unwrap();
+            println!(
+                "splat_wgpu {id}: peak device memory {:.1} MiB, peak host memory {:.1} MiB",
+                ctx.peak_bytes() as f64 / 1048576.0,
+                peak_since(base) as f64 / 1048576.0
+            );
+            group.bench_function(BenchmarkId::new("forward", &id), |b| {
+                b.iter(|| r.render(&g, Some(&d), &cam, &set).unwrap())
             });
         }
     }
