@@ -1,6 +1,8 @@
 //! Command-line interface: argument parsing and backend selection at runtime.
 
 mod fit_trajectory;
+mod metrics;
+mod metrics_trajectory;
 mod npy;
 mod prepare;
 mod render;
@@ -27,6 +29,10 @@ enum Command {
     Render(render::RenderArgs),
     /// Preprocess a captured 3DGS scene into simulation particles (PhysGaussian's keys).
     Prepare(prepare::PrepareArgs),
+    /// PSNR, SSIM, MS-SSIM, L1 and the DMS loss terms of a rendered video against a reference.
+    Metrics(metrics::MetricsArgs),
+    /// Chamfer distance, HD95 and F-score between simulated and reference point sequences.
+    MetricsTrajectory(metrics_trajectory::MetricsTrajectoryArgs),
 }
 
 /// Compute backend.
@@ -48,6 +54,8 @@ pub fn main() -> std::process::ExitCode {
         Command::FitTrajectory(a) => fit_trajectory::run(a),
         Command::Render(a) => render::run(a),
         Command::Prepare(a) => prepare::run(a),
+        Command::Metrics(a) => metrics::run(a),
+        Command::MetricsTrajectory(a) => metrics_trajectory::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,0 +1,664 @@
+//! The spectral half of Dual-domain Motion Supervision: log-magnitude and phase agreement of
+//! the per-patch 3-D DFT of the frame differences, and its exact gradient.
+//!
+//! Conventions (`../shared/ref/loss/README.md`, "DMS loss"): BT.601 gray
+//! `Y = 0.299 R + 0.587 G + 0.114 B` of the stored values; differences `D_t = Y_{t+1} - Y_t`;
+//! non-overlapping `ph x pw` patches (16 x 16) of the frames cropped to whole patches at the
+//! top-left; per patch the unnormalised forward DFT over `(t, h, w)` of its
+//! `(T - 1) x ph x pw` differences;
+//! `L_mag = mean |ln(1 + |F_r|) - ln(1 + |F_g|)|` and
+//! `L_phase = 1 - mean Re(F_r / (|F_r| + eps) conj(F_g / (|F_g| + eps)))`, `eps = 1e-8`,
+//! means over every entry of every patch.
+//!
+//! # Computation
+//!
+//! All spectral arithmetic is f64 (in f32 the round-off of spectral entries that are
+//! mathematically zero, ~1e-7 max|F|, is far above `eps` and turns them into unit phasors
+//! of random phase: the README measured L_phase moving by 4e-4). Both videos are real, so
+//! one complex 3-D FFT of `D_rendered + i D_reference` gives both spectra
+//! (`F_r[k] = (Z[k] + conj Z[-k]) / 2`, `F_g[k] = (Z[k] - conj Z[-k]) / 2i`), which are then
+//! exactly Hermitian; each conjugate pair `k, -k` is evaluated once. The 3-D DFT is three
+//! batches of 1-D rustfft transforms (plans built once in [`Spectral::new`]) along the
+//! contiguous axis, with a transpose between batches.
+//!
+//! # Gradient
+//!
+//! With `G[k] = dL/dRe F[k] + i dL/dIm F[k]` for a spectrum `F = DFT(x)` of a real `x`,
+//! `dL/dx = Re(DFT(conj G))`: the adjoint of a DFT is a DFT. `G` is Hermitian (the loss is
+//! symmetric in `k, -k`), so `DFT(conj G)` is real, and the gradients of two patches come
+//! from one complex FFT of `conj G_1 + i conj G_2`. Per entry, with `r = |F|`:
+//! `d|F| = F / r` (0 at `F = 0`, PyTorch's subgradient), the magnitude term gives
+//! `sign(ln(1+r) - ln(1+r_g)) / (1 + r) * F / r`, the phase term
+//! `q G_P - q^2 Re(conj(G_P) F) F / r` with `q = 1 / (r + eps)` and `G_P = -P_g / N`.
+//!
+//! # Near-zero rendered spectra
+//!
+//! Where the rendered spectrum is (near) zero and the reference's is not — a static rendered
+//! patch against a moving reference, the typical start of a fit — the phase term's gradient
+//! is `-P_g / (N eps)`: about `1 / (N eps)` per entry, `1e8 / N`. It is exact (PyTorch
+//! gives the same) but useless for gradient descent. Two options tame it:
+//! [`SpectralConfig::eps`] (the gradient scales as `1 / eps`) and
+//! [`SpectralConfig::phase_mask`] (entries where either spectrum's magnitude is below the
+//! threshold contribute `S = 0` and no gradient).
+//!
+//! Memory: the videos are read patch by patch; the only temporaries are a few
+//! `(T - 1) x ph x pw` complex buffers per worker.
+
+use crate::error::{Input, LossError};
+use crate::par;
+use crate::real::Real;
+use crate::video::{check_grad_len, check_pair, Video};
+use rustfft::num_complex::Complex;
+use rustfft::{Fft, FftPlanner};
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+type C64 = Complex<f64>;
+
+/// Normalisation of the per-patch DFT.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FftNorm {
+    /// Unnormalised forward DFT (`torch.fft.fftn(norm="backward")`, the default).
+    #[default]
+    Backward,
+    /// Scaled by `1 / sqrt((T - 1) ph pw)` (`norm="ortho"`).
+    Ortho,
+}
+
+/// Reduction of the magnitude term over spectral entries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Reduction {
+    /// Mean over every entry of every patch.
+    #[default]
+    Mean,
+    /// Sum over every entry of every patch.
+    Sum,
+}
+
+/// Settings of the spectral terms (each of the README's choices).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SpectralConfig {
+    /// Patch size `[rows, columns]` (16 x 16).
+    pub patch: [usize; 2],
+    /// DFT normalisation.
+    pub norm: FftNorm,
+    /// Reduction of `L_mag`.
+    pub mag_reduction: Reduction,
+    /// `eps` of the phase normalisation `F / (|F| + eps)` (1e-8).
+    pub eps: f64,
+    /// Phase mask: entries where `|F_r|` or `|F_g|` (after normalisation) is below this
+    /// contribute nothing to the phase sum (and no gradient); the mean still divides by
+    /// every entry. `None` (the paper): no mask.
+    pub phase_mask: Option<f64>,
+}
+
+impl Default for SpectralConfig {
+    fn default() -> Self {
+        SpectralConfig {
+            patch: [16, 16],
+            norm: FftNorm::Backward,
+            mag_reduction: Reduction::Mean,
+            eps: 1e-8,
+            phase_mask: None,
+        }
+    }
+}
+
+impl SpectralConfig {
+    /// Checks the settings.
+    pub fn validate(&self) -> Result<(), LossError> {
+        if self.patch[0] == 0 || self.patch[1] == 0 {
+            return Err(LossError::Config(format!(
+                "patch size must be positive, got {}x{}",
+                self.patch[0], self.patch[1]
+            )));
+        }
+        if !(self.eps >= 0.0 && self.eps.is_finite()) {
+            return Err(LossError::Config(format!(
+                "phase eps must be finite and >= 0, got {}",
+                self.eps
+            )));
+        }
+        if let Some(m) = self.phase_mask {
+            if !(m >= 0.0 && m.is_finite()) {
+                return Err(LossError::Config(format!(
+                    "phase mask threshold must be finite and >= 0, got {m}"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The spectral terms of one evaluation (unweighted).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SpectralTerms {
+    /// `L_mag`.
+    pub mag: f64,
+    /// `L_phase`.
+    pub phase: f64,
+    /// Spectral entries, `N (T - 1) ph pw`.
+    pub entries: usize,
+    /// Entries the phase mask removed.
+    pub masked: usize,
+}
+
+/// The spectral terms for videos of one shape, with FFT plans built once.
+#[derive(Clone)]
+pub struct Spectral {
+    cfg: SpectralConfig,
+    frames: usize,
+    height: usize,
+    width: usize,
+    fft_t: Arc<dyn Fft<f64>>,
+    fft_h: Arc<dyn Fft<f64>>,
+    fft_w: Arc<dyn Fft<f64>>,
+    scratch: usize,
+}
+
+impl std::fmt::Debug for Spectral {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Spectral")
+            .field("cfg", &self.cfg)
+            .field("frames", &self.frames)
+            .field("height", &self.height)
+            .field("width", &self.width)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Sums of one band of patches.
+#[derive(Clone, Copy, Default)]
+struct BandSums {
+    mag: f64,
+    phase: f64,
+    masked: usize,
+}
+
+/// Weights of the gradient: `d L / d |.|` of the magnitude term per entry and
+/// `d L / d S` of the phase term per entry.
+#[derive(Clone, Copy)]
+struct GradWeights {
+    mag: f64,
+    phase: f64,
+}
+
+impl Spectral {
+    /// Plans for videos of `frames x height x width`.
+    pub fn new(
+        cfg: SpectralConfig,
+        frames: usize,
+        height: usize,
+        width: usize,
+    ) -> Result<Self, LossError> {
+        cfg.validate()?;
+        if frames < 2 {
+            return Err(LossError::TooFewFrames {
+                input: Input::Reference,
+                frames,
+                needed: 2,
+                what: "the spectral loss (frame differences)",
+            });
+        }
+        let [ph, pw] = cfg.patch;
+        if height < ph || width < pw {
+            return Err(LossError::SmallerThanPatch {
+                input: Input::Reference,
+                height,
+                width,
+                patch_h: ph,
+                patch_w: pw,
+            });
+        }
+        let mut planner = FftPlanner::<f64>::new();
+        let fft_t = planner.plan_fft_forward(frames - 1);
+        let fft_h = planner.plan_fft_forward(ph);
+        let fft_w = planner.plan_fft_forward(pw);
+        let scratch = [&fft_t, &fft_h, &fft_w]
+            .iter()
+            .map(|f| f.get_inplace_scratch_len())
+            .max()
+            .unwrap_or(0);
+        Ok(Spectral {
+            cfg,
+            frames,
+            height,
+            width,
+            fft_t,
+            fft_h,
+            fft_w,
+            scratch,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SpectralConfig {
+        &self.cfg
+    }
+
+    /// Number of spectral entries `N (T - 1) ph pw`.
+    pub fn entries(&self) -> usize {
+        let [ph, pw] = self.cfg.patch;
+        (self.height / ph) * (self.width / pw) * (self.frames - 1) * ph * pw
+    }
+
+    fn check<T: Real>(&self, rendered: &Video<T>, reference: &Video<T>) -> Result<(), LossError> {
+        if (reference.frames(), reference.height(), reference.width())
+            != (self.frames, self.height, self.width)
+        {
+            return Err(LossError::Config(format!(
+                "spectral plans are for {} frames of {}x{}, the reference has {} of {}x{}",
+                self.frames,
+                self.height,
+                self.width,
+                reference.frames(),
+                reference.height(),
+                reference.width()
+            )));
+        }
+        check_pair(rendered, reference)
+    }
+
+    /// `L_mag` and `L_phase` of `rendered` against `reference`.
+    pub fn evaluate<T: Real>(
+        &self,
+        rendered: &Video<T>,
+        reference: &Video<T>,
+    ) -> Result<SpectralTerms, LossError> {
+        self.check(rendered, reference)?;
+        Ok(self.run(rendered, reference, None))
+    }
+
+    /// `L_mag` and `L_phase`, adding `w_mag * dL_mag/d rendered + w_phase * dL_phase/d
+    /// rendered` to `grad` (`(T, H, W, 3)`).
+    pub fn evaluate_grad_into<T: Real>(
+        &self,
+        rendered: &Video<T>,
+        reference: &Video<T>,
+        w_mag: f64,
+        w_phase: f64,
+        grad: &mut [T],
+    ) -> Result<SpectralTerms, LossError> {
+        self.check(rendered, reference)?;
+        check_grad_len(rendered, grad)?;
+        Ok(self.run(rendered, reference, Some((w_mag, w_phase, grad))))
+    }
+
+    /// Runs only the FFTs and transposes of one evaluation (forward transforms of both
+    /// videos, and with `grad` the backward transforms), on zeros, scheduled as
+    /// [`Spectral::evaluate`] schedules them. For profiling the share of time in FFTs.
+    pub fn transforms_only(&self, grad: bool) {
+        let [ph, pw] = self.cfg.patch;
+        let (nb, npw) = (self.height / ph, self.width / pw);
+        let len = (self.frames - 1) * ph * pw;
+        par::map((0..nb).collect(), |_| {
+            let mut z = vec![C64::default(); len];
+            let mut tmp = vec![C64::default(); len];
+            let mut scratch = vec![C64::default(); self.scratch];
+            for j in 0..npw {
+                self.forward(&mut z, &mut tmp, &mut scratch);
+                self.forward(&mut z, &mut tmp, &mut scratch);
+                if grad && (j % 2 == 1 || j + 1 == npw) {
+                    self.backward_transform(&mut z, &mut tmp, &mut scratch);
+                }
+            }
+        });
+    }
+
+    /// Unchecked evaluation, in parallel over bands of patch rows.
+    pub(crate) fn run<T: Real>(
+        &self,
+        x: &Video<T>,
+        y: &Video<T>,
+        grad: Option<(f64, f64, &mut [T])>,
+    ) -> SpectralTerms {
+        let ph = self.cfg.patch[0];
+        let (nb, w) = (self.height / ph, self.width);
+        let entries = self.entries();
+        let n = entries as f64;
+        let band_len = ph * w * 3;
+        let flen = x.frame_len();
+        let (weights, grad) = match grad {
+            Some((wm, wp, g)) => {
+                let mag = match self.cfg.mag_reduction {
+                    Reduction::Mean => wm / n,
+                    Reduction::Sum => wm,
+                };
+                (
+                    Some(GradWeights {
+                        mag,
+                        phase: -wp / n,
+                    }),
+                    Some(g),
+                )
+            }
+            None => (None, None),
+        };
+        // Band b of the gradient: rows b*ph .. (b+1)*ph of every frame.
+        let mut bands: Vec<(usize, Vec<&mut [T]>)> = (0..nb).map(|b| (b, Vec::new())).collect();
+        if let Some(g) = grad {
+            for frame in g.chunks_mut(flen) {
+                for (b, band) in frame.chunks_mut(band_len).take(nb).enumerate() {
+                    bands[b].1.push(band);
+                }
+            }
+        }
+        let with_grad = weights.is_some();
+        let sums = par::map_pooled(
+            bands,
+            || Workspace::new(self, with_grad),
+            |ws, (b, mut g)| {
+                let gb = if g.is_empty() {
+                    None
+                } else {
+                    Some((weights.expect("weights with a gradient"), &mut g[..]))
+                };
+                self.band(x, y, b, gb, ws)
+            },
+        );
+        let (mut mag, mut phase, mut masked) = (0.0, 0.0, 0);
+        for s in &sums {
+            mag += s.mag;
+            phase += s.phase;
+            masked += s.masked;
+        }
+        SpectralTerms {
+            mag: match self.cfg.mag_reduction {
+                Reduction::Mean => mag / n,
+                Reduction::Sum => mag,
+            },
+            phase: 1.0 - phase / n,
+            entries,
+            masked,
+        }
+    }
+
+    /// One band of patches (patch row `b`), two patches at a time. The band's gray frames of
+    /// both videos are read once, sequentially, into `(T, ph, W)` f64 buffers; with a
+    /// gradient, the band's gray-frame gradient is accumulated likewise and added to the
+    /// frames at the end (sequential access instead of one strided read per patch row).
+    fn band<T: Real>(
+        &self,
+        x: &Video<T>,
+        y: &Video<T>,
+        b: usize,
+        grad: Option<(GradWeights, &mut [&mut [T]])>,
+        ws: &mut Workspace,
+    ) -> BandSums {
+        let [ph, pw] = self.cfg.patch;
+        let (nt, w) = (self.frames, self.width);
+        let npw = w / pw;
+        if grad.is_some() {
+            ws.gy.fill(0.0);
+        }
+        let pl = ph * pw;
+        for t in 0..nt {
+            let (fx, fy) = (x.frame(t), y.frame(t));
+            for h in 0..ph {
+                let row = (b * ph + h) * w * 3;
+                for jj in 0..npw {
+                    let src = row + jj * pw * 3..row + (jj + 1) * pw * 3;
+                    let dst = (jj * nt + t) * pl + h * pw..(jj * nt + t) * pl + (h + 1) * pw;
+                    gray_rows(&fx[src.clone()], &mut ws.yr[dst.clone()]);
+                    gray_rows(&fy[src], &mut ws.yg[dst]);
+                }
+            }
+        }
+        let mut sums = BandSums::default();
+        let mut j = 0;
+        while j < npw {
+            let pair = if j + 1 < npw { 2 } else { 1 };
+            for k in 0..pair {
+                self.gather(j + k, ws);
+                self.forward(&mut ws.z, &mut ws.tmp, &mut ws.scratch);
+                self.forward(&mut ws.zg, &mut ws.tmp, &mut ws.scratch);
+                let gw = grad.as_ref().map(|(w, _)| *w);
+                let s = self.entries_pass(&ws.z, &ws.zg, gw.map(|w| (w, &mut ws.g[k][..])));
+                sums.mag += s.mag;
+                sums.phase += s.phase;
+                sums.masked += s.masked;
+            }
+            if grad.is_some() {
+                self.backward(ws, pair);
+                self.scatter(j, pair, ws);
+            }
+            j += pair;
+        }
+        if let Some((_, g)) = grad {
+            for (t, frame) in g.iter_mut().enumerate() {
+                for h in 0..ph {
+                    let row = h * w * 3;
+                    for jj in 0..npw {
+                        let o = (jj * nt + t) * pl + h * pw;
+                        let px = &mut frame[row + jj * pw * 3..row + (jj + 1) * pw * 3];
+                        for (p, &v) in px.chunks_exact_mut(3).zip(&ws.gy[o..o + pw]) {
+                            p[0] += T::cast(0.299 * v);
+                            p[1] += T::cast(0.587 * v);
+                            p[2] += T::cast(0.114 * v);
+                        }
+                    }
+                }
+            }
+        }
+        sums
+    }
+
+    /// Gray frame differences of patch `j` of the band: `z = D_rendered`,
+    /// `zg = D_reference` (imaginary parts 0), layout `(t, h, w)`.
+    fn gather(&self, j: usize, ws: &mut Workspace) {
+        let [ph, pw] = self.cfg.patch;
+        let pl = ph * pw;
+        let base = j * self.frames * pl;
+        for t in 0..self.frames - 1 {
+            let (a, c) = (base + t * pl, base + (t + 1) * pl);
+            let (z, zg) = (
+                &mut ws.z[t * pl..(t + 1) * pl],
+                &mut ws.zg[t * pl..(t + 1) * pl],
+            );
+            for q in 0..pl {
+                z[q] = C64::new(ws.yr[c + q] - ws.yr[a + q], 0.0);
+                zg[q] = C64::new(ws.yg[c + q] - ws.yg[a + q], 0.0);
+            }
+        }
+    }
+
+    /// Forward 3-D DFT of `z`: layout `(t, h, w)` in, `(kh, kw, kt)` out.
+    fn forward(&self, z: &mut [C64], tmp: &mut [C64], scratch: &mut [C64]) {
+        let [ph, pw] = self.cfg.patch;
+        let td = self.frames - 1;
+        self.fft_w.process_with_scratch(z, scratch);
+        transpose(z, tmp, td * ph, pw); // (pw, td, ph)
+        self.fft_h.process_with_scratch(tmp, scratch);
+        transpose(tmp, z, pw * td, ph); // (ph, pw, td)
+        self.fft_t.process_with_scratch(z, scratch);
+    }
+
+    /// `z = DFT(conj G_1 + i conj G_2)`: layout `(kh, kw, kt)` in, `(w, t, h)` out; the real
+    /// part is patch 1's gradient with respect to its differences, the imaginary part
+    /// patch 2's.
+    fn backward(&self, ws: &mut Workspace, pair: usize) {
+        let [g1, g2] = &ws.g;
+        if pair == 2 {
+            for ((z, a), c) in ws.z.iter_mut().zip(g1).zip(g2) {
+                *z = C64::new(a.re + c.im, c.re - a.im);
+            }
+        } else {
+            for (z, a) in ws.z.iter_mut().zip(g1) {
+                *z = a.conj();
+            }
+        }
+        self.backward_transform(&mut ws.z, &mut ws.tmp, &mut ws.scratch);
+    }
+
+    /// The 3-D DFT of the backward pass: layout `(kh, kw, kt)` in, `(w, t, h)` out.
+    fn backward_transform(&self, z: &mut [C64], tmp: &mut [C64], scratch: &mut [C64]) {
+        let [ph, pw] = self.cfg.patch;
+        let td = self.frames - 1;
+        self.fft_t.process_with_scratch(z, scratch);
+        transpose(z, tmp, ph * pw, td); // (td, ph, pw)
+        self.fft_w.process_with_scratch(tmp, scratch);
+        transpose(tmp, z, td * ph, pw); // (pw, td, ph)
+        self.fft_h.process_with_scratch(z, scratch);
+    }
+
+    /// Values of every entry of a forward-transformed `z` (layout `(kh, kw, kt)`); with
+    /// `grad`, also `G` of the rendered spectrum into `g` (same layout).
+    fn entries_pass(
+        &self,
+        zr: &[C64],
+        zg: &[C64],
+        grad: Option<(GradWeights, &mut [C64])>,
+    ) -> BandSums {
+        let [ph, pw] = self.cfg.patch;
+        let td = self.frames - 1;
+        let s = match self.cfg.norm {
+            FftNorm::Backward => 1.0,
+            FftNorm::Ortho => 1.0 / ((td * ph * pw) as f64).sqrt(),
+        };
+        let eps = self.cfg.eps;
+        let mask = self.cfg.phase_mask;
+        let mut sums = BandSums::default();
+        let (gw, mut g) = match grad {
+            Some((w, g)) => (Some(w), Some(g)),
+            None => (None, None),
+        };
+        for kh in 0..ph {
+            let mh = (ph - kh) % ph;
+            for kw in 0..pw {
+                let mw = (pw - kw) % pw;
+                let row = (kh * pw + kw) * td;
+                let mrow = (mh * pw + mw) * td;
+                for kt in 0..td {
+                    let e = row + kt;
+                    let m = mrow + if kt == 0 { 0 } else { td - kt };
+                    if m < e {
+                        continue;
+                    }
+                    let weight = if m == e { 1.0 } else { 2.0 };
+                    let fr = zr[e] * s;
+                    let fg = zg[e] * s;
+                    let rr = (fr.re * fr.re + fr.im * fr.im).sqrt();
+                    let rg = (fg.re * fg.re + fg.im * fg.im).sqrt();
+                    // ln(1 + rr) - ln(1 + rg) with one logarithm (exactly 0 when rr = rg).
+                    let dm = ((rr - rg) / (1.0 + rg)).ln_1p();
+                    sums.mag += weight * dm.abs();
+                    let keep = mask.is_none_or(|t| rr >= t && rg >= t);
+                    let qr = 1.0 / (rr + eps);
+                    let pg = fg * (1.0 / (rg + eps));
+                    if keep {
+                        let pr = fr * qr;
+                        sums.phase += weight * (pr.re * pg.re + pr.im * pg.im);
+                    } else {
+                        sums.masked += if m == e { 1 } else { 2 };
+                    }
+                    if let (Some(w), Some(g)) = (gw, g.as_deref_mut()) {
+                        let mut ge = C64::default();
+                        if rr > 0.0 {
+                            let unit = fr * (1.0 / rr);
+                            if dm != 0.0 {
+                                ge += unit * (w.mag * dm.signum() / (1.0 + rr));
+                            }
+                            if keep {
+                                // G_F = q G_P - q^2 Re(conj(G_P) F) F / r, G_P = w.phase P_g.
+                                let gp = pg * w.phase;
+                                let proj = gp.re * unit.re + gp.im * unit.im;
+                                ge += gp * qr - unit * (qr * qr * proj * rr);
+                            }
+                        } else if keep {
+                            ge = pg * (w.phase * qr);
+                        }
+                        ge *= s;
+                        g[e] = ge;
+                        g[m] = ge.conj();
+                    }
+                }
+            }
+        }
+        sums
+    }
+
+    /// Adds the gradient of the patch pair starting at column `j` (in `z`, layout
+    /// `(w, t, h)`) to the band's gray-frame gradient, through the differences
+    /// (`dL/dY_t = g_{t-1} - g_t`).
+    fn scatter(&self, j: usize, pair: usize, ws: &mut Workspace) {
+        let [ph, pw] = self.cfg.patch;
+        let (nt, td) = (self.frames, self.frames - 1);
+        let pl = ph * pw;
+        for k in 0..pair {
+            let part = |c: C64| if k == 0 { c.re } else { c.im };
+            for t in 0..nt {
+                for h in 0..ph {
+                    let o = ((j + k) * nt + t) * pl + h * pw;
+                    for ww in 0..pw {
+                        let base = ww * td * ph + h;
+                        let after = if t < td {
+                            part(ws.z[base + t * ph])
+                        } else {
+                            0.0
+                        };
+                        let before = if t > 0 {
+                            part(ws.z[base + (t - 1) * ph])
+                        } else {
+                            0.0
+                        };
+                        ws.gy[o + ww] += before - after;
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl Workspace {
+    /// Buffers for one worker.
+    fn new(sp: &Spectral, with_grad: bool) -> Self {
+        let [ph, pw] = sp.cfg.patch;
+        let len = (sp.frames - 1) * ph * pw;
+        let n = sp.frames * ph * (sp.width / pw) * pw;
+        Workspace {
+            yr: vec![0.0; n],
+            yg: vec![0.0; n],
+            gy: vec![0.0; if with_grad { n } else { 0 }],
+            z: vec![C64::default(); len],
+            zg: vec![C64::default(); len],
+            tmp: vec![C64::default(); len],
+            g: [vec![C64::default(); len], vec![C64::default(); len]],
+            scratch: vec![C64::default(); sp.scratch],
+        }
+    }
+}
+
+/// BT.601 gray of interleaved RGB rows, in f64.
+fn gray_rows<T: Real>(rgb: &[T], out: &mut [f64]) {
+    for (o, p) in out.iter_mut().zip(rgb.chunks_exact(3)) {
+        *o = 0.299 * p[0].f64() + 0.587 * p[1].f64() + 0.114 * p[2].f64();
+    }
+}
+
+/// Per-worker buffers.
+struct Workspace {
+    /// The band's gray frames, patch-major `(W / pw, T, ph, pw)`: rendered, reference.
+    yr: Vec<f64>,
+    yg: Vec<f64>,
+    /// The band's gray-frame gradient, same layout.
+    gy: Vec<f64>,
+    z: Vec<C64>,
+    tmp: Vec<C64>,
+    g: [Vec<C64>; 2],
+    scratch: Vec<C64>,
+    /// The reference's differences and spectrum.
+    zg: Vec<C64>,
+}
+
+/// Transposes the `rows x cols` matrix `src` into `dst` (`cols x rows`).
+fn transpose(src: &[C64], dst: &mut [C64], rows: usize, cols: usize) {
+    for r in 0..rows {
+        let s = &src[r * cols..(r + 1) * cols];
+        for (c, &v) in s.iter().enumerate() {
+            dst[c * rows + r] = v;
+        }
+    }
+}
