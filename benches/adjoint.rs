@@ -6,7 +6,8 @@
 //! simulator (the f64/f32 reference) and the parallel CPU adjoint (`ParallelHost`, all cores).
 //! The paper's scale (16 frames x 400 substeps, 10k and 100k particles) takes an hour on a
 //! 2-core machine: `cargo bench --bench adjoint -- 100000 16 400 --parallel-only`.
-//! `--parallel-only` skips the single-threaded host stepper; a strategy whose
+//! `--parallel-only` skips the single-threaded host stepper, `--only store-all|per-frame|every-n`
+//! measures one strategy; a strategy whose
 //! `memory_plan` exceeds 60% of the machine's memory is skipped (its plan is still printed).
 
 use r4d_backend_cpu::adjoint::ParallelHost;
@@ -26,6 +27,11 @@ static GLOBAL: Counting = Counting;
 fn main() {
     let raw: Vec<String> = std::env::args().skip(1).collect();
     let parallel_only = raw.iter().any(|a| a == "--parallel-only");
+    // `--only store-all|per-frame|every-n` measures one strategy.
+    let only = raw
+        .iter()
+        .position(|a| a == "--only")
+        .and_then(|i| raw.get(i + 1).cloned());
     let args: Vec<usize> = raw.iter().filter_map(|a| a.parse().ok()).collect();
     let target = args.first().copied().unwrap_or(10_000);
     let frames = args.get(1).copied().unwrap_or(2);
@@ -81,6 +87,7 @@ fn main() {
             spf,
             np,
             n,
+            only.as_deref(),
         );
     }
     let parallel = ParallelHost::<f32>::new(&sim);
@@ -93,6 +100,7 @@ fn main() {
         spf,
         np,
         n,
+        only.as_deref(),
     );
 }
 
@@ -106,6 +114,7 @@ fn measure<D>(
     spf: u32,
     np: usize,
     n: usize,
+    only: Option<&str>,
 ) where
     D: Differentiable<
         State = r4d_mpm::adjoint::host::HostState<f32>,
@@ -118,6 +127,14 @@ fn measure<D>(
         Checkpointing::PerFrame,
         Checkpointing::EveryN(((substeps as f64).sqrt().round() as u32).max(1)),
     ] {
+        let name = match strategy {
+            Checkpointing::StoreAll => "store-all",
+            Checkpointing::PerFrame => "per-frame",
+            Checkpointing::EveryN(_) => "every-n",
+        };
+        if only.is_some_and(|o| o != name) {
+            continue;
+        }
         let plan = memory_plan(np as u64, n as u64, substeps, spf, strategy, 4).peak_bytes as f64
             / 1048576.0;
         if plan > 0.6 * machine_memory_mib() {
