@@ -110,7 +110,7 @@ pub struct IterLog {
 }
 
 /// A part's parameters in the `params.json` schema.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, serde::Deserialize, PartialEq)]
 pub struct PartRecord {
     /// Part index.
     pub id: usize,

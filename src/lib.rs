@@ -7,7 +7,10 @@
 //! re-exports the crates for embedding and holds the pipelines that combine them
 //! ([`fit_trajectory`]).
 
+pub mod alloc;
+pub mod fit_diagnostics;
 pub mod fit_trajectory;
+pub mod video_fit;
 
 pub use r4d_backend_cpu as backend_cpu;
 pub use r4d_backend_wgpu as backend_wgpu;

@@ -2,6 +2,10 @@
 
 mod cli;
 
+/// Counts heap bytes for the peak-memory figures in logs.
+#[global_allocator]
+static ALLOC: resonance4d::alloc::Counting = resonance4d::alloc::Counting;
+
 fn main() -> std::process::ExitCode {
     cli::main()
 }

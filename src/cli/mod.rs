@@ -1,11 +1,13 @@
 //! Command-line interface: argument parsing and backend selection at runtime.
 
+mod fit;
 mod fit_trajectory;
 mod metrics;
 mod metrics_trajectory;
 mod npy;
 mod prepare;
 mod render;
+mod run_hooks;
 mod scene;
 mod simulate;
 
@@ -23,6 +25,8 @@ struct Cli {
 enum Command {
     /// Run an MPM simulation and write one PLY per frame.
     Simulate(simulate::SimulateArgs),
+    /// Fit the material parameters of every part to a reference video.
+    Fit(fit::FitArgs),
     /// Fit part parameters to target particle trajectories (exact adjoint gradients).
     FitTrajectory(fit_trajectory::FitTrajectoryArgs),
     /// Render a 3DGS scene, one simulated frame of it, or a whole simulated sequence.
@@ -51,6 +55,7 @@ pub fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Simulate(a) => simulate::run(a),
+        Command::Fit(a) => fit::run(a),
         Command::FitTrajectory(a) => fit_trajectory::run(a),
         Command::Render(a) => render::run(a),
         Command::Prepare(a) => prepare::run(a),

@@ -8,8 +8,32 @@
 //! ([`LogDomainOptimizer`]); mapping parts and parameter kinds to that vector is the caller's
 //! business ([`ParamKind`] names the kinds and their default bounds).
 //!
-//! Still to come with the fitting issue: Latin hypercube initialisation and the `Initializer`
-//! trait.
+//! ## Initialisation
+//!
+//! The fit starts from the paper's simulation-driven initialisation ([`Initializer`],
+//! implemented by [`LatinHypercubeInit`]): `N = 32` candidates from a seeded Latin hypercube
+//! ([`latin_hypercube`]) are mapped log-uniformly into the bounds of a [`SearchSpace`]
+//! ([`log_space`]); the caller simulates each and scores it against the reference video
+//! (higher is better, e.g. MS-SSIM). Candidates whose simulation fails (an error or a NaN
+//! score) are recorded and skipped; the [`InitOutcome`] ranks the rest and its
+//! [`InitOutcome::best`] is the starting point of the gradient-based fit. Candidates are
+//! evaluated in parallel with rayon, and the outcome does not depend on it.
+//!
+//! ```
+//! use r4d_optim::{Initializer, LatinHypercubeInit, SearchSpace};
+//! // Maximise -(log10 theta - 2)^2 over [1, 1e4]: the peak is at theta = 100.
+//! let space = SearchSpace::new(vec!["E".into()], vec![(1.0, 1e4)]).unwrap();
+//! let init = LatinHypercubeInit { candidates: 32, seed: 1, ..Default::default() };
+//! let out = init
+//!     .initialize(&space, &|_index, theta| Ok(-(theta[0].log10() - 2.0).powi(2)))
+//!     .unwrap();
+//! // 32 strata of 4/32 decades each: the one holding the peak puts a candidate that close.
+//! assert!((out.best[0].log10() - 2.0).abs() < 4.0 / 32.0);
+//! assert_eq!(out.ranking.len(), 32);
+//! assert_eq!(out.top_k.len(), 4);
+//! ```
+//!
+//! ## Fitting
 //!
 //! ```
 //! use r4d_optim::{AdamW, LogDomainOptimizer};
@@ -25,6 +49,12 @@
 
 use serde::{Deserialize, Serialize};
 
+mod init;
+mod lhs;
+
+pub use init::{Candidate, Evaluate, InitOutcome, Initializer, LatinHypercubeInit, SearchSpace};
+pub use lhs::{latin_hypercube, log_space};
+
 /// Errors of this crate.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -39,6 +69,41 @@ pub enum Error {
     /// An unknown parameter name.
     #[error("unknown parameter '{0}' (known: E, nu, yield_stress, plastic_viscosity, friction_angle, density)")]
     UnknownParam(String),
+    /// A search-space bound is not positive, finite and ordered.
+    #[error("parameter '{name}': search bounds [{lo}, {hi}] must be positive, finite and ordered (lo <= hi)")]
+    InvalidBounds {
+        /// The parameter's name.
+        name: String,
+        /// Lower bound.
+        lo: f64,
+        /// Upper bound.
+        hi: f64,
+    },
+    /// The search space is malformed (names and bounds differ in number, or a name repeats).
+    #[error("search space: {0}")]
+    InvalidSpace(String),
+    /// An extra initialisation candidate ([`LatinHypercubeInit::include`]) does not fit the
+    /// search space.
+    #[error("included initialisation candidate {position}: {message}")]
+    InvalidInclude {
+        /// Position in `include`.
+        position: usize,
+        /// What is wrong, naming the parameter.
+        message: String,
+    },
+    /// There is nothing to evaluate (no samples and no included candidates).
+    #[error("no initialisation candidates (candidates = 0 and nothing included)")]
+    NoCandidates,
+    /// Every initialisation candidate failed to evaluate.
+    #[error("all {count} initialisation candidates failed; first failure (candidate {index}): {message}")]
+    AllCandidatesFailed {
+        /// Number of candidates.
+        count: usize,
+        /// Index of the first (lowest-index) failed candidate.
+        index: usize,
+        /// Its error message.
+        message: String,
+    },
 }
 
 /// The learnable physical parameters of a part.
@@ -254,5 +319,123 @@ mod tests {
         );
         assert_eq!(ParamKind::parse("nu").unwrap(), ParamKind::PoissonRatio);
         assert!(ParamKind::parse("poisson").is_err());
+    }
+
+    /// Asserts `a == b` within `tol` relative to max(1, |b|).
+    fn close(a: f64, b: f64, tol: f64, what: &str) {
+        assert!(
+            (a - b).abs() <= tol * b.abs().max(1.0),
+            "{what}: {a} vs {b}"
+        );
+    }
+
+    #[test]
+    fn adamw_two_steps_by_hand() {
+        // lr 0.1, beta1 0.9, beta2 0.999, eps 1e-8, weight decay 0.01, no clipping.
+        // theta0 = [2, 4]: xi0 = [ln 2, ln 4] = [0.6931471805599453, 1.3862943611198906].
+        // Bounds: [0.5, 8] and [1, 4.5]; ln 4.5 = 1.5040773967762742.
+        let adam = AdamW {
+            lr: 0.1,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+            weight_decay: 0.01,
+        };
+        let mut o =
+            LogDomainOptimizer::new(vec![2.0, 4.0], vec![(0.5, 8.0), (1.0, 4.5)], adam, None)
+                .unwrap();
+
+        // Step 1: g_theta = [1.5, -0.4], g_xi = g_theta * theta = [3, -1.6];
+        // returned norm |g_xi| = sqrt(9 + 2.56) = sqrt(11.56) = 3.4.
+        let n1 = o.step(&[1.5, -0.4]);
+        close(n1, 3.4, 1e-15, "norm 1");
+        // Bias corrections: 1 - 0.9 = 0.1, 1 - 0.999 = 0.001.
+        // p0: m = 0.1 * 3 = 0.3, v = 0.001 * 9 = 0.009; m^ = 3, v^ = 9;
+        //     m^ / (sqrt v^ + eps) = 3 / (3 + 1e-8) = 0.9999999966666667;
+        //     decay lr * wd * xi: inside the bracket wd * xi0 = 0.006931471805599453;
+        //     xi1 = 0.6931471805599453 - 0.1 * (0.9999999966666667 + 0.006931471805599453)
+        //         = 0.5924540337127187 (inside [ln 0.5, ln 8]).
+        // p1: m = -0.16, v = 0.00256; m^ = -1.6, v^ = 2.56;
+        //     ratio = -1.6 / (1.6 + 1e-8) = -0.99999999375; wd * xi0 = 0.013862943611198907;
+        //     xi1 = 1.3862943611198906 - 0.1 * (-0.99999999375 + 0.013862943611198907)
+        //         = 1.4849080661337708 (inside [0, ln 4.5]).
+        close(o.xi[0], 0.5924540337127187, 1e-14, "xi1[0]");
+        close(o.xi[1], 1.4849080661337708, 1e-14, "xi1[1]");
+        close(o.m[0], 0.3, 1e-14, "m1[0]");
+        close(o.v[1], 0.00256, 1e-14, "v1[1]");
+        let t1 = o.theta();
+        close(t1[0], 1.80842090029581, 1e-13, "theta1[0]");
+        close(t1[1], 4.414559546595623, 1e-13, "theta1[1]");
+
+        // Step 2: choose g_theta so that g_xi = g_theta * theta1 = [1, -2];
+        // returned norm sqrt(1 + 4) = sqrt 5.
+        let n2 = o.step(&[1.0 / t1[0], -2.0 / t1[1]]);
+        close(n2, 5f64.sqrt(), 1e-14, "norm 2");
+        // Bias corrections: 1 - 0.9^2 = 0.19, 1 - 0.999^2 = 0.001999.
+        // p0: m = 0.9 * 0.3 + 0.1 * 1 = 0.37, v = 0.999 * 0.009 + 0.001 * 1 = 0.009991;
+        //     m^ = 0.37 / 0.19 = 1.9473684210526319, v^ = 0.009991 / 0.001999 = 4.99799899949982;
+        //     ratio = 1.9473684210526319 / (2.2356204...+ 1e-8) = 0.8710639468280398;
+        //     wd * xi1 = 0.005924540337127186;
+        //     xi2 = 0.5924540337127187 - 0.1 * (0.8710639468280398 + 0.005924540337127186)
+        //         = 0.504755184996202.
+        // p1: m = 0.9 * -0.16 + 0.1 * -2 = -0.344, v = 0.999 * 0.00256 + 0.001 * 4 = 0.00655744;
+        //     m^ = -1.810526315789474, v^ = 3.2803601800900926;
+        //     ratio = -0.9996410304514594; wd * xi1 = 0.014849080661337707;
+        //     xi2 = 1.4849080661337708 - 0.1 * (-0.9996410304514594 + 0.014849080661337707)
+        //         = 1.583387261112783 > ln 4.5: clamped to 1.5040773967762742 (theta = 4.5).
+        close(o.m[0], 0.37, 1e-14, "m2[0]");
+        close(o.v[0], 0.009991, 1e-14, "v2[0]");
+        close(o.m[1], -0.344, 1e-14, "m2[1]");
+        close(o.v[1], 0.00655744, 1e-14, "v2[1]");
+        close(o.xi[0], 0.504755184996202, 1e-14, "xi2[0]");
+        assert_eq!(o.xi[1], 4.5f64.ln(), "xi2[1] clamped to the upper bound");
+        close(o.theta()[0], 1.656579915195519, 1e-13, "theta2[0]");
+        close(o.theta()[1], 4.5, 1e-15, "theta2[1]");
+        assert_eq!(o.steps(), 2);
+    }
+
+    #[test]
+    fn gradient_norm_clipping_scales_to_the_clip_norm() {
+        // theta = 1 (xi = 0) so g_xi = g_theta; no weight decay so xi moves by Adam alone.
+        let bounds = vec![(1e-3, 1e3), (1e-3, 1e3)];
+        let adam = AdamW {
+            lr: 0.1,
+            ..Default::default()
+        };
+        let mut clipped =
+            LogDomainOptimizer::new(vec![1.0, 1.0], bounds.clone(), adam, Some(1.0)).unwrap();
+        let mut free = LogDomainOptimizer::new(vec![1.0, 1.0], bounds.clone(), adam, None).unwrap();
+        // g_xi = [3, -4], |g_xi| = 5 > 1: scaled by 1/5 to [0.6, -0.8] (norm 1).
+        let n = clipped.step(&[3.0, -4.0]);
+        assert_eq!(n, 5.0, "the returned norm is the pre-clip norm");
+        assert_eq!(free.step(&[3.0, -4.0]), 5.0);
+        // The moments saw the clipped gradient: m = 0.1 g, v = 0.001 g^2.
+        close(clipped.m[0], 0.06, 1e-15, "m[0]");
+        close(clipped.m[1], -0.08, 1e-15, "m[1]");
+        close(clipped.v[0], 0.001 * 0.36, 1e-15, "v[0]");
+        close(clipped.v[1], 0.001 * 0.64, 1e-15, "v[1]");
+        // First Adam step: m^ / sqrt v^ = sign(g), so the step is unchanged in direction and
+        // (up to eps) in size: xi = -lr * g / (|g| + eps).
+        close(clipped.xi[0], -0.1 * 0.6 / (0.6 + 1e-8), 1e-15, "xi[0]");
+        close(clipped.xi[1], 0.1 * 0.8 / (0.8 + 1e-8), 1e-15, "xi[1]");
+        for i in 0..2 {
+            close(clipped.xi[i], free.xi[i], 1e-7, "clipped vs free step");
+        }
+        // With a large eps the first step shows the magnitudes: g / (|g| + 1) with the clipped
+        // g is 0.6 / 1.6 = 0.375 and -0.8 / 1.8 = -0.4444...
+        let big_eps = AdamW { eps: 1.0, ..adam };
+        let mut o =
+            LogDomainOptimizer::new(vec![1.0, 1.0], bounds.clone(), big_eps, Some(1.0)).unwrap();
+        o.step(&[3.0, -4.0]);
+        close(o.xi[0], -0.1 * 0.375, 1e-15, "xi[0] (eps 1)");
+        close(o.xi[1], 0.1 * 0.8 / 1.8, 1e-15, "xi[1] (eps 1)");
+        // Below the clip norm nothing changes: g = [0.3, -0.4], norm 0.5.
+        let mut a =
+            LogDomainOptimizer::new(vec![1.0, 1.0], bounds.clone(), big_eps, Some(1.0)).unwrap();
+        let mut b = LogDomainOptimizer::new(vec![1.0, 1.0], bounds, big_eps, None).unwrap();
+        close(a.step(&[0.3, -0.4]), 0.5, 1e-15, "norm below clip");
+        b.step(&[0.3, -0.4]);
+        assert_eq!(a.xi, b.xi);
+        assert_eq!(a.m, b.m);
     }
 }

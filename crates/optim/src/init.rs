@@ -1,0 +1,644 @@
+//! Simulation-driven initialisation (the paper's Sec. 3.3): sample candidate parameter vectors
+//! over the search space, score each by simulating and comparing with the reference video,
+//! and start the gradient-based fit from the best.
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::lhs::{latin_hypercube, log_space};
+use crate::{Error, ParamKind};
+
+/// Named positive bounds for a flat vector of parameters (the order the caller's `evaluate`
+/// expects).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SearchSpace {
+    /// Parameter names, used in error messages and reports.
+    pub names: Vec<String>,
+    /// `(lo, hi)` per parameter: positive, finite, `lo <= hi`.
+    pub bounds: Vec<(f64, f64)>,
+}
+
+impl SearchSpace {
+    /// A validated search space (see [`SearchSpace::validate`]).
+    pub fn new(names: Vec<String>, bounds: Vec<(f64, f64)>) -> Result<Self, Error> {
+        let space = SearchSpace { names, bounds };
+        space.validate()?;
+        Ok(space)
+    }
+
+    /// The given kinds with their [`ParamKind::default_bounds`], named by [`ParamKind::name`].
+    pub fn from_kinds(kinds: &[ParamKind]) -> Result<Self, Error> {
+        SearchSpace::new(
+            kinds.iter().map(|k| k.name().to_string()).collect(),
+            kinds.iter().map(|k| k.default_bounds()).collect(),
+        )
+    }
+
+    /// Checks one bound per name, no duplicate names, and bounds that are positive, finite
+    /// and ordered.
+    pub fn validate(&self) -> Result<(), Error> {
+        if self.names.len() != self.bounds.len() {
+            return Err(Error::InvalidSpace(format!(
+                "{} parameter names but {} bounds",
+                self.names.len(),
+                self.bounds.len()
+            )));
+        }
+        for (i, name) in self.names.iter().enumerate() {
+            if self.names[..i].contains(name) {
+                return Err(Error::InvalidSpace(format!(
+                    "parameter '{name}' appears more than once"
+                )));
+            }
+        }
+        for (name, &(lo, hi)) in self.names.iter().zip(&self.bounds) {
+            if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
+                return Err(Error::InvalidBounds {
+                    name: name.clone(),
+                    lo,
+                    hi,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Number of parameters.
+    pub fn dims(&self) -> usize {
+        self.bounds.len()
+    }
+
+    /// Whether `theta` has one value per parameter, each within its closed bounds.
+    pub fn contains(&self, theta: &[f64]) -> bool {
+        theta.len() == self.bounds.len()
+            && theta
+                .iter()
+                .zip(&self.bounds)
+                .all(|(&t, &(lo, hi))| lo <= t && t <= hi)
+    }
+}
+
+/// One evaluated candidate.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Candidate {
+    /// Position in the sample order ([`InitOutcome::candidates`]); also the first argument
+    /// `evaluate` received.
+    pub index: usize,
+    /// The parameter vector, in the search space's order.
+    pub theta: Vec<f64>,
+    /// Score (higher is better); `None` when the evaluation failed.
+    pub score: Option<f64>,
+    /// Why the evaluation failed (the evaluator's message, or "score is NaN"); `None` when it
+    /// succeeded.
+    pub error: Option<String>,
+}
+
+/// The result of an initialisation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InitOutcome {
+    /// Every candidate, in sample order (`candidates[i].index == i`).
+    pub candidates: Vec<Candidate>,
+    /// Indices of the scored candidates, best (highest score) first; equal scores keep the
+    /// lower index first. Failed candidates are absent.
+    pub ranking: Vec<usize>,
+    /// The first `top_k` entries of `ranking` (fewer when fewer candidates were scored).
+    pub top_k: Vec<usize>,
+    /// The best candidate's parameters (`candidates[ranking[0]].theta`).
+    pub best: Vec<f64>,
+}
+
+impl InitOutcome {
+    /// Ranks evaluated candidates (`candidates[i].index == i`, which this asserts): a
+    /// candidate counts as scored when its score is `Some` and not NaN. Fails with
+    /// [`Error::AllCandidatesFailed`] when none is scored (reporting the failure with the
+    /// lowest index) and [`Error::NoCandidates`] when `candidates` is empty.
+    pub fn from_candidates(candidates: Vec<Candidate>, top_k: usize) -> Result<Self, Error> {
+        for (i, c) in candidates.iter().enumerate() {
+            assert_eq!(c.index, i, "candidates must be in index order");
+        }
+        let score = |c: &Candidate| c.score.filter(|s| !s.is_nan());
+        let mut ranking: Vec<usize> = candidates
+            .iter()
+            .filter(|c| score(c).is_some())
+            .map(|c| c.index)
+            .collect();
+        if ranking.is_empty() {
+            let Some(first) = candidates.first() else {
+                return Err(Error::NoCandidates);
+            };
+            return Err(Error::AllCandidatesFailed {
+                count: candidates.len(),
+                index: first.index,
+                message: first
+                    .error
+                    .clone()
+                    .unwrap_or_else(|| "score is NaN or missing".to_string()),
+            });
+        }
+        // Stable sort, so equal scores keep the lower index first. No NaN is left, so
+        // partial_cmp is total here (and -0.0 ties with 0.0).
+        ranking.sort_by(|&a, &b| {
+            let (sa, sb) = (
+                score(&candidates[a]).unwrap(),
+                score(&candidates[b]).unwrap(),
+            );
+            sb.partial_cmp(&sa).expect("NaN scores were filtered out")
+        });
+        let top_k = ranking[..top_k.min(ranking.len())].to_vec();
+        let best = candidates[ranking[0]].theta.clone();
+        Ok(InitOutcome {
+            candidates,
+            ranking,
+            top_k,
+            best,
+        })
+    }
+
+    /// The candidates of [`InitOutcome::top_k`], best first.
+    pub fn top_candidates(&self) -> Vec<&Candidate> {
+        self.top_k.iter().map(|&i| &self.candidates[i]).collect()
+    }
+
+    /// The failed candidates, in sample order.
+    pub fn failed(&self) -> impl Iterator<Item = &Candidate> + '_ {
+        self.candidates
+            .iter()
+            .filter(|c| c.score.is_none_or(f64::is_nan))
+    }
+}
+
+/// The evaluator an [`Initializer`] calls: `evaluate(index, theta)` returns the candidate's
+/// score (higher is better) or why it failed. `&Evaluate<'_>` is
+/// `&(dyn Fn(usize, &[f64]) -> Result<f64, String> + Sync)`; closures may borrow.
+pub type Evaluate<'a> = dyn Fn(usize, &[f64]) -> Result<f64, String> + Sync + 'a;
+
+/// Chooses a starting point for the fit by evaluating candidates over a [`SearchSpace`].
+pub trait Initializer {
+    /// Evaluates candidates with `evaluate(index, theta)`, which returns a score (higher is
+    /// better, e.g. MS-SSIM of the simulated render against the reference video) or an error
+    /// message. A failed candidate (an `Err`, or a NaN score) is recorded and skipped; the
+    /// initialisation fails only when every candidate fails
+    /// ([`Error::AllCandidatesFailed`]) or the space or configuration is invalid.
+    fn initialize(
+        &self,
+        space: &SearchSpace,
+        evaluate: &Evaluate<'_>,
+    ) -> Result<InitOutcome, Error>;
+}
+
+/// Latin hypercube initialisation: `candidates` points of a seeded Latin hypercube
+/// ([`latin_hypercube`]), mapped into the bounds in log10 space ([`log_space`], so every
+/// decade of a wide range is sampled alike), plus the `include` points; all are evaluated and
+/// ranked.
+///
+/// Candidate `i < candidates` is Latin hypercube point `i`; the `include` points follow, in
+/// their order. The outcome depends only on the space, `candidates`, `seed`, `include`,
+/// `top_k` and the evaluator's results, not on `parallel` or thread scheduling.
+///
+/// With `parallel`, candidates are evaluated on rayon's current thread pool (run inside
+/// `ThreadPool::install` to limit the threads); set it to `false` when the evaluator is not
+/// worth running concurrently (e.g. it holds one GPU queue). A panic in `evaluate` is not
+/// caught: it propagates to the caller.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LatinHypercubeInit {
+    /// Number of Latin hypercube samples (the paper's N = 32).
+    pub candidates: usize,
+    /// Seed of the sampler.
+    pub seed: u64,
+    /// How many of the best candidates [`InitOutcome::top_k`] lists (default 4).
+    pub top_k: usize,
+    /// Evaluate candidates concurrently with rayon (default `true`).
+    pub parallel: bool,
+    /// Extra candidates evaluated too, e.g. the user's starting point: each must have one
+    /// positive finite value per parameter, within the bounds. Default: none.
+    pub include: Vec<Vec<f64>>,
+}
+
+impl Default for LatinHypercubeInit {
+    fn default() -> Self {
+        LatinHypercubeInit {
+            candidates: 32,
+            seed: 0,
+            top_k: 4,
+            parallel: true,
+            include: Vec::new(),
+        }
+    }
+}
+
+impl LatinHypercubeInit {
+    /// The candidate parameter vectors, in sample order, without evaluating them. Fails on an
+    /// invalid space, an `include` point that does not fit it, or no candidates at all.
+    pub fn sample(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
+        space.validate()?;
+        for (j, p) in self.include.iter().enumerate() {
+            if p.len() != space.dims() {
+                return Err(Error::InvalidInclude {
+                    position: j,
+                    message: format!(
+                        "{} values for {} parameters ({})",
+                        p.len(),
+                        space.dims(),
+                        space.names.join(", ")
+                    ),
+                });
+            }
+            for ((&t, &(lo, hi)), name) in p.iter().zip(&space.bounds).zip(&space.names) {
+                if !(t.is_finite() && lo <= t && t <= hi) {
+                    return Err(Error::InvalidInclude {
+                        position: j,
+                        message: format!("parameter '{name}' = {t} is outside [{lo}, {hi}]"),
+                    });
+                }
+            }
+        }
+        let mut points: Vec<Vec<f64>> = latin_hypercube(self.candidates, space.dims(), self.seed)
+            .into_iter()
+            .map(|u| {
+                u.iter()
+                    .zip(&space.bounds)
+                    .map(|(&u, &(lo, hi))| log_space(u, lo, hi))
+                    .collect()
+            })
+            .collect();
+        points.extend(self.include.iter().cloned());
+        if points.is_empty() {
+            return Err(Error::NoCandidates);
+        }
+        Ok(points)
+    }
+
+    /// [`Initializer::initialize`] with a progress hook: `on_done` is called once per
+    /// candidate as soon as its evaluation finishes (from the evaluating thread, so in
+    /// completion order when `parallel`).
+    pub fn initialize_with(
+        &self,
+        space: &SearchSpace,
+        evaluate: &Evaluate<'_>,
+        on_done: &(dyn Fn(&Candidate) + Sync),
+    ) -> Result<InitOutcome, Error> {
+        let points = self.sample(space)?;
+        let run = |(index, theta): (usize, Vec<f64>)| -> Candidate {
+            let (score, error) = match evaluate(index, &theta) {
+                Ok(s) if s.is_nan() => (None, Some("score is NaN".to_string())),
+                Ok(s) => (Some(s), None),
+                Err(e) => (None, Some(e)),
+            };
+            let c = Candidate {
+                index,
+                theta,
+                score,
+                error,
+            };
+            on_done(&c);
+            c
+        };
+        // Both paths collect in index order.
+        let candidates: Vec<Candidate> = if self.parallel {
+            points.into_par_iter().enumerate().map(&run).collect()
+        } else {
+            points.into_iter().enumerate().map(&run).collect()
+        };
+        InitOutcome::from_candidates(candidates, self.top_k)
+    }
+}
+
+impl Initializer for LatinHypercubeInit {
+    fn initialize(
+        &self,
+        space: &SearchSpace,
+        evaluate: &Evaluate<'_>,
+    ) -> Result<InitOutcome, Error> {
+        self.initialize_with(space, evaluate, &|_| {})
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+
+    fn space3() -> SearchSpace {
+        SearchSpace::new(
+            vec!["E".into(), "yield_stress".into(), "density".into()],
+            vec![(1e3, 1e7), (1e2, 1e6), (1e2, 1e4)],
+        )
+        .unwrap()
+    }
+
+    /// Peak at E = 1e5, yield stress = 1e4, density = 1e3 (in log10 units).
+    fn peak(_: usize, t: &[f64]) -> Result<f64, String> {
+        let target = [5.0, 4.0, 3.0];
+        Ok(-t
+            .iter()
+            .zip(target)
+            .map(|(x, c)| (x.log10() - c).powi(2))
+            .sum::<f64>())
+    }
+
+    #[test]
+    fn search_space_validation_names_the_parameter() {
+        let e = SearchSpace::new(vec!["E".into(), "nu".into()], vec![(1e3, 1e7), (0.0, 0.49)])
+            .unwrap_err();
+        assert!(matches!(&e, Error::InvalidBounds { name, .. } if name == "nu"));
+        assert!(e.to_string().contains("'nu'"), "{e}");
+        for bad in [
+            (-1.0, 2.0),
+            (2.0, 1.0),
+            (1.0, f64::INFINITY),
+            (f64::NAN, 1.0),
+        ] {
+            let e = SearchSpace::new(vec!["density".into()], vec![bad]).unwrap_err();
+            assert!(e.to_string().contains("'density'"), "{e}");
+        }
+        let e = SearchSpace::new(vec!["E".into()], vec![]).unwrap_err();
+        assert!(matches!(e, Error::InvalidSpace(_)), "{e}");
+        let e = SearchSpace::new(vec!["E".into(), "E".into()], vec![(1.0, 2.0); 2]).unwrap_err();
+        assert!(e.to_string().contains("'E'"), "{e}");
+        // An invalid space built by hand is caught by the initialiser too.
+        let raw = SearchSpace {
+            names: vec!["E".into()],
+            bounds: vec![(0.0, 1.0)],
+        };
+        assert!(LatinHypercubeInit::default()
+            .initialize(&raw, &peak)
+            .is_err());
+        let k = SearchSpace::from_kinds(&ParamKind::ALL).unwrap();
+        assert_eq!(k.dims(), 6);
+        assert_eq!(k.names[1], "nu");
+        assert_eq!(k.bounds[1], (0.01, 0.49));
+    }
+
+    #[test]
+    fn every_candidate_respects_the_bounds() {
+        let space = SearchSpace::from_kinds(&ParamKind::ALL).unwrap();
+        for (n, seed) in [(1usize, 0u64), (7, 1), (32, 2), (200, 3)] {
+            let init = LatinHypercubeInit {
+                candidates: n,
+                seed,
+                ..Default::default()
+            };
+            let pts = init.sample(&space).unwrap();
+            assert_eq!(pts.len(), n);
+            for p in &pts {
+                assert!(space.contains(p), "{p:?}");
+            }
+            // One candidate per log10 stratum in every dimension.
+            for (d, &(lo, hi)) in space.bounds.iter().enumerate() {
+                let mut strata: Vec<usize> = pts
+                    .iter()
+                    .map(|p| {
+                        let u = (p[d].log10() - lo.log10()) / (hi.log10() - lo.log10());
+                        ((u * n as f64).floor() as usize).min(n - 1)
+                    })
+                    .collect();
+                strata.sort();
+                // Rounding in log10/pow can move a point across a stratum edge by ~1 ulp, so
+                // allow a neighbour; the exact property is tested on the unit hypercube.
+                for (k, s) in strata.iter().enumerate() {
+                    assert!(s.abs_diff(k) <= 1, "dim {d}: stratum {s} at rank {k}");
+                }
+            }
+        }
+        // Degenerate bounds give the bound itself.
+        let fixed = SearchSpace::new(vec!["nu".into()], vec![(0.3, 0.3)]).unwrap();
+        let pts = LatinHypercubeInit::default().sample(&fixed).unwrap();
+        assert!(pts.iter().all(|p| p == &vec![0.3]));
+    }
+
+    #[test]
+    fn picks_the_best_of_a_known_score_function() {
+        let space = space3();
+        let init = LatinHypercubeInit {
+            candidates: 64,
+            seed: 11,
+            ..Default::default()
+        };
+        let out = init.initialize(&space, &peak).unwrap();
+        assert_eq!(out.candidates.len(), 64);
+        assert_eq!(out.ranking.len(), 64);
+        assert_eq!(out.top_k.len(), 4);
+        assert_eq!(out.top_k[..], out.ranking[..4]);
+        // Brute force: the best is the arg max of the scores, the ranking is sorted.
+        let scores: Vec<f64> = out.candidates.iter().map(|c| c.score.unwrap()).collect();
+        let argmax = (0..64).fold(0, |b, i| if scores[i] > scores[b] { i } else { b });
+        assert_eq!(out.ranking[0], argmax);
+        assert_eq!(out.best, out.candidates[argmax].theta);
+        assert!(out.ranking.windows(2).all(|w| scores[w[0]] >= scores[w[1]]));
+        for (i, c) in out.candidates.iter().enumerate() {
+            assert_eq!(c.index, i);
+            assert_eq!(c.score, peak(i, &c.theta).ok());
+            assert!(c.error.is_none());
+        }
+        // Each stratum is 1/64 of the range (4, 4 and 2 decades): the best point is close to
+        // the peak in every coordinate only if the sampler covers the space.
+        let d = peak(0, &out.best).unwrap();
+        assert!(d > -1.0, "best score {d}, best {:?}", out.best);
+        assert_eq!(out.top_candidates().len(), 4);
+        assert_eq!(out.top_candidates()[0].theta, out.best);
+        assert_eq!(out.failed().count(), 0);
+        // The outcome round-trips through serde.
+        let json = serde_json::to_string(&out).unwrap();
+        let back: InitOutcome = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, out);
+    }
+
+    #[test]
+    fn parallel_equals_sequential_and_include_is_evaluated() {
+        let space = space3();
+        let start = vec![1e5, 1e4, 1e3];
+        let base = LatinHypercubeInit {
+            candidates: 40,
+            seed: 5,
+            top_k: 6,
+            parallel: false,
+            include: vec![start.clone()],
+        };
+        // Some failures, a slow candidate so completion order differs from index order.
+        let eval = |i: usize, t: &[f64]| -> Result<f64, String> {
+            if i % 7 == 3 {
+                return Err(format!("candidate {i} exploded"));
+            }
+            if i % 11 == 4 {
+                return Ok(f64::NAN);
+            }
+            if i == 0 {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            peak(i, t)
+        };
+        let seq = base.initialize(&space, &eval).unwrap();
+        let par_init = LatinHypercubeInit {
+            parallel: true,
+            ..base.clone()
+        };
+        let order = Mutex::new(Vec::new());
+        let par = par_init
+            .initialize_with(&space, &eval, &|c| order.lock().unwrap().push(c.index))
+            .unwrap();
+        assert_eq!(seq, par);
+        let mut order = order.into_inner().unwrap();
+        order.sort();
+        assert_eq!(order, (0..41).collect::<Vec<_>>());
+        // The included start is candidate 40, is the exact peak, so it wins.
+        assert_eq!(seq.candidates[40].theta, start);
+        assert_eq!(seq.ranking[0], 40);
+        assert_eq!(seq.best, start);
+        // The LHS part is the same as without `include`, and a different seed changes it.
+        let no_inc = LatinHypercubeInit {
+            include: vec![],
+            ..base.clone()
+        };
+        let lhs_part: Vec<Vec<f64>> = seq.candidates[..40]
+            .iter()
+            .map(|c| c.theta.clone())
+            .collect();
+        assert_eq!(no_inc.sample(&space).unwrap(), lhs_part);
+        let other = LatinHypercubeInit { seed: 6, ..no_inc };
+        assert_ne!(other.sample(&space).unwrap(), lhs_part);
+    }
+
+    #[test]
+    fn failures_are_recorded_and_skipped() {
+        let space = space3();
+        let init = LatinHypercubeInit {
+            candidates: 20,
+            seed: 1,
+            top_k: 30,
+            ..Default::default()
+        };
+        let calls = AtomicUsize::new(0);
+        let eval = |i: usize, t: &[f64]| -> Result<f64, String> {
+            calls.fetch_add(1, Ordering::Relaxed);
+            match i % 4 {
+                0 => Err(format!("simulation exploded at step {i}")),
+                1 => Ok(f64::NAN),
+                _ => peak(i, t),
+            }
+        };
+        let out = init.initialize(&space, &eval).unwrap();
+        assert_eq!(calls.load(Ordering::Relaxed), 20);
+        assert_eq!(out.candidates.len(), 20);
+        assert_eq!(out.ranking.len(), 10);
+        // top_k larger than the scored count: all of them.
+        assert_eq!(out.top_k, out.ranking);
+        assert!(out.ranking.iter().all(|&i| i % 4 >= 2));
+        let failed: Vec<usize> = out.failed().map(|c| c.index).collect();
+        assert_eq!(failed, (0..20).filter(|i| i % 4 < 2).collect::<Vec<_>>());
+        assert_eq!(
+            out.candidates[4].error.as_deref(),
+            Some("simulation exploded at step 4")
+        );
+        assert_eq!(out.candidates[5].error.as_deref(), Some("score is NaN"));
+        assert_eq!(out.candidates[5].score, None);
+    }
+
+    #[test]
+    fn all_failed_is_a_typed_error_with_the_first_failure() {
+        let space = space3();
+        for parallel in [false, true] {
+            let init = LatinHypercubeInit {
+                candidates: 8,
+                parallel,
+                ..Default::default()
+            };
+            let eval = |i: usize, _: &[f64]| -> Result<f64, String> {
+                if i == 2 {
+                    Ok(f64::NAN)
+                } else {
+                    Err(format!("exploded (candidate {i})"))
+                }
+            };
+            let e = init.initialize(&space, &eval).unwrap_err();
+            match &e {
+                Error::AllCandidatesFailed {
+                    count,
+                    index,
+                    message,
+                } => {
+                    assert_eq!((*count, *index), (8, 0));
+                    assert_eq!(message, "exploded (candidate 0)");
+                }
+                other => panic!("unexpected error {other:?}"),
+            }
+            assert!(e.to_string().contains("all 8"), "{e}");
+        }
+        let none = LatinHypercubeInit {
+            candidates: 0,
+            ..Default::default()
+        };
+        assert!(matches!(
+            none.initialize(&space, &peak),
+            Err(Error::NoCandidates)
+        ));
+    }
+
+    #[test]
+    fn ties_keep_the_lower_index_first() {
+        let space = space3();
+        let init = LatinHypercubeInit {
+            candidates: 12,
+            ..Default::default()
+        };
+        // Scores 0, 1, 2, 0, 1, 2, ... with -0.0 tying with 0.0.
+        let eval = |i: usize, _: &[f64]| -> Result<f64, String> {
+            Ok(match i % 3 {
+                0 if i % 2 == 1 => -0.0,
+                r => r as f64,
+            })
+        };
+        let out = init.initialize(&space, &eval).unwrap();
+        assert_eq!(out.ranking, vec![2, 5, 8, 11, 1, 4, 7, 10, 0, 3, 6, 9]);
+        assert_eq!(out.top_k, vec![2, 5, 8, 11]);
+        assert_eq!(out.best, out.candidates[2].theta);
+    }
+
+    #[test]
+    fn bad_include_points_are_rejected_by_name() {
+        let space = space3();
+        let wrong_len = LatinHypercubeInit {
+            include: vec![vec![1e5, 1e4]],
+            ..Default::default()
+        };
+        let e = wrong_len.sample(&space).unwrap_err();
+        assert!(
+            matches!(e, Error::InvalidInclude { position: 0, .. }),
+            "{e}"
+        );
+        let outside = LatinHypercubeInit {
+            include: vec![vec![1e5, 1e4, 1e3], vec![1e5, 1e4, 5e4]],
+            ..Default::default()
+        };
+        let e = outside.sample(&space).unwrap_err();
+        assert!(
+            matches!(e, Error::InvalidInclude { position: 1, .. }),
+            "{e}"
+        );
+        assert!(e.to_string().contains("'density'"), "{e}");
+        // Only included points, no samples.
+        let only = LatinHypercubeInit {
+            candidates: 0,
+            include: vec![vec![1e5, 1e4, 1e3]],
+            ..Default::default()
+        };
+        let out = only.initialize(&space, &peak).unwrap();
+        assert_eq!(out.best, vec![1e5, 1e4, 1e3]);
+    }
+
+    #[test]
+    fn config_deserialises_with_defaults() {
+        let c: LatinHypercubeInit = serde_json::from_str(r#"{"seed": 3}"#).unwrap();
+        assert_eq!(
+            c,
+            LatinHypercubeInit {
+                seed: 3,
+                ..Default::default()
+            }
+        );
+        assert_eq!(c.candidates, 32);
+        assert_eq!(c.top_k, 4);
+        assert!(c.parallel);
+    }
+}

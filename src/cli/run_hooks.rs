@@ -1,0 +1,210 @@
+//! Progress bars, `log.jsonl`, `init.json` and `checkpoint.json` for `r4d fit` and
+//! `r4d demo`.
+
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use r4d_mpm::PartParams;
+use r4d_optim::{Candidate, InitOutcome};
+use resonance4d::video_fit::report::write_json;
+use resonance4d::video_fit::{FitConfig, FitHooks, FitState, IterRecord};
+use std::io::{BufRead, IsTerminal, Write};
+use std::path::{Path, PathBuf};
+
+/// The hooks of a run folder.
+pub struct RunHooks {
+    dir: PathBuf,
+    log_file: std::fs::File,
+    /// The iteration records (those of an earlier, resumed run included).
+    pub log: Vec<IterRecord>,
+    bar: ProgressBar,
+    init_bar: ProgressBar,
+    error: Option<anyhow::Error>,
+}
+
+fn bar(len: u64, template: &str) -> ProgressBar {
+    let b = if std::io::stderr().is_terminal() {
+        ProgressBar::new(len)
+    } else {
+        ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden())
+    };
+    b.set_style(ProgressStyle::with_template(template).expect("valid template"));
+    b
+}
+
+impl RunHooks {
+    /// Opens `dir/log.jsonl`; when resuming keeps its first `iters_done` records.
+    pub fn new(dir: &Path, cfg: &FitConfig, resume: Option<&FitState>) -> Result<Self> {
+        let path = dir.join("log.jsonl");
+        let keep = resume.map_or(0, |s| s.iters_done);
+        let mut log = Vec::new();
+        if keep > 0 {
+            let f = std::fs::File::open(&path)
+                .with_context(|| format!("resuming: reading {}", path.display()))?;
+            for line in std::io::BufReader::new(f).lines().take(keep) {
+                log.push(
+                    serde_json::from_str(&line?)
+                        .with_context(|| format!("{}: bad record", path.display()))?,
+                );
+            }
+        }
+        // Rewrite the kept records: a run killed after logging but before checkpointing
+        // leaves extra lines that the resumed run writes again.
+        let mut log_file =
+            std::fs::File::create(&path).with_context(|| format!("writing {}", path.display()))?;
+        for r in &log {
+            writeln!(log_file, "{}", serde_json::to_string(r)?)?;
+        }
+        let b = bar(
+            cfg.iters as u64,
+            "{bar:40} iter {pos}/{len} [{elapsed} < {eta}] {msg}",
+        );
+        b.set_position(keep as u64);
+        Ok(RunHooks {
+            dir: dir.to_path_buf(),
+            log_file,
+            log,
+            bar: b,
+            init_bar: bar(
+                (cfg.init.candidates + usize::from(cfg.init.include_start)) as u64,
+                "{bar:40} init candidate {pos}/{len} [{elapsed} < {eta}] {msg}",
+            ),
+            error: None,
+        })
+    }
+
+    fn keep(&mut self, r: Result<()>) {
+        if let Err(e) = r {
+            self.error.get_or_insert(e);
+        }
+    }
+
+    /// Clears the bars; returns the first I/O error a hook met.
+    pub fn finish(&mut self) -> Result<()> {
+        self.bar.finish_and_clear();
+        match self.error.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+}
+
+impl FitHooks for RunHooks {
+    fn on_candidate(&mut self, c: &Candidate) {
+        self.init_bar.inc(1);
+        match (c.score, &c.error) {
+            (Some(s), _) => self
+                .init_bar
+                .set_message(format!("#{} MS-SSIM {s:.4}", c.index)),
+            (None, Some(e)) => self
+                .init_bar
+                .set_message(format!("#{} failed: {e}", c.index)),
+            _ => {}
+        }
+    }
+
+    fn on_init(&mut self, o: &InitOutcome, names: &[String]) {
+        self.init_bar.finish_and_clear();
+        let mut lines = vec![format!(
+            "initialisation: {} candidates, {} failed; top {}:",
+            o.candidates.len(),
+            o.failed().count(),
+            o.top_k.len()
+        )];
+        for c in o.top_candidates() {
+            let vals: Vec<String> = names
+                .iter()
+                .zip(&c.theta)
+                .map(|(n, v)| format!("{n}={v:.4e}"))
+                .collect();
+            lines.push(format!(
+                "  #{:<3} MS-SSIM {:.4}  {}",
+                c.index,
+                c.score.unwrap_or(f64::NAN),
+                vals.join(" ")
+            ));
+        }
+        eprintln!("{}", lines.join("\n"));
+        let r = write_json(
+            &self.dir.join("init.json"),
+            &serde_json::json!({ "names": names, "outcome": o }),
+        )
+        .map_err(anyhow::Error::from);
+        self.keep(r);
+    }
+
+    fn on_iter(&mut self, r: &IterRecord) {
+        self.bar.inc(1);
+        self.bar
+            .set_message(format!("loss {:.4e} |g| {:.2e}", r.loss.total, r.grad_norm));
+        if self.bar.is_hidden() {
+            eprintln!(
+                "iter {:>4}: loss {:.5e}  |grad| {:.3e}  {:.1} s",
+                r.iter, r.loss.total, r.grad_norm, r.time_s
+            );
+        }
+        let line = serde_json::to_string(r).map_err(anyhow::Error::from);
+        let res = line.and_then(|l| {
+            writeln!(self.log_file, "{l}")?;
+            self.log_file.flush()?;
+            Ok(())
+        });
+        self.keep(res);
+        self.log.push(r.clone());
+    }
+
+    fn on_checkpoint(&mut self, s: &FitState) {
+        let r = write_json(&self.dir.join("checkpoint.json"), s).map_err(anyhow::Error::from);
+        self.keep(r);
+    }
+}
+
+/// A table of parameters per part: start and fit, and truth with relative errors when
+/// given.
+pub fn param_table(
+    init: &[PartParams],
+    fit: &[PartParams],
+    truth: Option<&[PartParams]>,
+) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    type Quantity = (&'static str, fn(&PartParams) -> f64);
+    let rows: [Quantity; 3] = [
+        ("E (Pa)", |p| p.youngs_modulus_pa),
+        ("density", |p| p.density_kg_m3),
+        ("E/density", |p| p.youngs_modulus_pa / p.density_kg_m3),
+    ];
+    let _ = match truth {
+        Some(_) => writeln!(
+            s,
+            "{:<6} {:<10} {:>12} {:>12} {:>9} {:>12} {:>9}",
+            "part", "quantity", "truth", "init", "init err", "fit", "fit err"
+        ),
+        None => writeln!(
+            s,
+            "{:<6} {:<10} {:>12} {:>12}",
+            "part", "quantity", "init", "fit"
+        ),
+    };
+    for (i, (a, b)) in init.iter().zip(fit).enumerate() {
+        for (name, f) in rows {
+            let _ = match truth {
+                Some(t) => {
+                    let tv = f(&t[i]);
+                    writeln!(
+                        s,
+                        "{:<6} {:<10} {:>12.4e} {:>12.4e} {:>8.1}% {:>12.4e} {:>8.2}%",
+                        i,
+                        name,
+                        tv,
+                        f(a),
+                        100.0 * (f(a) - tv) / tv,
+                        f(b),
+                        100.0 * (f(b) - tv) / tv
+                    )
+                }
+                None => writeln!(s, "{:<6} {:<10} {:>12.4e} {:>12.4e}", i, name, f(a), f(b)),
+            };
+        }
+    }
+    s
+}

@@ -1,0 +1,294 @@
+//! Settings of a video fit (`r4d fit --config FIT.toml`). Every key is optional.
+//!
+//! ```toml
+//! iters = 40              # AdamW iterations
+//! lr = 0.1                # learning rate in log units per step
+//! lr_schedule = "cosine"  # or "constant"; cosine decays to 5% of lr
+//! beta1 = 0.7
+//! beta2 = 0.99
+//! weight_decay = 0.0      # decoupled, on xi = log(theta)
+//! clip_norm = 1.0         # gradient-norm clip in log space (0: off)
+//! granularity = "part"    # "object" or "particle" (the paper's ablation)
+//! checkpointing = "per_frame"  # "store_all" or "every_n:K"
+//! precision = "f64"       # or "f32"
+//! frames = 16             # video frames fitted (default: all)
+//! checkpoint_every = 1    # iterations between checkpoints
+//! free = ["E", "density"] # free parameters of every part (default: by material)
+//!
+//! [loss]                  # the DMS loss (r4d_loss::DmsConfig); ablations:
+//! weights = { l1 = 0.0, spatial = 1.0, mag = 1.0, phase = 1.0 }
+//!
+//! [init]                  # simulation-driven initialisation
+//! enabled = true
+//! candidates = 32         # Latin hypercube samples in log10 space
+//! frames = 16             # frames simulated per candidate
+//! seed = 0
+//! top_k = 4
+//!
+//! [[parts]]               # per-part overrides
+//! id = 0
+//! free = ["E", "nu", "density"]
+//! bounds = { E = [1e4, 1e6] }
+//! ```
+
+use super::params::{default_free, Granularity};
+use super::problem::Precision;
+use super::FitError;
+use r4d_loss::DmsConfig;
+use r4d_mpm::adjoint::checkpoint::Checkpointing;
+use r4d_mpm::PartParams;
+use r4d_optim::{AdamW, ParamKind};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Learning-rate schedule.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LrSchedule {
+    /// The same rate every iteration.
+    Constant,
+    /// Cosine decay from `lr` to 5% of it over the run (default).
+    #[default]
+    Cosine,
+}
+
+/// The simulation-driven initialisation (paper Sec. 3.3).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InitConfig {
+    /// Run it (otherwise the fit starts from the simulation config's parameters).
+    pub enabled: bool,
+    /// Latin hypercube candidates (the paper: 32).
+    pub candidates: usize,
+    /// Video frames simulated and compared per candidate (the paper: 16).
+    pub frames: usize,
+    /// Seed of the sampler.
+    pub seed: u64,
+    /// Best candidates kept in the log.
+    pub top_k: usize,
+    /// Also evaluate the simulation config's parameters as a candidate.
+    pub include_start: bool,
+}
+
+impl Default for InitConfig {
+    fn default() -> Self {
+        InitConfig {
+            enabled: true,
+            candidates: 32,
+            frames: 16,
+            seed: 0,
+            top_k: 4,
+            include_start: false,
+        }
+    }
+}
+
+/// Per-part overrides.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PartFit {
+    /// Part index.
+    pub id: usize,
+    /// Free parameters of this part.
+    pub free: Option<Vec<String>>,
+    /// Bounds per parameter name, `[lo, hi]`.
+    pub bounds: BTreeMap<String, [f64; 2]>,
+}
+
+/// Settings of a video fit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FitConfig {
+    /// AdamW iterations.
+    pub iters: usize,
+    /// Learning rate (log units per step).
+    pub lr: f64,
+    /// Schedule of the learning rate.
+    pub lr_schedule: LrSchedule,
+    /// Adam's first-moment decay.
+    pub beta1: f64,
+    /// Adam's second-moment decay.
+    pub beta2: f64,
+    /// Adam's denominator guard.
+    pub eps: f64,
+    /// Decoupled weight decay on `xi = log(theta)`.
+    pub weight_decay: f64,
+    /// Gradient-norm clip in log space (0: none).
+    pub clip_norm: f64,
+    /// Part (default), object or particle parameters.
+    pub granularity: Granularity,
+    /// `per_frame` (default), `store_all` or `every_n:K`.
+    pub checkpointing: String,
+    /// Precision of the simulation.
+    pub precision: Precision,
+    /// Video frames fitted (default: all).
+    pub frames: Option<usize>,
+    /// Iterations between checkpoints.
+    pub checkpoint_every: usize,
+    /// Free parameters of every part (default: by material, see
+    /// [`default_free`](super::params::default_free)).
+    pub free: Option<Vec<String>>,
+    /// The loss.
+    pub loss: DmsConfig,
+    /// Initialisation.
+    pub init: InitConfig,
+    /// Per-part overrides.
+    pub parts: Vec<PartFit>,
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        FitConfig {
+            iters: 40,
+            lr: 0.1,
+            lr_schedule: LrSchedule::Cosine,
+            beta1: 0.7,
+            beta2: 0.99,
+            eps: 1e-8,
+            weight_decay: 0.0,
+            clip_norm: 1.0,
+            granularity: Granularity::Part,
+            checkpointing: "per_frame".into(),
+            precision: Precision::F64,
+            frames: None,
+            checkpoint_every: 1,
+            free: None,
+            loss: DmsConfig::default(),
+            init: InitConfig::default(),
+            parts: Vec::new(),
+        }
+    }
+}
+
+fn kinds(names: &[String], what: &str) -> Result<Vec<ParamKind>, FitError> {
+    names
+        .iter()
+        .map(|n| ParamKind::parse(n).map_err(|e| FitError::Input(format!("{what}: {e}"))))
+        .collect()
+}
+
+impl FitConfig {
+    /// Reads a TOML file.
+    pub fn load(path: &Path) -> Result<FitConfig, FitError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
+        let c: FitConfig = toml::from_str(&text)
+            .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
+        c.validate()
+            .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
+        Ok(c)
+    }
+
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), FitError> {
+        let bad = |m: String| Err(FitError::Input(m));
+        if !(self.lr.is_finite() && self.lr > 0.0) {
+            return bad(format!("lr = {} must be positive", self.lr));
+        }
+        for (n, b) in [("beta1", self.beta1), ("beta2", self.beta2)] {
+            if !(0.0..1.0).contains(&b) {
+                return bad(format!("{n} = {b} must be in [0, 1)"));
+            }
+        }
+        if !(self.clip_norm.is_finite() && self.clip_norm >= 0.0) {
+            return bad(format!("clip_norm = {} must be >= 0", self.clip_norm));
+        }
+        if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
+            return bad(format!("weight_decay = {} must be >= 0", self.weight_decay));
+        }
+        if self.checkpoint_every == 0 {
+            return bad("checkpoint_every must be at least 1".into());
+        }
+        if self.init.enabled && self.init.candidates == 0 {
+            return bad("init.candidates must be at least 1".into());
+        }
+        if self.init.frames < 2 {
+            return bad("init.frames must be at least 2".into());
+        }
+        self.checkpointing()?;
+        if let Some(f) = &self.free {
+            kinds(f, "free")?;
+        }
+        for p in &self.parts {
+            if let Some(f) = &p.free {
+                kinds(f, &format!("parts id {}: free", p.id))?;
+            }
+            for (n, [lo, hi]) in &p.bounds {
+                ParamKind::parse(n)
+                    .map_err(|e| FitError::Input(format!("parts id {}: bounds: {e}", p.id)))?;
+                if !(lo.is_finite() && hi.is_finite() && *lo > 0.0 && hi >= lo) {
+                    return bad(format!(
+                        "parts id {}: bounds of {n} [{lo}, {hi}] must be positive and ordered",
+                        p.id
+                    ));
+                }
+            }
+        }
+        self.loss
+            .validate()
+            .map_err(|e| FitError::Input(format!("loss: {e}")))
+    }
+
+    /// The checkpointing strategy.
+    pub fn checkpointing(&self) -> Result<Checkpointing, FitError> {
+        let s = self.checkpointing.trim();
+        match s {
+            "per_frame" | "per-frame" => Ok(Checkpointing::PerFrame),
+            "store_all" | "store-all" => Ok(Checkpointing::StoreAll),
+            _ => match s
+                .strip_prefix("every_n:")
+                .or_else(|| s.strip_prefix("every:"))
+                .and_then(|n| n.parse::<u32>().ok())
+            {
+                Some(n) if n > 0 => Ok(Checkpointing::EveryN(n)),
+                _ => Err(FitError::Input(format!(
+                    "checkpointing = '{s}': use per_frame, store_all or every_n:K"
+                ))),
+            },
+        }
+    }
+
+    /// AdamW settings.
+    pub fn adam(&self) -> AdamW {
+        AdamW {
+            lr: self.lr,
+            beta1: self.beta1,
+            beta2: self.beta2,
+            eps: self.eps,
+            weight_decay: self.weight_decay,
+        }
+    }
+
+    /// Free kinds of every part.
+    pub fn free_kinds(&self, parts: &[PartParams]) -> Result<Vec<Vec<ParamKind>>, FitError> {
+        parts
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                match self
+                    .parts
+                    .iter()
+                    .find(|o| o.id == i)
+                    .and_then(|o| o.free.as_ref())
+                    .or(self.free.as_ref())
+                {
+                    Some(names) => kinds(names, &format!("part {i}")),
+                    None => Ok(default_free(p.material)),
+                }
+            })
+            .collect()
+    }
+
+    /// Bounds of `kind` for `part` (the override, else the kind's default).
+    pub fn bounds(&self, part: Option<usize>, kind: ParamKind) -> (f64, f64) {
+        part.and_then(|i| self.parts.iter().find(|o| o.id == i))
+            .and_then(|o| {
+                o.bounds
+                    .iter()
+                    .find(|(n, _)| ParamKind::parse(n).ok() == Some(kind))
+            })
+            .map(|(_, b)| (b[0], b[1]))
+            .unwrap_or_else(|| kind.default_bounds())
+    }
+}

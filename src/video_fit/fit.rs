@@ -1,0 +1,380 @@
+//! The fit loop: simulation-driven initialisation, then AdamW on `xi = log(theta)` with bound
+//! and gradient clipping; a record per iteration and a resumable checkpoint.
+
+use super::config::{FitConfig, LrSchedule};
+use super::params::{get, set, Granularity, ParamSpace};
+use super::problem::{Evaluation, Objective, VideoProblem};
+use super::FitError;
+use crate::fit_trajectory::PartRecord;
+use r4d_loss::{ssim::ms_ssim, MsSsimConfig, Video};
+use r4d_mpm::PartParams;
+use r4d_optim::{
+    Candidate, InitOutcome, LatinHypercubeInit, LogDomainOptimizer, ParamKind, SearchSpace,
+};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Everything a killed fit needs to continue exactly where it stopped (`checkpoint.json`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FitState {
+    /// Names of the free parameters (checked on resume).
+    pub names: Vec<String>,
+    /// The initialisation's result, once done.
+    pub init: Option<InitOutcome>,
+    /// Iterations completed.
+    pub iters_done: usize,
+    /// The optimiser (log parameters, moments, step count); `None` before the first
+    /// iteration.
+    pub optimizer: Option<LogDomainOptimizer>,
+    /// Lowest loss evaluated and its `theta`.
+    pub best: Option<(f64, Vec<f64>)>,
+}
+
+/// Mean loss terms over the views (absent terms were not evaluated).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Terms {
+    /// Weighted total.
+    pub total: f64,
+    /// Mean absolute error.
+    pub l1: Option<f64>,
+    /// `1 - SSIM`.
+    pub spatial: Option<f64>,
+    /// Spectral log-magnitude term.
+    pub mag: Option<f64>,
+    /// Spectral phase term.
+    pub phase: Option<f64>,
+}
+
+impl Terms {
+    /// Mean terms of an evaluation.
+    pub fn of(ev: &Evaluation) -> Terms {
+        let n = ev.views.len().max(1) as f64;
+        let mean = |f: &dyn Fn(&r4d_loss::DmsTerms) -> Option<f64>| {
+            let v: Vec<f64> = ev.views.iter().filter_map(f).collect();
+            (!v.is_empty()).then(|| v.iter().sum::<f64>() / n)
+        };
+        Terms {
+            total: ev.total,
+            l1: mean(&|t| t.l1),
+            spatial: mean(&|t| t.spatial),
+            mag: mean(&|t| t.mag),
+            phase: mean(&|t| t.phase),
+        }
+    }
+}
+
+/// One iteration (a line of `log.jsonl`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct IterRecord {
+    /// Iteration (0-based); the parameters are those evaluated at it.
+    pub iter: usize,
+    /// Loss terms (mean over views).
+    pub loss: Terms,
+    /// Free parameters evaluated, by name.
+    pub theta: BTreeMap<String, f64>,
+    /// `dL/dxi` (log-domain gradient) by name, before clipping.
+    pub grad_log: BTreeMap<String, f64>,
+    /// Norm of `dL/dxi` before clipping.
+    pub grad_norm: f64,
+    /// Learning rate of the step taken after this evaluation.
+    pub lr: f64,
+    /// The parameters per part (per-particle fits: geometric means).
+    pub parts: Vec<PartRecord>,
+    /// Wall time of the iteration (s).
+    pub time_s: f64,
+    /// Peak heap bytes of the process so far (0 when the counting allocator is not
+    /// installed).
+    pub peak_host_bytes: usize,
+}
+
+/// Callbacks of [`run_fit`]: progress, logs and checkpoints.
+pub trait FitHooks {
+    /// An initialisation candidate was evaluated.
+    fn on_candidate(&mut self, _c: &Candidate) {}
+    /// The initialisation finished.
+    fn on_init(&mut self, _o: &InitOutcome, _names: &[String]) {}
+    /// An iteration finished.
+    fn on_iter(&mut self, _r: &IterRecord) {}
+    /// A checkpoint to persist.
+    fn on_checkpoint(&mut self, _s: &FitState) {}
+}
+
+/// Hooks that do nothing.
+pub struct NoHooks;
+impl FitHooks for NoHooks {}
+
+/// The result of [`run_fit`].
+#[derive(Clone, Debug)]
+pub struct FitOutcome {
+    /// The free parameters.
+    pub space: ParamSpace,
+    /// Parameters per part at the start of the iterations (after initialisation).
+    pub init_parts: Vec<PartParams>,
+    /// Fitted parameters per part (per-particle fits: geometric means).
+    pub parts: Vec<PartParams>,
+    /// Fitted parameters per slot (= `parts` unless per particle).
+    pub slots: Vec<PartParams>,
+    /// Lowest loss evaluated (the returned parameters' loss); `None` without iterations.
+    pub best_loss: Option<f64>,
+    /// The initialisation's result.
+    pub init: Option<InitOutcome>,
+}
+
+/// Per-part parameters from per-slot ones (per-particle slots: geometric means per part).
+pub fn part_summary(
+    base: &[PartParams],
+    slot_parts: &[u32],
+    slots: &[PartParams],
+) -> Vec<PartParams> {
+    if slots.len() == base.len() && slot_parts.iter().enumerate().all(|(i, &p)| p as usize == i) {
+        return slots.to_vec();
+    }
+    (0..base.len())
+        .map(|i| {
+            let mine: Vec<&PartParams> = slots
+                .iter()
+                .zip(slot_parts)
+                .filter(|(_, &p)| p as usize == i)
+                .map(|(v, _)| v)
+                .collect();
+            let mut out = base[i];
+            if !mine.is_empty() {
+                for k in ParamKind::ALL {
+                    let m = mine.iter().map(|v| get(v, k).ln()).sum::<f64>() / mine.len() as f64;
+                    set(&mut out, k, m.exp());
+                }
+            }
+            out
+        })
+        .collect()
+}
+
+/// MS-SSIM of rendered videos against the problem's references (mean over views), with the
+/// smaller-window fallback for frames under 161 px (see [`MsSsimConfig::largest_window`]).
+pub fn ms_ssim_score(problem: &VideoProblem, rendered: &[Video<f32>]) -> Result<f64, FitError> {
+    let mut sum = 0.0;
+    for (v, r) in problem.views.iter().zip(rendered) {
+        let reference = Video::from_frames(
+            v.video.height(),
+            v.video.width(),
+            (0..r.frames()).map(|t| v.video.frame(t).to_vec()),
+        )?;
+        let side = r.height().min(r.width());
+        let cfg = if side > 160 {
+            MsSsimConfig::default()
+        } else {
+            MsSsimConfig::largest_window(side).ok_or_else(|| {
+                FitError::Input(format!(
+                    "{}: frames of {}x{} are too small for MS-SSIM (need more than 32 px a side)",
+                    v.name,
+                    r.width(),
+                    r.height()
+                ))
+            })?
+        };
+        sum += ms_ssim(r, &reference, &cfg)?.mean;
+    }
+    Ok(sum / rendered.len().max(1) as f64)
+}
+
+/// The initialisation's search space: part-level (object-level for object fits) entries of
+/// the free kinds.
+fn init_space(cfg: &FitConfig, parts: &[PartParams]) -> Result<ParamSpace, FitError> {
+    let free = cfg.free_kinds(parts)?;
+    let g = if cfg.granularity == Granularity::Object {
+        Granularity::Object
+    } else {
+        Granularity::Part
+    };
+    let ids: Vec<u32> = (0..parts.len() as u32).collect();
+    Ok(ParamSpace::new(g, &free, &ids, |p, k| cfg.bounds(p, k)))
+}
+
+/// Simulation-driven initialisation: Latin hypercube candidates in log10 space, each
+/// simulated for `init.frames` frames and scored by MS-SSIM against the reference.
+pub fn initialize(
+    problem: &VideoProblem,
+    cfg: &FitConfig,
+    hooks: &mut dyn FitHooks,
+) -> Result<(ParamSpace, InitOutcome), FitError> {
+    let parts = &problem.config.parts;
+    let space = init_space(cfg, parts)?;
+    let mut obj = Objective::new(problem, Some(cfg.init.frames), &cfg.loss, false)?;
+    obj.precision = cfg.precision;
+    let search = SearchSpace {
+        names: space.names(),
+        bounds: space.bounds(),
+    };
+    let init = LatinHypercubeInit {
+        candidates: cfg.init.candidates,
+        seed: cfg.init.seed,
+        top_k: cfg.init.top_k,
+        parallel: true,
+        include: if cfg.init.include_start {
+            vec![space.values(parts)]
+        } else {
+            Vec::new()
+        },
+    };
+    let evaluate = |_i: usize, theta: &[f64]| -> Result<f64, String> {
+        let mut slots = parts.clone();
+        space.apply(&mut slots, theta);
+        let videos = obj.render(&slots).map_err(|e| e.to_string())?;
+        ms_ssim_score(problem, &videos).map_err(|e| e.to_string())
+    };
+    let (tx, rx) = std::sync::mpsc::channel::<Candidate>();
+    let tx = std::sync::Mutex::new(tx);
+    let outcome = std::thread::scope(|s| {
+        let h = s.spawn(|| {
+            init.initialize_with(&search, &evaluate, &|c: &Candidate| {
+                let _ = tx.lock().map(|t| t.send(c.clone()));
+            })
+        });
+        // Forward the candidates to the hooks on this thread as they finish.
+        loop {
+            match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+                Ok(c) => hooks.on_candidate(&c),
+                Err(_) if h.is_finished() => break,
+                Err(_) => {}
+            }
+        }
+        while let Ok(c) = rx.try_recv() {
+            hooks.on_candidate(&c);
+        }
+        h.join().expect("initialisation thread")
+    })?;
+    hooks.on_init(&outcome, &search.names);
+    Ok((space, outcome))
+}
+
+/// Runs a whole fit of `problem` with `cfg`, continuing from `resume` when given.
+pub fn run_fit(
+    problem: &VideoProblem,
+    cfg: &FitConfig,
+    resume: Option<FitState>,
+    hooks: &mut dyn FitHooks,
+) -> Result<FitOutcome, FitError> {
+    cfg.validate()?;
+    let per_particle = cfg.granularity == Granularity::Particle;
+    let mut obj = Objective::new(problem, cfg.frames, &cfg.loss, per_particle)?;
+    obj.checkpointing = cfg.checkpointing()?;
+    obj.precision = cfg.precision;
+    let slot_parts = obj.slot_parts();
+    let free = cfg.free_kinds(&problem.config.parts)?;
+    let space = ParamSpace::new(cfg.granularity, &free, &slot_parts, |p, k| cfg.bounds(p, k));
+    if space.is_empty() {
+        return Err(FitError::Input("no free parameter to fit".into()));
+    }
+    let names = space.names();
+    let mut state = match resume {
+        Some(s) => {
+            if s.names != names {
+                return Err(FitError::Resume(format!(
+                    "the checkpoint fits {} parameters ({}...), this run {} ({}...)",
+                    s.names.len(),
+                    s.names.first().cloned().unwrap_or_default(),
+                    names.len(),
+                    names.first().cloned().unwrap_or_default()
+                )));
+            }
+            s
+        }
+        None => FitState {
+            names: names.clone(),
+            init: None,
+            iters_done: 0,
+            optimizer: None,
+            best: None,
+        },
+    };
+    // Starting point: the config's parts, replaced by the initialisation's best candidate.
+    let mut base_parts = problem.config.parts.clone();
+    if cfg.init.enabled {
+        let ispace = init_space(cfg, &problem.config.parts)?;
+        let outcome = match state.init.take() {
+            Some(o) => o,
+            None => {
+                let (_, o) = initialize(problem, cfg, hooks)?;
+                o
+            }
+        };
+        ispace.apply(&mut base_parts, &outcome.best);
+        state.init = Some(outcome);
+        if state.optimizer.is_none() {
+            hooks.on_checkpoint(&state);
+        }
+    }
+    let base_slots: Vec<PartParams> = slot_parts.iter().map(|&p| base_parts[p as usize]).collect();
+    let init_parts = base_parts.clone();
+    let mut opt = match state.optimizer.take() {
+        Some(o) => o,
+        None => LogDomainOptimizer::new(
+            space.values(&base_slots),
+            space.bounds(),
+            cfg.adam(),
+            (cfg.clip_norm > 0.0).then_some(cfg.clip_norm),
+        )?,
+    };
+    let peak = crate::alloc::peak;
+    for iter in state.iters_done..cfg.iters {
+        let start = Instant::now();
+        let theta = opt.theta();
+        let mut slots = base_slots.clone();
+        space.apply(&mut slots, &theta);
+        let (ev, g) = obj.value_and_grad(&slots)?;
+        let gtheta = space.gather(&g);
+        if state.best.as_ref().is_none_or(|(l, _)| ev.total < *l) {
+            state.best = Some((ev.total, theta.clone()));
+        }
+        let lr = match cfg.lr_schedule {
+            LrSchedule::Constant => cfg.lr,
+            LrSchedule::Cosine => {
+                let p = iter as f64 / cfg.iters.max(1) as f64;
+                cfg.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * p).cos()))
+            }
+        };
+        opt.adam.lr = lr;
+        let grad_norm = opt.step(&gtheta);
+        let rec = IterRecord {
+            iter,
+            loss: Terms::of(&ev),
+            theta: names.iter().cloned().zip(theta.iter().copied()).collect(),
+            grad_log: names
+                .iter()
+                .cloned()
+                .zip(gtheta.iter().zip(&theta).map(|(g, t)| g * t))
+                .collect(),
+            grad_norm,
+            lr,
+            parts: part_summary(&base_parts, &slot_parts, &slots)
+                .iter()
+                .enumerate()
+                .map(|(i, p)| PartRecord::of(i, p))
+                .collect(),
+            time_s: start.elapsed().as_secs_f64(),
+            peak_host_bytes: peak(),
+        };
+        hooks.on_iter(&rec);
+        state.iters_done = iter + 1;
+        if state.iters_done % cfg.checkpoint_every == 0 || state.iters_done == cfg.iters {
+            state.optimizer = Some(opt.clone());
+            hooks.on_checkpoint(&state);
+            state.optimizer = None;
+        }
+    }
+    let theta = match &state.best {
+        Some((_, t)) => t.clone(),
+        None => opt.theta(),
+    };
+    let mut slots = base_slots.clone();
+    space.apply(&mut slots, &theta);
+    Ok(FitOutcome {
+        parts: part_summary(&base_parts, &slot_parts, &slots),
+        slots,
+        init_parts,
+        best_loss: state.best.as_ref().map(|b| b.0),
+        init: state.init,
+        space,
+    })
+}
