@@ -1,5 +1,6 @@
 //! Command-line interface: argument parsing and backend selection at runtime.
 
+mod demo;
 mod fit;
 mod fit_trajectory;
 mod metrics;
@@ -25,6 +26,8 @@ struct Cli {
 enum Command {
     /// Run an MPM simulation and write one PLY per frame.
     Simulate(simulate::SimulateArgs),
+    /// The built-in demo: a two-part plant rendered from known parameters, fitted back.
+    Demo(demo::DemoArgs),
     /// Fit the material parameters of every part to a reference video.
     Fit(fit::FitArgs),
     /// Fit part parameters to target particle trajectories (exact adjoint gradients).
@@ -55,6 +58,7 @@ pub fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Simulate(a) => simulate::run(a),
+        Command::Demo(a) => demo::run(a),
         Command::Fit(a) => fit::run(a),
         Command::FitTrajectory(a) => fit_trajectory::run(a),
         Command::Render(a) => render::run(a),

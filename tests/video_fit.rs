@@ -1,0 +1,397 @@
+//! The video fit (issue 7): gradient of the whole pipeline (simulate -> render -> DMS)
+//! against finite differences, a fit that lowers the loss and approaches the truth, resume
+//! after an interruption, and a recovery from a Latin hypercube start.
+
+use r4d_mpm::{PartParams, ParticleSet, SimConfig};
+use resonance4d::video_fit::fit::{FitHooks, FitState, NoHooks};
+use resonance4d::video_fit::{run_fit, FitConfig, Objective, Precision, VideoProblem, View};
+use std::path::Path;
+
+/// A small elastic block (one part, or two stacked parts) clamped at its base and pushed
+/// sideways at the top, seen by a 64 x 64 camera; the reference is rendered from `truth`.
+fn small_problem(truth: &[PartParams], frames: usize) -> VideoProblem {
+    let text = format!(
+        r#"
+[domain]
+n_grid = 16
+[time]
+substep_dt = 1e-3
+substeps_per_frame = 12
+frames = {frames}
+[solver]
+gravity = [0.0, 0.0, -9.8]
+[[boundary]]
+type = "bounding_box"
+[[boundary]]
+type = "cuboid"
+point = [0.5, 0.5, 0.1875]
+size = [0.5, 0.5, 0.07]
+[[boundary]]
+type = "particle_impulse"
+force = [0.25, 0.1, 0.0]
+point = [0.5, 0.5, 0.6]
+size = [0.2, 0.2, 0.1]
+num_dt = 8
+{parts}"#,
+        parts = truth
+            .iter()
+            .map(|_| "[[parts]]\nmaterial = \"jelly\"\n")
+            .collect::<String>()
+    );
+    let mut config = SimConfig::parse(&text, Path::new("small.toml")).unwrap();
+    config.parts = truth.to_vec();
+    let dx = config.domain.dx();
+    let d = |i: f64| i * dx;
+    let top = if truth.len() > 1 { 1 } else { 0 };
+    let shapes = [
+        r4d_mpm::Shape::Box {
+            min: [d(6.0), d(7.0), d(3.0)],
+            max: [d(10.0), d(9.0), d(8.0)],
+            part: 0,
+            per_cell: 2,
+        },
+        r4d_mpm::Shape::Box {
+            min: [d(6.0), d(7.0), d(8.0)],
+            max: [d(10.0), d(9.0), d(11.0)],
+            part: top,
+            per_cell: 2,
+        },
+    ];
+    let particles = ParticleSet::from_shapes(&shapes, dx);
+    let mut scene = r4d_splat::Gaussians {
+        sh_degree: 0,
+        ..Default::default()
+    };
+    let s = (0.25 * dx) as f32;
+    for x in &particles.x {
+        let c = x.map(|v| (v / 0.125).floor() as i64);
+        let odd = (c[0] + c[1] + c[2]).rem_euclid(2) as f32;
+        scene.means.push(*x);
+        scene.log_scales.push([s.ln(); 3]);
+        scene.quats.push([1.0, 0.0, 0.0, 0.0]);
+        scene.opacity_logits.push(3.0);
+        scene
+            .sh
+            .extend([0.9 - 0.7 * odd, 0.3 + 0.5 * odd, 0.2].map(|v| (v - 0.5) / 0.2820948));
+    }
+    let mut link = r4d_splat::SimLink::identity(scene.len());
+    link.simulated = (0..particles.x.len() as u32).collect();
+    let camera = r4d_splat::Camera::look_at(
+        64,
+        64,
+        45.0,
+        [0.55, -0.45, 0.55],
+        [0.5, 0.5, 0.42],
+        [0.0, 0.0, 1.0],
+    );
+    let mut p = VideoProblem {
+        config,
+        particles,
+        scene,
+        link,
+        settings: r4d_splat::RenderSettings {
+            background: [0.9, 0.9, 0.85],
+            ..Default::default()
+        },
+        views: vec![View {
+            name: "small".into(),
+            video: r4d_loss::Video::zeros(frames + 1, 64, 64),
+            camera,
+        }],
+        fps: 1.0 / 12e-3,
+    };
+    let obj = Objective::new(&p, None, &fit_config(0).loss, false).unwrap();
+    p.views[0].video = obj.render(truth).unwrap().remove(0);
+    p
+}
+
+fn jelly(e: f64, rho: f64) -> PartParams {
+    PartParams {
+        youngs_modulus_pa: e,
+        poisson_ratio: 0.3,
+        density_kg_m3: rho,
+        ..Default::default()
+    }
+}
+
+fn fit_config(iters: usize) -> FitConfig {
+    let mut c = FitConfig {
+        iters,
+        lr: 0.1,
+        beta1: 0.6,
+        free: Some(vec!["E".into(), "density".into()]),
+        ..Default::default()
+    };
+    c.init.enabled = false;
+    c.loss.spectral.patch = [8, 8];
+    c.loss.spectral.phase_mask = Some(1e-3);
+    c
+}
+
+/// dL/dlog(theta) of E and density of both parts against central differences of the f64
+/// simulation (relative step 1e-3). This checks the glue (frame indexing, time resampling,
+/// the render VJP feeding the adjoint); each stage is checked in f64 to ~1e-6 in its own
+/// crate. The renders here are f32 and the rasterizer has alpha and transmittance
+/// thresholds, so the composed loss is smooth only to a few percent at this step (measured:
+/// 0.2-4% for most entries, up to 10% for the weakest); a glue error (a frame off by one, a
+/// missing factor) shows up far above the 12% allowed.
+fn check_pipeline_gradient(fps_factor: f64, tol: f64) {
+    let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
+    let mut p = small_problem(&truth, 5);
+    let mut loss = fit_config(0).loss;
+    loss.weights = r4d_loss::DmsWeights {
+        l1: 1.0,
+        spatial: 0.0,
+        mag: 0.0,
+        phase: 0.0,
+    };
+    if fps_factor != 1.0 {
+        // Video frames between simulated frames: the renders are resampled in time.
+        p.fps *= fps_factor;
+        p.views[0].video = {
+            let v = &p.views[0].video;
+            r4d_loss::Video::from_frames(v.height(), v.width(), (0..4).map(|t| v.frame(t).to_vec()))
+                .unwrap()
+        };
+    }
+    let start = [jelly(1.4e4, 1000.0), jelly(1.1e4, 1200.0)];
+    let mut obj = Objective::new(&p, None, &loss, false).unwrap();
+    if fps_factor != 1.0 {
+        assert!(!obj.time_map().is_identity());
+    }
+    obj.precision = Precision::F64;
+    let (ev, g) = obj.value_and_grad(&start).unwrap();
+    assert!(ev.total > 0.0);
+    let mut checked = 0;
+    for part in 0..2 {
+        for (name, analytic) in [
+            ("E", g[part].youngs_modulus * start[part].youngs_modulus_pa),
+            ("density", g[part].density * start[part].density_kg_m3),
+        ] {
+            let h: f64 = 1e-3;
+            let at = |f: f64| {
+                let mut q = start;
+                match name {
+                    "E" => q[part].youngs_modulus_pa *= f,
+                    _ => q[part].density_kg_m3 *= f,
+                }
+                obj.value(&q).unwrap().total
+            };
+            // Mean of central differences at three steps: the f32 render noise differs
+            // between steps and partly averages out.
+            let fd = [1e-2, 3e-3, h]
+                .iter()
+                .map(|&h: &f64| (at(h.exp()) - at((-h).exp())) / (2.0 * h))
+                .sum::<f64>()
+                / 3.0;
+            let rel = (analytic - fd).abs() / fd.abs().max(1e-12);
+            eprintln!("part{part}.{name}: analytic {analytic:.6e} fd {fd:.6e} rel {rel:.2e}");
+            assert!(
+                rel < tol || (analytic - fd).abs() < 2e-6,
+                "part{part}.{name}: analytic {analytic:e} vs finite difference {fd:e}"
+            );
+            if fd.abs() > 2e-5 {
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked >= 2, "too few non-negligible gradients checked");
+}
+
+#[test]
+fn pipeline_gradient_matches_finite_differences() {
+    check_pipeline_gradient(1.0, 0.12);
+}
+
+#[test]
+fn pipeline_gradient_with_time_resampling() {
+    // Fewer, interpolated frames: a smaller gradient against the same render noise.
+    check_pipeline_gradient(0.75, 0.2);
+}
+
+/// The same problem in a world frame rotated, scaled and shifted against the simulation's
+/// (scene and camera moved by the same similarity) must give the same loss and gradient:
+/// checks the link's mapping of dL/dx and dL/dF back into simulation space.
+#[test]
+fn link_transform_leaves_loss_and_gradient_unchanged() {
+    let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
+    let p = small_problem(&truth, 4);
+    let start = [jelly(1.4e4, 1000.0), jelly(1.1e4, 1200.0)];
+    let loss = fit_config(0).loss;
+    let obj = Objective::new(&p, None, &loss, false).unwrap();
+    let (ev, g) = obj.value_and_grad(&start).unwrap();
+    let mut q = p.clone();
+    let (c, s) = (0.6f64, 0.8f64);
+    q.link.rotation = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+    q.link.scale = 2.5;
+    q.link.centre = [0.1, -0.2, 0.05];
+    q.link.shift = [0.3, 0.2, 0.1];
+    let link = q.link.clone();
+    for m in &mut q.scene.means {
+        *m = link.to_world(m.map(|v| v as f64)).map(|v| v as f32);
+    }
+    for ls in &mut q.scene.log_scales {
+        *ls = ls.map(|v| v - (2.5f32).ln());
+    }
+    // Rotation of the Gaussians: isotropic, nothing to rotate.
+    let cam = &p.views[0].camera;
+    let eye = link.to_world([0.55, -0.45, 0.55]);
+    let target = link.to_world([0.5, 0.5, 0.42]);
+    let up = {
+        let a = link.to_world([0.0, 0.0, 1.0]);
+        let o = link.to_world([0.0, 0.0, 0.0]);
+        [a[0] - o[0], a[1] - o[1], a[2] - o[2]]
+    };
+    q.views[0].camera = r4d_splat::Camera::look_at(cam.width, cam.height, 45.0, eye, target, up);
+    let obj2 = Objective::new(&q, None, &loss, false).unwrap();
+    let (ev2, g2) = obj2.value_and_grad(&start).unwrap();
+    assert!(
+        (ev.total - ev2.total).abs() < 1e-3 * ev.total,
+        "loss {} vs {} in the transformed frame",
+        ev.total,
+        ev2.total
+    );
+    for part in 0..2 {
+        for (a, b) in [
+            (g[part].youngs_modulus, g2[part].youngs_modulus),
+            (g[part].density, g2[part].density),
+        ] {
+            assert!(
+                (a - b).abs() <= 2e-2 * a.abs().max(b.abs()),
+                "part {part}: gradient {a:e} vs {b:e} in the transformed frame"
+            );
+        }
+    }
+}
+
+#[derive(Default)]
+struct Collect {
+    losses: Vec<f64>,
+    states: Vec<FitState>,
+}
+impl FitHooks for Collect {
+    fn on_iter(&mut self, r: &resonance4d::video_fit::IterRecord) {
+        self.losses.push(r.loss.total);
+    }
+    fn on_checkpoint(&mut self, s: &FitState) {
+        self.states.push(s.clone());
+    }
+}
+
+#[test]
+fn fit_lowers_the_loss_and_resume_continues_exactly() {
+    let truth = [jelly(2e4, 800.0)];
+    let mut p = small_problem(&truth, 5);
+    p.config.parts = vec![jelly(6e4, 800.0)];
+    let mut cfg = fit_config(6);
+    cfg.free = Some(vec!["E".into()]);
+    cfg.lr = 0.2;
+    cfg.lr_schedule = resonance4d::video_fit::config::LrSchedule::Constant;
+    // The loss at the truth is not 0: static patches have zero spectra on both sides, and
+    // their phase entries count as disagreeing (the paper's definition).
+    let floor = Objective::new(&p, None, &cfg.loss, false)
+        .unwrap()
+        .value(&truth)
+        .unwrap()
+        .total;
+    let mut all = Collect::default();
+    let full = run_fit(&p, &cfg, None, &mut all).unwrap();
+    assert!(
+        all.losses.last().unwrap() - floor < 0.5 * (all.losses[0] - floor),
+        "losses {:?} (at the truth {floor})",
+        all.losses
+    );
+    let e0 = (6e4f64 / 2e4).ln();
+    let e1 = (full.parts[0].youngs_modulus_pa / 2e4).ln().abs();
+    assert!(
+        e1 < 0.5 * e0,
+        "E {} (truth 2e4, start 6e4)",
+        full.parts[0].youngs_modulus_pa
+    );
+    // Interrupted after 3 iterations, resumed from the JSON checkpoint.
+    let ck = all.states[2].clone();
+    assert_eq!(ck.iters_done, 3);
+    let ck: FitState = serde_json::from_str(&serde_json::to_string(&ck).unwrap()).unwrap();
+    let mut rest = Collect::default();
+    let resumed = run_fit(&p, &cfg, Some(ck), &mut rest).unwrap();
+    assert_eq!(rest.losses.len(), 3);
+    for (a, b) in all.losses[3..].iter().zip(&rest.losses) {
+        assert!((a - b).abs() <= 1e-9 * a.abs(), "loss {a} vs resumed {b}");
+    }
+    let (a, b) = (
+        full.parts[0].youngs_modulus_pa,
+        resumed.parts[0].youngs_modulus_pa,
+    );
+    assert!((a - b).abs() <= 1e-6 * a, "E {a} vs resumed {b}");
+}
+
+/// From a Latin hypercube start over E and density (two decades each) the fit recovers
+/// E/density of a small block within 10%.
+#[test]
+fn fit_from_latin_hypercube_start_recovers_e_over_density() {
+    let truth = [jelly(2e4, 800.0)];
+    let mut p = small_problem(&truth, 6);
+    p.config.parts = vec![jelly(1e5, 1000.0)];
+    let mut cfg = fit_config(20);
+    cfg.init.enabled = true;
+    cfg.init.candidates = 12;
+    cfg.init.frames = 7;
+    cfg.parts.push(resonance4d::video_fit::config::PartFit {
+        id: 0,
+        free: None,
+        bounds: [
+            ("E".to_string(), [2e3, 2e5]),
+            ("density".to_string(), [100.0, 10000.0]),
+        ]
+        .into_iter()
+        .collect(),
+    });
+    let out = run_fit(&p, &cfg, None, &mut NoHooks).unwrap();
+    let ratio = |q: &PartParams| q.youngs_modulus_pa / q.density_kg_m3;
+    let err = (ratio(&out.parts[0]) / ratio(&truth[0]) - 1.0).abs();
+    let init = (ratio(&out.init_parts[0]) / ratio(&truth[0]) - 1.0).abs();
+    eprintln!(
+        "E {:.4e} density {:.1}; E/density error {:.2}% (after initialisation {:.1}%)",
+        out.parts[0].youngs_modulus_pa,
+        out.parts[0].density_kg_m3,
+        100.0 * err,
+        100.0 * init
+    );
+    assert!(err < 0.1, "E/density off by {:.1}%", 100.0 * err);
+}
+
+#[test]
+#[ignore]
+fn debug_grad_terms() {
+    let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
+    let mut p = small_problem(&truth, 5);
+    if std::env::var("LINEAR").is_ok() {
+        p.views[0]
+            .video
+            .data_mut()
+            .iter_mut()
+            .for_each(|v| *v = -1.0);
+    }
+    let start = [jelly(1.4e4, 1000.0), jelly(1.1e4, 1200.0)];
+    let mut loss = fit_config(0).loss;
+    loss.weights = r4d_loss::DmsWeights {
+        l1: 1.0,
+        spatial: 0.0,
+        mag: 0.0,
+        phase: 0.0,
+    };
+    let obj = Objective::new(&p, None, &loss, false).unwrap();
+    let (_, g) = obj.value_and_grad(&start).unwrap();
+    for part in 0..2 {
+        let analytic = g[part].density * start[part].density_kg_m3;
+        for h in [3e-2f64, 1e-2, 3e-3, 1e-3, 3e-4] {
+            let at = |f: f64| {
+                let mut q = start;
+                q[part].density_kg_m3 *= f;
+                obj.value(&q).unwrap().total
+            };
+            let fd = (at(h.exp()) - at((-h).exp())) / (2.0 * h);
+            eprintln!("part{part}.density h {h:e}: analytic {analytic:.6e} fd {fd:.6e}");
+        }
+    }
+}
