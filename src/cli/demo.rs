@@ -68,7 +68,10 @@ pub fn run(a: DemoArgs) -> Result<()> {
     std::fs::create_dir_all(&inputs)?;
     r4d_splat::ply::write_gaussians(&inputs.join("scene.ply"), &p.scene)?;
     r4d_loss::io::write_npy(&inputs.join("reference.npy"), &p.views[0].video)?;
-    write_json(&inputs.join("sim.json"), &p.config)?;
+    // TOML: the clamp's end time is +infinity, which JSON cannot hold.
+    let mut sim = p.config.clone();
+    sim.particles = Some("particles.ply".into());
+    std::fs::write(inputs.join("sim.toml"), toml::to_string(&sim)?)?;
     write_json(
         &inputs.join("cameras.json"),
         &serde_json::json!({

@@ -17,6 +17,8 @@
 //!
 //! [loss]                  # the DMS loss (r4d_loss::DmsConfig); ablations:
 //! weights = { l1 = 0.0, spatial = 1.0, mag = 1.0, phase = 1.0 }
+//! [loss.spectral]         # omitted keys take r4d_loss's defaults
+//! phase_mask = 1e-3       # the fit's default (see default_loss)
 //!
 //! [init]                  # simulation-driven initialisation
 //! enabled = true
@@ -129,7 +131,7 @@ pub struct FitConfig {
     /// Free parameters of every part (default: by material, see
     /// [`default_free`](super::params::default_free)).
     pub free: Option<Vec<String>>,
-    /// The loss.
+    /// The loss (default: [`default_loss`]).
     pub loss: DmsConfig,
     /// Initialisation.
     pub init: InitConfig,
@@ -154,11 +156,22 @@ impl Default for FitConfig {
             frames: None,
             checkpoint_every: 1,
             free: None,
-            loss: DmsConfig::default(),
+            loss: default_loss(),
             init: InitConfig::default(),
             parts: Vec::new(),
         }
     }
+}
+
+/// The paper's DMS loss with a phase mask of 1e-3: entries where either spectrum is (near)
+/// zero carry no phase gradient (without it a patch the fit moves but the reference keeps
+/// still gives gradients of order `1 / eps`; see `r4d_loss::spectral`). A `[loss.spectral]`
+/// table in `FIT.toml` starts from the library's defaults (no mask) for the keys it omits;
+/// `phase_mask = 0.0` switches the mask off.
+pub fn default_loss() -> DmsConfig {
+    let mut c = DmsConfig::default();
+    c.spectral.phase_mask = Some(1e-3);
+    c
 }
 
 fn kinds(names: &[String], what: &str) -> Result<Vec<ParamKind>, FitError> {

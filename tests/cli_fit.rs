@@ -1,0 +1,212 @@
+//! `r4d demo` and `r4d fit` end to end (small settings), resume, and typed input errors; plus
+//! the PhysGaussian fitting case (ignored by default: minutes).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+mod common;
+
+fn r4d(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_r4d"))
+        .args(args)
+        .output()
+        .expect("run r4d")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("r4d_cli_fit_{name}_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    let t = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&t).unwrap()
+}
+
+fn ok(o: &std::process::Output) {
+    assert!(
+        o.status.success(),
+        "r4d failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+#[test]
+fn quick_demo_then_fit_and_resume_on_its_inputs() {
+    let d = tmp("demo");
+    let out = d.join("demo");
+    let o = r4d(&["demo", "--quick", "--out", out.to_str().unwrap()]);
+    ok(&o);
+    let s = json(&out.join("summary.json"));
+    for k in ["truth", "init", "fit"] {
+        assert_eq!(
+            s[k]["parts"].as_array().unwrap().len(),
+            2,
+            "summary.json {k}"
+        );
+        assert!(s[k]["parts"][1]["E"].as_f64().unwrap() > 0.0);
+    }
+    assert!(s["wall_time_s"].as_f64().unwrap() > 0.0);
+    assert!(!s["profiles"].as_array().unwrap().is_empty());
+    for f in [
+        "params.json",
+        "log.jsonl",
+        "checkpoint.json",
+        "init.json",
+        "fitted.gif",
+        "side_by_side.gif",
+        "wt_reference.png",
+        "wt_fitted.png",
+        "spectrum_reference.png",
+        "spectrum_fitted.png",
+        "loss_curve.png",
+        "fitted/frame_0000.png",
+        "inputs/scene.ply",
+        "inputs/reference.npy",
+        "inputs/sim.toml",
+        "inputs/cameras.json",
+        "inputs/parts.json",
+        "inputs/particles.ply",
+    ] {
+        assert!(out.join(f).exists(), "demo wrote no {f}");
+    }
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("E/density"), "{stdout}");
+
+    // r4d fit on the demo's inputs, one iteration, then resumed for a second one.
+    let inp = out.join("inputs");
+    let cfg = d.join("fit.toml");
+    let write_cfg = |iters: usize| {
+        std::fs::write(
+            &cfg,
+            format!(
+                "iters = {iters}\nfree = [\"E\"]\nprecision = \"f32\"\nframes = 5\n[init]\ncandidates = 3\nframes = 3\n[loss.spectral]\npatch = [16, 16]\nphase_mask = 1e-3\n"
+            ),
+        )
+        .unwrap()
+    };
+    write_cfg(1);
+    let run = d.join("run");
+    let p = |n: &str| inp.join(n).to_str().unwrap().to_string();
+    let args = [
+        "fit",
+        "--scene",
+        &p("scene.ply"),
+        "--sim",
+        &p("sim.toml"),
+        "--particles",
+        &p("particles.ply"),
+        "--parts",
+        &p("parts.json"),
+        "--cameras",
+        &p("cameras.json"),
+        "--video",
+        &p("reference.npy"),
+        "--out",
+        run.to_str().unwrap(),
+        "--config",
+        cfg.to_str().unwrap(),
+    ];
+    ok(&r4d(&args));
+    let params = json(&run.join("params.json"));
+    assert_eq!(params["parts"].as_array().unwrap().len(), 2);
+    assert_eq!(json(&run.join("checkpoint.json"))["iters_done"], 1);
+    write_cfg(2);
+    let o = r4d(&["fit", "--resume", run.to_str().unwrap()]);
+    ok(&o);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("resuming"));
+    assert_eq!(json(&run.join("checkpoint.json"))["iters_done"], 2);
+    let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), 2);
+    let first: serde_json::Value = serde_json::from_str(log.lines().next().unwrap()).unwrap();
+    for k in [
+        "loss",
+        "theta",
+        "grad_log",
+        "grad_norm",
+        "parts",
+        "time_s",
+        "peak_host_bytes",
+    ] {
+        assert!(first.get(k).is_some(), "log record without {k}");
+    }
+    assert!(first["peak_host_bytes"].as_u64().unwrap() > 0);
+
+    // Bad inputs: a video of the wrong size, parts for another scene.
+    let small = d.join("small.npy");
+    let v = r4d_loss::Video::<f32>::zeros(4, 10, 12);
+    r4d_loss::io::write_npy(&small, &v).unwrap();
+    let mut bad = args.to_vec();
+    let small_s = small.to_str().unwrap().to_string();
+    bad[12] = &small_s;
+    let o = r4d(&bad);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("small.npy") && err.contains("12x10"), "{err}");
+    let parts = d.join("parts.json");
+    std::fs::write(&parts, r#"{"num_parts": 1, "labels": [0, 0, -1]}"#).unwrap();
+    let parts_s = parts.to_str().unwrap().to_string();
+    let mut bad = args.to_vec();
+    bad[8] = &parts_s;
+    let o = r4d(&bad);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("parts.json") && err.contains("3 labels"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// `r4d fit` on PhysGaussian's fitting case (a video PhysGaussian's solver simulated and
+/// gsplat rendered, 8-bit PNG frames of camera 0): E/density within 10%. Minutes: run with
+/// `cargo test --release --test cli_fit -- --ignored`.
+#[test]
+#[ignore]
+fn physgaussian_fit_jelly_arch_recovers_e_over_density() {
+    let f = common::fixture("physgaussian/fit_jelly_arch");
+    let d = tmp("arch");
+    let cfg = d.join("fit.toml");
+    std::fs::write(
+        &cfg,
+        "iters = 25\nlr = 0.15\nbeta1 = 0.6\nprecision = \"f32\"\nfree = [\"E\", \"density\"]\n[init]\ncandidates = 16\n[loss.spectral]\nphase_mask = 1e-3\n[[parts]]\nid = 0\nbounds = { E = [1e4, 1e7], density = [100.0, 3000.0] }\n",
+    )
+    .unwrap();
+    let s = |n: &str| f.join(n).to_str().unwrap().to_string();
+    let run = d.join("run");
+    let o = r4d(&[
+        "fit",
+        "--scene",
+        &s("scene.ply"),
+        "--sim",
+        &s("physgaussian_config.json"),
+        "--particles",
+        &s("particles.ply"),
+        "--parts",
+        &s("scene.ply"),
+        "--cameras",
+        &s("cameras.json"),
+        "--video",
+        &s("cam0"),
+        "--out",
+        run.to_str().unwrap(),
+        "--config",
+        cfg.to_str().unwrap(),
+    ]);
+    ok(&o);
+    eprintln!("{}", String::from_utf8_lossy(&o.stdout));
+    let p = json(&run.join("params.json"));
+    let (e, rho) = (
+        p["parts"][0]["E"].as_f64().unwrap(),
+        p["parts"][0]["density"].as_f64().unwrap(),
+    );
+    let err = (e / rho) / (3e5 / 600.0) - 1.0;
+    eprintln!(
+        "E {e:.4e} density {rho:.1}: E/density error {:.2}%",
+        100.0 * err
+    );
+    assert!(err.abs() < 0.1, "E/density off by {:.1}%", 100.0 * err);
+}
