@@ -61,13 +61,17 @@ impl DemoOptions {
 
 /// The true parameters of the demo's parts.
 pub fn truth() -> Vec<PartParams> {
-    let mut stem = PartParams::default();
-    stem.youngs_modulus_pa = 3e5;
-    stem.poisson_ratio = 0.3;
-    stem.density_kg_m3 = 500.0;
-    let mut head = stem;
-    head.youngs_modulus_pa = 6e4;
-    head.density_kg_m3 = 1200.0;
+    let stem = PartParams {
+        youngs_modulus_pa: 3e5,
+        poisson_ratio: 0.3,
+        density_kg_m3: 500.0,
+        ..Default::default()
+    };
+    let head = PartParams {
+        youngs_modulus_pa: 6e4,
+        density_kg_m3: 1200.0,
+        ..stem
+    };
     vec![stem, head]
 }
 

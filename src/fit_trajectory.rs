@@ -34,18 +34,7 @@ pub enum FitError {
     NonFinite(usize),
 }
 
-/// Whether parts share their parameters.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Granularity {
-    /// One value per part (default).
-    Part,
-    /// One value for the whole object, shared by all parts.
-    Object,
-    /// One value per particle (the paper's ablation); `params.json` then holds each part's
-    /// geometric mean and the per-particle values go to a PLY beside it.
-    Particle,
-}
+pub use crate::video_fit::params::Granularity;
 
 /// The result of a fit.
 #[derive(Clone, Debug, PartialEq)]
@@ -147,36 +136,7 @@ impl PartRecord {
     }
 }
 
-fn get(p: &PartParams, k: ParamKind) -> f64 {
-    match k {
-        ParamKind::YoungsModulus => p.youngs_modulus_pa,
-        ParamKind::PoissonRatio => p.poisson_ratio,
-        ParamKind::YieldStress => p.yield_stress_pa,
-        ParamKind::PlasticViscosity => p.plastic_viscosity_pa_s,
-        ParamKind::FrictionAngle => p.friction_angle_deg,
-        ParamKind::Density => p.density_kg_m3,
-    }
-}
-fn set(p: &mut PartParams, k: ParamKind, v: f64) {
-    match k {
-        ParamKind::YoungsModulus => p.youngs_modulus_pa = v,
-        ParamKind::PoissonRatio => p.poisson_ratio = v,
-        ParamKind::YieldStress => p.yield_stress_pa = v,
-        ParamKind::PlasticViscosity => p.plastic_viscosity_pa_s = v,
-        ParamKind::FrictionAngle => p.friction_angle_deg = v,
-        ParamKind::Density => p.density_kg_m3 = v,
-    }
-}
-fn grad_of(g: &PhysParams<f64>, k: ParamKind) -> f64 {
-    match k {
-        ParamKind::YoungsModulus => g.youngs_modulus,
-        ParamKind::PoissonRatio => g.poisson_ratio,
-        ParamKind::YieldStress => g.yield_stress,
-        ParamKind::PlasticViscosity => g.plastic_viscosity,
-        ParamKind::FrictionAngle => g.friction_angle_deg,
-        ParamKind::Density => g.density,
-    }
-}
+use crate::video_fit::params::{get, grad_of, set};
 
 /// Fits the free parameters of `config`'s parts so that the simulation of `scene` follows
 /// `targets` (positions at frames 1, 2, ...). The starting point is the config's parameters.
@@ -194,24 +154,7 @@ pub fn fit_trajectory(
 
 /// Per-part geometric means of per-particle parameters (`part` gives each particle's part).
 fn part_means(config: &SimConfig, part: &[u32], values: &[PartParams]) -> Vec<PartParams> {
-    (0..config.parts.len())
-        .map(|i| {
-            let mine: Vec<&PartParams> = values
-                .iter()
-                .zip(part)
-                .filter(|(_, &p)| p as usize == i)
-                .map(|(v, _)| v)
-                .collect();
-            let mut out = config.parts[i];
-            if !mine.is_empty() {
-                for k in ParamKind::ALL {
-                    let mean = mine.iter().map(|v| get(v, k).ln()).sum::<f64>() / mine.len() as f64;
-                    set(&mut out, k, mean.exp());
-                }
-            }
-            out
-        })
-        .collect()
+    crate::video_fit::fit::part_summary(&config.parts, part, values)
 }
 
 /// Everything a killed fit needs to continue exactly where it stopped: the optimiser with its

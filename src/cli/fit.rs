@@ -150,6 +150,18 @@ pub fn load_problem(a: &FitArgs) -> Result<VideoProblem> {
         fps,
     };
     problem.validate()?;
+    let side = problem.views[0]
+        .camera
+        .width
+        .min(problem.views[0].camera.height) as usize;
+    if side <= 160 {
+        if let Some(c) = r4d_loss::MsSsimConfig::largest_window(side) {
+            eprintln!(
+                "note: frames of {side} px on their short side are too small for the standard MS-SSIM (11-tap window, > 160 px); the initialisation scores candidates with a {}-tap window (r4d_loss::MsSsimConfig::largest_window)",
+                c.window
+            );
+        }
+    }
     Ok(problem)
 }
 

@@ -129,7 +129,7 @@ pub struct FitConfig {
     /// Iterations between checkpoints.
     pub checkpoint_every: usize,
     /// Free parameters of every part (default: by material, see
-    /// [`default_free`](super::params::default_free)).
+    /// [`default_free`]).
     pub free: Option<Vec<String>>,
     /// The loss (default: [`default_loss`]).
     pub loss: DmsConfig,
