@@ -661,7 +661,8 @@ pub fn loss_curve_png(path: &Path, title: &str, series: &[(&str, Vec<(f64, f64)>
 ///   ([`side_by_side`]);
 /// - `wt_reference.png`, `wt_fitted.png`: w-t slices of image row `row` ([`wt_slice`]);
 /// - `spectrum_reference.png`, `spectrum_fitted.png`: their temporal spectra on one colour
-///   scale ([`temporal_spectrum_pair`]).
+///   scale ([`temporal_spectrum_pair`]), each frequency bin stretched to
+///   [`wt_time_scale`]`(bins)` rows (frequency 0 at the top).
 ///
 /// `row` defaults to [`busiest_row`] of the reference (the row with the largest temporal
 /// variance of luminance, so the slice crosses the motion). GIFs play at `fps`. The videos
@@ -695,6 +696,13 @@ pub fn write_fit_diagnostics(
     save_png(&wt_fitted, &wt_slice(fitted, row)?)?;
 
     let (spec_ref, spec_fit) = temporal_spectrum_pair(reference, fitted, row)?;
+    // A spectrum has only T/2 + 1 rows: stretch each frequency bin to a band of rows so the
+    // file is at least WT_MIN_HEIGHT pixels tall.
+    let stretch = |img: RgbImage| -> RgbImage {
+        let s = wt_time_scale(img.height() as usize) as u32;
+        RgbImage::from_fn(img.width(), img.height() * s, |x, y| *img.get_pixel(x, y / s))
+    };
+    let (spec_ref, spec_fit) = (stretch(spec_ref), stretch(spec_fit));
     let spectrum_reference = dir.join("spectrum_reference.png");
     save_png(&spectrum_reference, &spec_ref)?;
     let spectrum_fitted = dir.join("spectrum_fitted.png");
@@ -1006,7 +1014,8 @@ mod tests {
             assert!(image::open(p).is_ok(), "{} unreadable", p.display());
         }
         let spec = image::open(&files.spectrum_fitted).unwrap();
-        assert_eq!((spec.width(), spec.height()), (8, 4));
+        // 4 frequency bins, each stretched to ceil(128 / 4) rows.
+        assert_eq!((spec.width(), spec.height()), (8, 4 * wt_time_scale(4) as u32));
 
         let bad = write_fit_diagnostics(&tmp.0, &reference, &fitted, Some(5), 12.0);
         assert!(matches!(bad, Err(DiagError::Row { row: 5, height: 5 })));
