@@ -700,7 +700,9 @@ pub fn write_fit_diagnostics(
     // file is at least WT_MIN_HEIGHT pixels tall.
     let stretch = |img: RgbImage| -> RgbImage {
         let s = wt_time_scale(img.height() as usize) as u32;
-        RgbImage::from_fn(img.width(), img.height() * s, |x, y| *img.get_pixel(x, y / s))
+        RgbImage::from_fn(img.width(), img.height() * s, |x, y| {
+            *img.get_pixel(x, y / s)
+        })
     };
     let (spec_ref, spec_fit) = (stretch(spec_ref), stretch(spec_fit));
     let spectrum_reference = dir.join("spectrum_reference.png");
@@ -1015,7 +1017,10 @@ mod tests {
         }
         let spec = image::open(&files.spectrum_fitted).unwrap();
         // 4 frequency bins, each stretched to ceil(128 / 4) rows.
-        assert_eq!((spec.width(), spec.height()), (8, 4 * wt_time_scale(4) as u32));
+        assert_eq!(
+            (spec.width(), spec.height()),
+            (8, 4 * wt_time_scale(4) as u32)
+        );
 
         let bad = write_fit_diagnostics(&tmp.0, &reference, &fitted, Some(5), 12.0);
         assert!(matches!(bad, Err(DiagError::Row { row: 5, height: 5 })));
