@@ -6,7 +6,7 @@
 //! simulator (the f64/f32 reference) and the parallel CPU adjoint (`ParallelHost`, all cores).
 //! The paper's scale (16 frames x 400 substeps, 10k and 100k particles) takes an hour on a
 //! 2-core machine: `cargo bench --bench adjoint -- 100000 16 400 --parallel-only`.
-//! `--parallel-only` skips the single-threaded host stepper, `--only store-all|per-frame|every-n`
+//! `--parallel-only` skips the single-threaded host stepper, `--only store-all|per-frame|every-n|nested`
 //! measures one strategy; a strategy whose
 //! `memory_plan` exceeds 60% of the machine's memory is skipped (its plan is still printed).
 
@@ -27,7 +27,7 @@ static GLOBAL: Counting = Counting;
 fn main() {
     let raw: Vec<String> = std::env::args().skip(1).collect();
     let parallel_only = raw.iter().any(|a| a == "--parallel-only");
-    // `--only store-all|per-frame|every-n` measures one strategy.
+    // `--only store-all|per-frame|every-n|nested` measures one strategy.
     let only = raw
         .iter()
         .position(|a| a == "--only")
@@ -126,11 +126,13 @@ fn measure<D>(
         Checkpointing::StoreAll,
         Checkpointing::PerFrame,
         Checkpointing::EveryN(((substeps as f64).sqrt().round() as u32).max(1)),
+        Checkpointing::Nested(((spf as f64).sqrt().round() as u32).max(1)),
     ] {
         let name = match strategy {
             Checkpointing::StoreAll => "store-all",
             Checkpointing::PerFrame => "per-frame",
             Checkpointing::EveryN(_) => "every-n",
+            Checkpointing::Nested(_) => "nested",
         };
         if only.is_some_and(|o| o != name) {
             continue;

@@ -49,7 +49,8 @@ pub struct FitTrajectoryArgs {
     /// OUT/params_particles.ply).
     #[arg(long, default_value = "part")]
     granularity: String,
-    /// Checkpointing: per-frame, store-all or every:N.
+    /// Checkpointing: per-frame, store-all, every:N or nested:N (frame checkpoints, then every
+    /// N substeps inside a frame during the backward pass).
     #[arg(long, default_value = "per-frame")]
     checkpointing: String,
     /// Number of frames to fit (default: all target frames the config's frames allow).
@@ -119,7 +120,12 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
                 .parse()
                 .with_context(|| format!("--checkpointing: bad interval in '{s}'"))?,
         ),
-        o => bail!("--checkpointing: unknown '{o}' (per-frame, store-all, every:N)"),
+        s if s.starts_with("nested:") => Checkpointing::Nested(
+            s[7..]
+                .parse()
+                .with_context(|| format!("--checkpointing: bad interval in '{s}'"))?,
+        ),
+        o => bail!("--checkpointing: unknown '{o}' (per-frame, store-all, every:N, nested:N)"),
     };
     let targets = read_targets(&a.target, config.time.frames)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;

@@ -9,7 +9,7 @@
 //! weight_decay = 0.0      # decoupled, on xi = log(theta)
 //! clip_norm = 1.0         # gradient-norm clip in log space (0: off)
 //! granularity = "part"    # "object" or "particle" (the paper's ablation)
-//! checkpointing = "per_frame"  # "store_all" or "every_n:K"
+//! checkpointing = "per_frame"  # "store_all", "every_n:K" or "nested:K"
 //! precision = "f64"       # or "f32"
 //! frames = 16             # video frames fitted (default: all)
 //! checkpoint_every = 1    # iterations between checkpoints
@@ -120,7 +120,8 @@ pub struct FitConfig {
     pub clip_norm: f64,
     /// Part (default), object or particle parameters.
     pub granularity: Granularity,
-    /// `per_frame` (default), `store_all` or `every_n:K`.
+    /// `per_frame` (default), `store_all`, `every_n:K` or `nested:K` (frame checkpoints,
+    /// then every `K` substeps inside a frame during the backward pass).
     pub checkpointing: String,
     /// Precision of the simulation.
     pub precision: Precision,
@@ -249,16 +250,16 @@ impl FitConfig {
         match s {
             "per_frame" | "per-frame" => Ok(Checkpointing::PerFrame),
             "store_all" | "store-all" => Ok(Checkpointing::StoreAll),
-            _ => match s
-                .strip_prefix("every_n:")
-                .or_else(|| s.strip_prefix("every:"))
-                .and_then(|n| n.parse::<u32>().ok())
-            {
-                Some(n) if n > 0 => Ok(Checkpointing::EveryN(n)),
-                _ => Err(FitError::Input(format!(
-                    "checkpointing = '{s}': use per_frame, store_all or every_n:K"
-                ))),
-            },
+            _ => {
+                let num = |p: &str| s.strip_prefix(p).and_then(|n| n.parse::<u32>().ok());
+                match (num("every_n:").or_else(|| num("every:")), num("nested:")) {
+                    (Some(n), _) if n > 0 => Ok(Checkpointing::EveryN(n)),
+                    (_, Some(n)) if n > 0 => Ok(Checkpointing::Nested(n)),
+                    _ => Err(FitError::Input(format!(
+                        "checkpointing = '{s}': use per_frame, store_all, every_n:K or nested:K"
+                    ))),
+                }
+            }
         }
     }
 

@@ -11,12 +11,14 @@
 //! | [`Checkpointing::StoreAll`] | 1 | `K + 3` | 0 |
 //! | [`Checkpointing::PerFrame`] | substeps per frame | `ceil(K / k) + k + 1` | `K - ceil(K / k)` |
 //! | [`Checkpointing::EveryN`]`(k)` | `k` | `ceil(K / k) + k + 1` | `K - ceil(K / k)` |
+//! | [`Checkpointing::Nested`]`(n)` | frame `f`, then `n` | `ceil(K / f) + ceil(f / n) + n + 1` | about `2 K` |
 //!
 //! Every VJP re-runs its own substep forward to rebuild the grid and the stress (one extra
 //! forward substep per backward substep in all strategies), so with checkpointing a backward
 //! pass costs about two forward passes plus the reverse arithmetic. `k = sqrt(K)` minimises
 //! the memory of `EveryN`: for 16 frames of 400 substeps, `k = 80` keeps 161 states instead
-//! of 6401. [`memory_plan`] evaluates these formulas for a configuration.
+//! of 6401; `Nested(20)` keeps 17 + 20 + 21 = 58 (frame boundaries, the inner checkpoints
+//! of one frame, one piece) for one more forward pass. [`memory_plan`] evaluates these formulas for a configuration.
 
 /// One differentiable substep and its adjoint.
 pub trait Differentiable {
@@ -51,6 +53,11 @@ pub enum Checkpointing {
     PerFrame,
     /// Keep every `n`-th substep (`n = sqrt(total substeps)` minimises memory).
     EveryN(u32),
+    /// Two levels: keep frame boundaries in the forward pass; in the backward pass re-run a
+    /// frame keeping every `n`-th substep, then re-run each of those `n`-substep pieces
+    /// keeping all its states (`n = sqrt(substeps per frame)` minimises memory). One more
+    /// forward pass than [`Checkpointing::PerFrame`], far fewer states than any single level.
+    Nested(u32),
 }
 
 impl Checkpointing {
@@ -60,6 +67,7 @@ impl Checkpointing {
             Checkpointing::StoreAll => 1,
             Checkpointing::PerFrame => substeps_per_frame.max(1) as u64,
             Checkpointing::EveryN(n) => n.max(1) as u64,
+            Checkpointing::Nested(_) => substeps_per_frame.max(1) as u64,
         }
     }
 }
@@ -96,7 +104,14 @@ pub fn memory_plan(
     let state_bytes = particles * 26 * scalar_bytes;
     let k = strategy.interval(substeps_per_frame).min(substeps.max(1));
     let checkpoints = substeps.div_ceil(k) + 1;
-    let segment_states = k + 1;
+    let segment_states = match strategy {
+        // Inner checkpoints of one frame plus one inner piece's states.
+        Checkpointing::Nested(n) => {
+            let n = (n.max(1) as u64).min(k);
+            k.div_ceil(n) + n + 1
+        }
+        _ => k + 1,
+    };
     let grid_bytes = 4 * n_grid * n_grid * n_grid * 4 * scalar_bytes;
     // Per particle: the adjoint state (26), the saved intermediates (mass, v1, stress,
     // x, F_trial, F_elastic, plastic = 1 + 3 + 9 + 3 + 9 + 9 + 2) and the new state (26).
@@ -146,36 +161,98 @@ pub fn value_and_grad<D: Differentiable>(
     // Backward, segment by segment.
     let mut adj = d.zero_adjoint(init);
     let segments = substeps.div_ceil(k);
+    let inner = match strategy {
+        Checkpointing::Nested(n) => (n.max(1) as u64).min(k),
+        _ => k,
+    };
     for seg in (0..segments).rev() {
         let start = seg * k;
         let end = ((seg + 1) * k).min(substeps);
-        let mut states = Vec::with_capacity((end - start + 1) as usize);
-        states.push(checkpoints[seg as usize].clone());
-        for j in start..end - 1 {
-            let mut next = states.last().expect("segment start").clone();
-            d.step(&mut next, params, j);
-            states.push(next);
-        }
-        // The segment's end state is the next checkpoint (or the final state): not re-run.
-        states.push(match checkpoints.get(seg as usize + 1) {
-            Some(c) => c.clone(),
-            None => s.clone(),
-        });
-        for j in (start..end).rev() {
-            if (j + 1) % spf == 0 {
-                let local = (j + 1 - start) as usize;
-                frame_adjoint(((j + 1) / spf) as usize, &states[local], &mut adj);
-            }
-            d.step_vjp(
-                &states[(j - start) as usize],
+        let last = match checkpoints.get(seg as usize + 1) {
+            Some(c) => c,
+            None => &s,
+        };
+        if inner >= end - start {
+            reverse_piece(
+                d,
+                &checkpoints[seg as usize],
+                last,
                 params,
-                j,
+                start,
+                end,
+                spf,
                 &mut adj,
                 &mut grad,
+                &mut frame_adjoint,
+            );
+            continue;
+        }
+        // Nested: checkpoints every `inner` substeps inside the segment, then each piece.
+        let mut inner_cks = vec![checkpoints[seg as usize].clone()];
+        let mut t = checkpoints[seg as usize].clone();
+        for j in start..end - 1 {
+            d.step(&mut t, params, j);
+            if (j + 1 - start) % inner == 0 {
+                inner_cks.push(t.clone());
+            }
+        }
+        drop(t);
+        let pieces = (end - start).div_ceil(inner);
+        for piece in (0..pieces).rev() {
+            let a = start + piece * inner;
+            let b = (a + inner).min(end);
+            let piece_last = match inner_cks.get(piece as usize + 1) {
+                Some(c) => c,
+                None => last,
+            };
+            reverse_piece(
+                d,
+                &inner_cks[piece as usize],
+                piece_last,
+                params,
+                a,
+                b,
+                spf,
+                &mut adj,
+                &mut grad,
+                &mut frame_adjoint,
             );
         }
     }
     (loss, adj, grad)
+}
+
+/// Reverse sweep of substeps `start..end` given the states at both ends: re-runs the piece
+/// keeping every state (the end state is `last`, not re-run), then the VJPs in reverse, with
+/// `frame_adjoint` at each frame boundary.
+#[allow(clippy::too_many_arguments)]
+fn reverse_piece<D: Differentiable>(
+    d: &D,
+    first: &D::State,
+    last: &D::State,
+    params: &D::Params,
+    start: u64,
+    end: u64,
+    spf: u64,
+    adj: &mut D::State,
+    grad: &mut D::Grad,
+    frame_adjoint: &mut impl FnMut(usize, &D::State, &mut D::State),
+) {
+    let mut states = Vec::with_capacity((end - start + 1) as usize);
+    states.push(first.clone());
+    for j in start..end - 1 {
+        let mut next = states.last().expect("piece start").clone();
+        d.step(&mut next, params, j);
+        states.push(next);
+    }
+    states.push(last.clone());
+    for j in (start..end).rev() {
+        if (j + 1) % spf == 0 {
+            let local = (j + 1 - start) as usize;
+            frame_adjoint(((j + 1) / spf) as usize, &states[local], adj);
+        }
+        d.step_vjp(&states[(j - start) as usize], params, j, adj, grad);
+    }
 }
 
 #[cfg(test)]
@@ -212,6 +289,7 @@ mod tests {
             Checkpointing::StoreAll,
             Checkpointing::PerFrame,
             Checkpointing::EveryN(7),
+            Checkpointing::Nested(6),
         ] {
             let toy = Toy {
                 a: 0.9,
@@ -234,6 +312,9 @@ mod tests {
                 Checkpointing::StoreAll => 60,
                 Checkpointing::PerFrame => 60 + 60 - 3,
                 Checkpointing::EveryN(_) => 60 + 60 - 9,
+                // Frames of 20: the inner checkpoint pass re-runs 19 per frame, then pieces
+                // of 6, 6, 6, 2 re-run 5 + 5 + 5 + 1.
+                Checkpointing::Nested(_) => 60 + 3 * 19 + 3 * 16,
             };
             assert_eq!(toy.steps.get(), expect, "{strategy:?}");
             results.push((l, adj0, g));
@@ -261,6 +342,9 @@ mod tests {
         assert_eq!(all.checkpoints, 6401);
         assert_eq!(per.checkpoints + per.segment_states, 17 + 401);
         assert_eq!(sq.checkpoints + sq.segment_states, 81 + 81);
+        let nested = memory_plan(1000, 32, 6400, 400, Checkpointing::Nested(20), 4);
+        assert_eq!(nested.checkpoints + nested.segment_states, 17 + 20 + 21);
+        assert!(nested.peak_bytes < sq.peak_bytes);
         assert!(sq.peak_bytes < per.peak_bytes && per.peak_bytes < all.peak_bytes);
     }
 }
