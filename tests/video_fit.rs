@@ -360,42 +360,6 @@ fn fit_from_latin_hypercube_start_recovers_e_over_density() {
     assert!(err < 0.1, "E/density off by {:.1}%", 100.0 * err);
 }
 
-#[test]
-#[ignore]
-fn debug_grad_terms() {
-    let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
-    let mut p = small_problem(&truth, 5);
-    if std::env::var("LINEAR").is_ok() {
-        p.views[0]
-            .video
-            .data_mut()
-            .iter_mut()
-            .for_each(|v| *v = -1.0);
-    }
-    let start = [jelly(1.4e4, 1000.0), jelly(1.1e4, 1200.0)];
-    let mut loss = fit_config(0).loss;
-    loss.weights = r4d_loss::DmsWeights {
-        l1: 1.0,
-        spatial: 0.0,
-        mag: 0.0,
-        phase: 0.0,
-    };
-    let obj = Objective::new(&p, None, &loss, false).unwrap();
-    let (_, g) = obj.value_and_grad(&start).unwrap();
-    for part in 0..2 {
-        let analytic = g[part].density * start[part].density_kg_m3;
-        for h in [3e-2f64, 1e-2, 3e-3, 1e-3, 3e-4] {
-            let at = |f: f64| {
-                let mut q = start;
-                q[part].density_kg_m3 *= f;
-                obj.value(&q).unwrap().total
-            };
-            let fd = (at(h.exp()) - at((-h).exp())) / (2.0 * h);
-            eprintln!("part{part}.density h {h:e}: analytic {analytic:.6e} fd {fd:.6e}");
-        }
-    }
-}
-
 /// Per-particle parameter slots (the paper's ablation): the per-particle gradients of a part
 /// sum to the part's gradient.
 #[test]

@@ -410,28 +410,77 @@ impl<'a> Objective<'a> {
         Ok(())
     }
 
-    /// Assembles the rendered videos from the per-simulated-frame renders.
-    fn assemble(&self, frames: &[Option<Vec<Vec<f32>>>]) -> Result<Vec<Video<f32>>, FitError> {
+    /// Assembles the rendered videos from the per-simulated-frame renders, moving frames out
+    /// of `frames` (each is freed once no later video frame needs it), so the peak is one
+    /// video per view plus a frame.
+    fn assemble_take(
+        &self,
+        frames: &mut [Option<Vec<Vec<f32>>>],
+    ) -> Result<Vec<Video<f32>>, FitError> {
         let views = &self.problem.views;
-        (0..views.len())
-            .map(|v| {
-                let (h, w) = (views[v].video.height(), views[v].video.width());
-                Video::from_frames(
-                    h,
-                    w,
-                    self.time.taps.iter().map(|&(j0, j1, a)| {
-                        let f0 = &frames[j0].as_ref().expect("rendered frame")[v];
-                        if a == 0.0 {
-                            f0.clone()
-                        } else {
-                            let f1 = &frames[j1].as_ref().expect("rendered frame")[v];
-                            f0.iter().zip(f1).map(|(x, y)| x + a * (y - x)).collect()
-                        }
-                    }),
-                )
-                .map_err(|e| FitError::Input(e.to_string()))
-            })
-            .collect()
+        let taps = &self.time.taps;
+        // Last video frame that reads each simulated frame.
+        let mut last_use = vec![usize::MAX; frames.len()];
+        for (k, &(j0, j1, a)) in taps.iter().enumerate() {
+            last_use[j0] = k;
+            if a != 0.0 {
+                last_use[j1] = k;
+            }
+        }
+        let mut out = Vec::with_capacity(views.len());
+        for v in 0..views.len() {
+            let (h, w) = (views[v].video.height(), views[v].video.width());
+            let last_view = v + 1 == views.len();
+            let mut get = |j: usize, k: usize| -> Vec<f32> {
+                let f = frames[j].as_mut().expect("rendered frame");
+                if last_use[j] == k {
+                    std::mem::take(&mut f[v])
+                } else {
+                    f[v].clone()
+                }
+            };
+            let mut data = Vec::with_capacity(taps.len() * h * w * 3);
+            for (k, &(j0, j1, a)) in taps.iter().enumerate() {
+                let f0 = get(j0, k);
+                if a == 0.0 {
+                    data.extend_from_slice(&f0);
+                } else {
+                    let f1 = get(j1, k);
+                    data.extend(f0.iter().zip(&f1).map(|(x, y)| x + a * (y - x)));
+                }
+            }
+            if last_view {
+                frames.iter_mut().for_each(|f| *f = None);
+            }
+            out.push(
+                Video::new(taps.len(), h, w, data).map_err(|e| FitError::Input(e.to_string()))?,
+            );
+        }
+        Ok(out)
+    }
+
+    /// `dL/d(rendered frame j)` of view `v` from the gradient of its video (`gv`, the
+    /// video's layout), through the time map.
+    fn frame_grad(&self, gv: &[f32], j: usize, out: &mut [f32]) -> bool {
+        let fl = out.len();
+        out.fill(0.0);
+        let mut any = false;
+        for (k, &(j0, j1, a)) in self.time.taps.iter().enumerate() {
+            let w = if j0 == j && j1 == j {
+                1.0
+            } else if j0 == j {
+                1.0 - a
+            } else if j1 == j && a != 0.0 {
+                a
+            } else {
+                continue;
+            };
+            any = true;
+            for (o, &x) in out.iter_mut().zip(&gv[k * fl..(k + 1) * fl]) {
+                *o += w * x;
+            }
+        }
+        any
     }
 
     fn needed(&self) -> Vec<bool> {
@@ -445,7 +494,37 @@ impl<'a> Objective<'a> {
         need
     }
 
-    /// Forward (and with `grad` the reverse sweep) in precision `T`.
+    /// DMS of every view: the mean total and the terms; with `grads`, also the gradient of
+    /// the mean with respect to each view's video (its layout).
+    fn loss(
+        &self,
+        videos: &[Video<f32>],
+        mut grads: Option<&mut Vec<Vec<f32>>>,
+    ) -> Result<Evaluation, FitError> {
+        let mut ev = Evaluation::default();
+        let nv = self.dms.len() as f64;
+        for (dms, video) in self.dms.iter().zip(videos) {
+            let terms = match grads.as_deref_mut() {
+                Some(gs) => {
+                    let mut g = vec![0.0f32; video.data().len()];
+                    let t = dms.terms_and_grad_into(video, &mut g)?;
+                    g.iter_mut().for_each(|x| *x /= nv as f32);
+                    gs.push(g);
+                    t
+                }
+                None => dms.terms(video)?,
+            };
+            ev.total += terms.total / nv;
+            ev.views.push(terms);
+        }
+        if !ev.total.is_finite() {
+            return Err(FitError::NonFinite("the loss".into()));
+        }
+        Ok(ev)
+    }
+
+    /// Forward (and with `grad` the reverse sweep) in precision `T`. Returns the rendered
+    /// videos only without `grad` (with it they are freed as soon as the loss is evaluated).
     #[allow(clippy::type_complexity)]
     fn run<T: Real>(
         &self,
@@ -474,40 +553,6 @@ impl<'a> Objective<'a> {
                 }
             }
         };
-        let evaluate = |d_frames: Option<&mut Vec<Vec<Vec<f32>>>>| -> Result<Evaluation, FitError> {
-            let videos = self.assemble(&renders.borrow())?;
-            let mut ev = Evaluation::default();
-            let nv = self.dms.len() as f32;
-            let mut grads = d_frames;
-            for (v, (dms, video)) in self.dms.iter().zip(&videos).enumerate() {
-                let terms = match grads.as_deref_mut() {
-                    Some(df) => {
-                        let mut g = vec![0.0f32; video.data().len()];
-                        let t = dms.terms_and_grad_into(video, &mut g)?;
-                        let fl = video.frame_len();
-                        for (k, &(j0, j1, a)) in self.time.taps.iter().enumerate() {
-                            let gk = &g[k * fl..(k + 1) * fl];
-                            for (o, &x) in df[j0][v].iter_mut().zip(gk) {
-                                *o += (1.0 - a) * x / nv;
-                            }
-                            if a != 0.0 {
-                                for (o, &x) in df[j1][v].iter_mut().zip(gk) {
-                                    *o += a * x / nv;
-                                }
-                            }
-                        }
-                        t
-                    }
-                    None => dms.terms(video)?,
-                };
-                ev.total += terms.total / self.dms.len() as f64;
-                ev.views.push(terms);
-            }
-            if !ev.total.is_finite() {
-                return Err(FitError::NonFinite("the loss".into()));
-            }
-            Ok(ev)
-        };
         if !grad {
             let mut s = init.clone();
             for j in 0..substeps {
@@ -519,21 +564,17 @@ impl<'a> Objective<'a> {
                     }
                 }
             }
-            let ev = evaluate(None)?;
-            let videos = self.assemble(&renders.borrow())?;
+            drop(s);
+            let videos = self.assemble_take(&mut renders.borrow_mut())?;
+            let ev = self.loss(&videos, None)?;
             return Ok((ev, None, videos));
         }
-        // Reverse mode: the forward pass renders; the first reverse call evaluates the loss
-        // over the whole video and splits dL/dvideo onto the simulated frames.
-        let sizes: Vec<usize> = self
-            .problem
-            .views
-            .iter()
-            .map(|v| v.video.frame_len())
-            .collect();
-        let d_frames: RefCell<Option<Vec<Vec<Vec<f32>>>>> = RefCell::new(None);
+        // Reverse mode: the forward pass renders; the first reverse call assembles the
+        // videos (freeing the renders), evaluates the loss and keeps only dL/dvideo.
+        let video_grads: RefCell<Option<Vec<Vec<f32>>>> = RefCell::new(None);
         let eval_out: RefCell<Option<Evaluation>> = RefCell::new(None);
         let grad0 = vec![PhysParams::<T>::default(); self.sim.slots()];
+        let mut frame_buf: Vec<f32> = Vec::new();
         let (_, adj0, mut g) = value_and_grad(
             &stepper,
             &init,
@@ -550,19 +591,34 @@ impl<'a> Objective<'a> {
                 if error.borrow().is_some() {
                     return;
                 }
-                if d_frames.borrow().is_none() {
-                    let mut df: Vec<Vec<Vec<f32>>> = (0..=nframes)
-                        .map(|_| sizes.iter().map(|&n| vec![0.0; n]).collect())
-                        .collect();
-                    match evaluate(Some(&mut df)) {
-                        Ok(ev) => *eval_out.borrow_mut() = Some(ev),
+                if video_grads.borrow().is_none() {
+                    let r = self
+                        .assemble_take(&mut renders.borrow_mut())
+                        .and_then(|videos| {
+                            let mut gs = Vec::with_capacity(videos.len());
+                            let ev = self.loss(&videos, Some(&mut gs))?;
+                            Ok((ev, gs))
+                        });
+                    match r {
+                        Ok((ev, gs)) => {
+                            *eval_out.borrow_mut() = Some(ev);
+                            *video_grads.borrow_mut() = Some(gs);
+                        }
                         Err(e) => return first_err(&error, e),
                     }
-                    *d_frames.borrow_mut() = Some(df);
                 }
-                let df = d_frames.borrow();
-                let df = df.as_ref().expect("frame gradients");
-                if let Err(e) = self.render_vjp_into(s, &df[f], adj) {
+                let gs = video_grads.borrow();
+                let gs = gs.as_ref().expect("video gradients");
+                let mut d_rgb = Vec::with_capacity(gs.len());
+                for (v, gv) in gs.iter().enumerate() {
+                    frame_buf.resize(self.problem.views[v].video.frame_len(), 0.0);
+                    if self.frame_grad(gv, f, &mut frame_buf) {
+                        d_rgb.push(frame_buf.clone());
+                    } else {
+                        d_rgb.push(Vec::new());
+                    }
+                }
+                if let Err(e) = self.render_vjp_into(s, &d_rgb, adj) {
                     first_err(&error, e);
                 }
             },
@@ -573,7 +629,10 @@ impl<'a> Objective<'a> {
         self.sim.init_vjp(&adj0, &mut g);
         let ev = match eval_out.borrow_mut().take() {
             Some(ev) => ev,
-            None => evaluate(None)?,
+            None => {
+                let videos = self.assemble_take(&mut renders.borrow_mut())?;
+                self.loss(&videos, None)?
+            }
         };
         let g64: Vec<PhysParams<f64>> = g
             .iter()
@@ -600,7 +659,6 @@ impl<'a> Objective<'a> {
         }) {
             return Err(FitError::NonFinite("the parameter gradient".into()));
         }
-        let videos = self.assemble(&renders.borrow())?;
-        Ok((ev, Some(g64), videos))
+        Ok((ev, Some(g64), Vec::new()))
     }
 }
