@@ -1,12 +1,18 @@
 //! Renderer benchmarks: forward (`render`) and forward + backward (`render_vjp`, which re-runs
 //! projection and binning) of 100k and 300k Gaussians (SH degree 3, deformed by a per-Gaussian
-//! F as in a simulated frame) at 1280x720 and 1920x1080 on the rayon CPU backend, and the
-//! forward pass on the wgpu backend when an adapter exists.
+//! F as in a simulated frame) at 1280x720 and 1920x1080, on the rayon CPU backend and, when an
+//! adapter exists, on the wgpu backend (forward and backward both in WGSL).
 //!
 //! The synthetic scene: centres uniform in a ball of radius 1, scales log-uniform in
 //! [0.003, 0.03], opacities sigmoid(U[-2, 4]), seen from distance 3 with a 60 degree field of
 //! view, so the object fills most of the frame like a captured object does. Each case prints
-//! its tile intersections and the peak host memory (counting allocator) of one call.
+//! its tile intersections and the peak host memory (counting allocator) of one call; the wgpu
+//! cases also print the peak device memory of one forward and one forward + backward (the
+//! backend's own accounting of its buffers, `WgpuContext::peak_bytes`).
+//!
+//! `R4D_BENCH_SPLAT_SIZES=N@WxH[,N@WxH...]` replaces the four cases (e.g. a reduced size on
+//! Mesa's lavapipe, a CPU emulation of Vulkan: `R4D_BENCH_SPLAT_SIZES=20000@320x180 cargo
+//! bench --bench splat -- splat_wgpu`).
 
 #![expect(
     missing_docs,
@@ -78,44 +84,77 @@ fn scene(n: usize) -> (Gaussians, Deformation) {
     (g, d)
 }
 
+/// The cases (Gaussians, width, height): `R4D_BENCH_SPLAT_SIZES` or the default four.
+fn cases() -> Vec<(usize, u32, u32)> {
+    let Ok(spec) = std::env::var("R4D_BENCH_SPLAT_SIZES") else {
+        return vec![
+            (100_000, 1280, 720),
+            (100_000, 1920, 1080),
+            (300_000, 1280, 720),
+            (300_000, 1920, 1080),
+        ];
+    };
+    spec.split(',')
+        .map(|c| {
+            let parse = || -> Option<(usize, u32, u32)> {
+                let (n, size) = c.trim().split_once('@')?;
+                let (w, h) = size.split_once('x')?;
+                Some((n.parse().ok()?, w.parse().ok()?, h.parse().ok()?))
+            };
+            parse().unwrap_or_else(|| {
+                panic!("R4D_BENCH_SPLAT_SIZES: '{c}' is not N@WxH (e.g. 20000@320x180)")
+            })
+        })
+        .collect()
+}
+
 fn bench(c: &mut Criterion) {
+    let cases = cases();
     let mut group = c.benchmark_group("splat");
     group.sample_size(10);
-    for n in [100_000usize, 300_000] {
-        let (g, d) = scene(n);
-        for (w, h) in [(1280u32, 720u32), (1920, 1080)] {
-            let cam = Camera::look_at(w, h, 60.0, [0.0, -3.0, 0.5], [0.0; 3], [0.0, 0.0, 1.0]);
-            let set = RenderSettings::default();
-            let mut r = SplatRenderer::new(CpuSplat);
-            let id = format!("{n}/{w}x{h}");
-            let base = reset_peak();
-            r.render(&g, Some(&d), &cam, &set).unwrap();
-            let fwd_peak = peak_since(base);
-            let stats = r.stats;
-            let d_rgb = vec![1e-3f32; (w * h * 3) as usize];
-            let base = reset_peak();
-            r.render_vjp(&g, Some(&d), &cam, &set, &d_rgb).unwrap();
-            let bwd_peak = peak_since(base);
-            println!(
-                "splat {id}: {} visible, {} tile intersections, peak host memory: forward {:.1} MiB, forward+backward {:.1} MiB",
-                stats.visible,
-                stats.intersections,
-                fwd_peak as f64 / 1048576.0,
-                bwd_peak as f64 / 1048576.0
-            );
-            group.bench_function(BenchmarkId::new("forward", &id), |b| {
-                b.iter(|| r.render(&g, Some(&d), &cam, &set).unwrap())
-            });
-            group.bench_function(BenchmarkId::new("forward_backward", &id), |b| {
-                b.iter(|| r.render_vjp(&g, Some(&d), &cam, &set, &d_rgb).unwrap())
-            });
+    let mut scenes: Vec<(usize, Gaussians, Deformation)> = Vec::new();
+    for &(n, _, _) in &cases {
+        if !scenes.iter().any(|s| s.0 == n) {
+            let (g, d) = scene(n);
+            scenes.push((n, g, d));
         }
     }
+    let scene_of = |n: usize| {
+        let s = scenes.iter().find(|s| s.0 == n).expect("built above");
+        (&s.1, &s.2)
+    };
+    for &(n, w, h) in &cases {
+        let (g, d) = scene_of(n);
+        let cam = Camera::look_at(w, h, 60.0, [0.0, -3.0, 0.5], [0.0; 3], [0.0, 0.0, 1.0]);
+        let set = RenderSettings::default();
+        let mut r = SplatRenderer::new(CpuSplat);
+        let id = format!("{n}/{w}x{h}");
+        let base = reset_peak();
+        r.render(g, Some(d), &cam, &set).unwrap();
+        let fwd_peak = peak_since(base);
+        let stats = r.stats;
+        let d_rgb = vec![1e-3f32; (w * h * 3) as usize];
+        let base = reset_peak();
+        r.render_vjp(g, Some(d), &cam, &set, &d_rgb).unwrap();
+        let bwd_peak = peak_since(base);
+        println!(
+            "splat {id}: {} visible, {} tile intersections, peak host memory: forward {:.1} MiB, forward+backward {:.1} MiB",
+            stats.visible,
+            stats.intersections,
+            fwd_peak as f64 / 1048576.0,
+            bwd_peak as f64 / 1048576.0
+        );
+        group.bench_function(BenchmarkId::new("forward", &id), |b| {
+            b.iter(|| r.render(g, Some(d), &cam, &set).unwrap())
+        });
+        group.bench_function(BenchmarkId::new("forward_backward", &id), |b| {
+            b.iter(|| r.render_vjp(g, Some(d), &cam, &set, &d_rgb).unwrap())
+        });
+    }
     group.finish();
-    // The wgpu forward renderer on whatever adapter is present (without a GPU: lavapipe, a
-    // software rasterizer, whose figures say nothing about GPU speed). `render` downloads the
-    // image, so the time includes the device work. Its backward pass still runs on the host
-    // (a later issue), so only the forward is measured.
+    // The wgpu renderer on whatever adapter is present (without a GPU: lavapipe, a software
+    // rasterizer, whose figures say nothing about GPU speed). `render` downloads the image and
+    // `render_vjp` the gradients, so the times include the device work.
     let ctx = match WgpuContext::new() {
         Ok(c) => Arc::new(c),
         Err(e) => {
@@ -129,25 +168,42 @@ fn bench(c: &mut Criterion) {
     );
     let mut group = c.benchmark_group("splat_wgpu");
     group.sample_size(10);
-    for n in [100_000usize, 300_000] {
-        let (g, d) = scene(n);
-        for (w, h) in [(1280u32, 720u32), (1920, 1080)] {
-            let cam = Camera::look_at(w, h, 60.0, [0.0, -3.0, 0.5], [0.0; 3], [0.0, 0.0, 1.0]);
-            let set = RenderSettings::default();
-            let mut r = SplatRenderer::new(WgpuSplat::new(ctx.clone()));
-            let id = format!("{n}/{w}x{h}");
-            ctx.reset_peak();
-            let base = reset_peak();
-            r.render(&g, Some(&d), &cam, &set).unwrap();
-            println!(
-                "splat_wgpu {id}: peak device memory {:.1} MiB, peak host memory {:.1} MiB",
-                ctx.peak_bytes() as f64 / 1048576.0,
-                peak_since(base) as f64 / 1048576.0
-            );
-            group.bench_function(BenchmarkId::new("forward", &id), |b| {
-                b.iter(|| r.render(&g, Some(&d), &cam, &set).unwrap())
-            });
-        }
+    for &(n, w, h) in &cases {
+        let (g, d) = scene_of(n);
+        let cam = Camera::look_at(w, h, 60.0, [0.0, -3.0, 0.5], [0.0; 3], [0.0, 0.0, 1.0]);
+        let set = RenderSettings::default();
+        let mut r = SplatRenderer::new(WgpuSplat::new(ctx.clone()));
+        let id = format!("{n}/{w}x{h}");
+        // A first call builds the pipelines.
+        r.render(g, Some(d), &cam, &set).unwrap();
+        ctx.reset_peak();
+        let base = reset_peak();
+        r.render(g, Some(d), &cam, &set).unwrap();
+        let (fwd_dev, fwd_host) = (ctx.peak_bytes(), peak_since(base));
+        let d_rgb = vec![1e-3f32; (w * h * 3) as usize];
+        r.render_vjp(g, Some(d), &cam, &set, &d_rgb).unwrap();
+        ctx.reset_peak();
+        let base = reset_peak();
+        r.render_vjp(g, Some(d), &cam, &set, &d_rgb).unwrap();
+        let (bwd_dev, bwd_host) = (ctx.peak_bytes(), peak_since(base));
+        let mib = |b: u64| b as f64 / 1048576.0;
+        println!(
+            "splat_wgpu {id}: {} visible, {} tile intersections; peak device memory: forward \
+             {:.1} MiB, forward+backward {:.1} MiB; peak host memory: forward {:.1} MiB, \
+             forward+backward {:.1} MiB",
+            r.stats.visible,
+            r.stats.intersections,
+            mib(fwd_dev),
+            mib(bwd_dev),
+            mib(fwd_host as u64),
+            mib(bwd_host as u64)
+        );
+        group.bench_function(BenchmarkId::new("forward", &id), |b| {
+            b.iter(|| r.render(g, Some(d), &cam, &set).unwrap())
+        });
+        group.bench_function(BenchmarkId::new("forward_backward", &id), |b| {
+            b.iter(|| r.render_vjp(g, Some(d), &cam, &set, &d_rgb).unwrap())
+        });
     }
     group.finish();
 }

@@ -1,8 +1,13 @@
-//! [`r4d_splat::SplatKernels`] on wgpu: the forward renderer in WGSL (`shaders/splat/`),
-//! mirroring the CPU backend stage by stage and the per-Gaussian / per-pixel functions of
-//! `r4d_splat::project` and `r4d_splat::raster`:
+//! [`r4d_splat::SplatKernels`] on wgpu: the renderer and its backward pass in WGSL
+//! (`shaders/splat/`), mirroring the CPU backend stage by stage and the per-Gaussian /
+//! per-pixel functions of `r4d_splat::project`, `r4d_splat::covariance`, `r4d_splat::sh` and
+//! `r4d_splat::raster`. Every stage runs on the device; the host only records dispatches (and
+//! reads back the 4-byte intersection count in `bin_tiles`).
 //!
 //! * `project`: one thread per Gaussian (`project.wgsl`); culled Gaussians get radii (0, 0).
+//!   The per-Gaussian math (covariance, `F Sigma F^T`, the polar rotation of F, the SH basis,
+//!   the projection up to the 2D covariance) is in `shaders/lib/splat_project.wgsl`, shared
+//!   with `project_vjp`.
 //! * `bin_tiles`: `count_tiles` (tiles per Gaussian, `r4d_splat::raster::tile_rect` computed
 //!   exactly), an exclusive scan (`scan_block` / `scan_add`, 1024 values per workgroup,
 //!   recursive over the block sums), one 4-byte readback of the number of intersections,
@@ -16,17 +21,29 @@
 //! * `rasterize`: one workgroup per 16x16 tile, one thread per pixel, the tile's Gaussians
 //!   staged 256 at a time in workgroup memory (`rasterize.wgsl`).
 //!
-//! The backward stages ([`SplatKernels::rasterize_vjp`], [`SplatKernels::project_vjp`]) are
-//! not GPU kernels yet: they download their inputs, run the single-threaded reference
-//! ([`r4d_splat::reference::rasterize_vjp`] / [`r4d_splat::reference::project_vjp`]) on the
-//! host and upload the results.
+//! * `rasterize_vjp`: one workgroup per tile, one thread per pixel (`rasterize_vjp.wgsl`).
+//!   The trait hands it no forward image, so each pixel first replays its compositing (as the
+//!   CPU reference does) for its final transmittance and the position of its last composited
+//!   Gaussian; then the tile's list is staged 128 Gaussians at a time from that position down
+//!   and each pixel runs [`r4d_splat::raster::composite_pixel_vjp`]'s recursion back to front,
+//!   recovering the transmittance in front of each Gaussian as `T / (1 - alpha)`. Pixels add
+//!   their per-Gaussian gradients (mean2d, conic, opacity, colour) into workgroup memory
+//!   first (a compare-exchange on the f32 bits), and each batch's nonzero sums go to the
+//!   global `ProjectedGrad` array with one float atomic each: native `atomic<f32>` where the
+//!   adapter has `SHADER_FLOAT32_ATOMIC`, else the compare-exchange variant
+//!   (`splat_rasterize_vjp_cas`), so the sums are not bitwise reproducible run to run.
+//! * `project_vjp`: one thread per Gaussian (`project_vjp.wgsl`),
+//!   [`r4d_splat::project::project_vjp`] in f32 (including the polar-rotation VJP, which the
+//!   reference solves in f64): it recomputes the forward quantities and writes dL/dmean,
+//!   dL/dlog_scale, dL/dquat, dL/dopacity_logit and dL/dF into sections of one buffer (a kernel
+//!   binds at most 8 storage buffers, WebGPU's default), plus the SH direction and the
+//!   clamp-masked dL/dcolour, from which `project_vjp_sh.wgsl` writes dL/dsh; the sections are
+//!   then copied into the separate gradient buffers on the device.
 
 use crate::context::{GpuBuffer, WgpuContext, WgpuError};
-use bytemuck::Pod;
+use bytemuck::{Pod, Zeroable};
 use r4d_splat::kernels::{ImageBufs, SceneBufs, SceneGradBufs, TileBufs};
 use r4d_splat::project::{Projected, ProjectedGrad};
-use r4d_splat::raster::TileBins;
-use r4d_splat::reference::{self, Scene};
 use r4d_splat::{CameraConsts, SplatKernels};
 use std::any::Any;
 use std::sync::Arc;
@@ -39,6 +56,44 @@ const WG: u32 = 256;
 /// One record of the intersection sort (`SplatTileKey` in `shaders/lib/splat_structs.wgsl`):
 /// tile id, order-preserving depth key, Gaussian index.
 type TileKey = [u32; 3];
+
+/// Sizes of the per-Gaussian kernels `project`, `project_vjp` and `project_vjp_sh`
+/// (`SplatProjectParams` in `shaders/lib/splat_structs.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct SplatProjectParams {
+    /// Number of Gaussians.
+    pub n: u32,
+    /// 1 when the scene is deformed (F given).
+    pub has_f: u32,
+    /// SH degree.
+    pub sh_degree: u32,
+    /// SH values per Gaussian (`K * 3`).
+    pub sh_len: u32,
+}
+
+impl SplatProjectParams {
+    fn of(scene: &SceneBufs<WgpuSplat>) -> Self {
+        let k = r4d_splat::gaussians::sh_coeffs(scene.sh_degree) as u32;
+        SplatProjectParams {
+            n: scene.n as u32,
+            has_f: scene.f.is_some() as u32,
+            sh_degree: scene.sh_degree,
+            sh_len: 3 * k,
+        }
+    }
+}
+
+/// The sections of `project_vjp.wgsl`'s output buffer (`PV_*` in
+/// `shaders/lib/splat_project.wgsl`), as (start in multiples of n, values per Gaussian):
+/// dL/dmean, dL/dlog_scale, dL/dquat, dL/dopacity_logit; between the last two sections, the SH
+/// direction and the masked dL/dcolour that `project_vjp_sh.wgsl` reads (3 + 3).
+const SECTION_MEAN: (usize, usize) = (0, 3);
+const SECTION_LOG_SCALE: (usize, usize) = (3, 3);
+const SECTION_QUAT: (usize, usize) = (6, 4);
+const SECTION_OPACITY: (usize, usize) = (10, 1);
+/// dL/dF, present when the scene is deformed: it ends the buffer.
+const SECTION_F: (usize, usize) = (17, 9);
 
 /// The wgpu splatting backend.
 pub struct WgpuSplat {
@@ -159,19 +214,53 @@ impl WgpuSplat {
         Ok(src)
     }
 
-    fn download_scene(&self, s: &SceneBufs<Self>) -> Result<Scene<f32>, WgpuError> {
-        Ok(Scene {
-            sh_degree: s.sh_degree,
-            means: self.ctx.download(&s.means)?,
-            log_scales: self.ctx.download(&s.log_scales)?,
-            quats: self.ctx.download(&s.quats)?,
-            opacity_logits: self.ctx.download(&s.opacity_logits)?,
-            sh: self.ctx.download(&s.sh)?,
-            f: match &s.f {
-                Some(f) => Some(self.ctx.download(f)?),
-                None => None,
-            },
-        })
+    /// Records `kernel` over the image's 16x16 tiles (one workgroup each) with `buffers` bound
+    /// at bindings 0, 1, ... of group 0.
+    fn dispatch_tiles(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        kernel: &str,
+        buffers: &[&wgpu::Buffer],
+        tiles: [u32; 2],
+    ) -> Result<(), WgpuError> {
+        let ctx = &self.ctx;
+        let pipeline = ctx.pipeline(kernel)?;
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(kernel),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(kernel),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(tiles[0], tiles[1], 1);
+        Ok(())
+    }
+
+    /// The buffer of a projection, or a one-record dummy when it is empty (a runtime-sized
+    /// array binding needs at least one element).
+    fn bindable_projection<'a>(
+        &self,
+        proj: &'a GpuBuffer<Projected<f32>>,
+        dummy: &'a mut Option<GpuBuffer<Projected<f32>>>,
+    ) -> Result<&'a wgpu::Buffer, WgpuError> {
+        if proj.bytes() < std::mem::size_of::<Projected<f32>>() as u64 {
+            let d = dummy.insert(self.ctx.zeros::<Projected<f32>>("splat_no_projected", 1)?);
+            Ok(&d.buffer)
+        } else {
+            Ok(&proj.buffer)
+        }
     }
 }
 
@@ -198,12 +287,8 @@ impl SplatKernels for WgpuSplat {
         if n == 0 {
             return Ok(out);
         }
-        let k = r4d_splat::gaussians::sh_coeffs(scene.sh_degree) as u32;
         let cam_u = ctx.uniform("splat_camera", cam)?;
-        let params = ctx.uniform(
-            "splat_project_params",
-            &[n as u32, scene.f.is_some() as u32, scene.sh_degree, 3 * k],
-        )?;
+        let params = ctx.uniform("splat_project_params", &SplatProjectParams::of(scene))?;
         let no_f;
         let f = match &scene.f {
             Some(f) => &f.buffer,
@@ -341,52 +426,29 @@ impl SplatKernels for WgpuSplat {
             return Ok(img);
         }
         let cam_u = ctx.uniform("splat_camera", cam)?;
-        // A runtime-sized array binding needs at least one element.
-        let dummy;
-        let proj_buf = if proj.bytes() < std::mem::size_of::<Projected<f32>>() as u64 {
-            dummy = ctx.zeros::<Projected<f32>>("splat_no_projected", 1)?;
-            &dummy.buffer
-        } else {
-            &proj.buffer
-        };
-        let pipeline = ctx.pipeline("splat_rasterize")?;
-        let entries: Vec<wgpu::BindGroupEntry> = [
-            &cam_u.buffer,
-            proj_buf,
-            &bins.offsets.buffer,
-            &bins.ids.buffer,
-            &img.rgb.buffer,
-            &img.alpha.buffer,
-            &img.depth.buffer,
-        ]
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            resource: b.as_entire_binding(),
-        })
-        .collect();
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("splat_rasterize"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
+        let mut dummy = None;
+        let proj_buf = self.bindable_projection(proj, &mut dummy)?;
         let mut enc = ctx.encoder();
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("splat_rasterize"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(tx, ty, 1);
-        }
+        self.dispatch_tiles(
+            &mut enc,
+            "splat_rasterize",
+            &[
+                &cam_u.buffer,
+                proj_buf,
+                &bins.offsets.buffer,
+                &bins.ids.buffer,
+                &img.rgb.buffer,
+                &img.alpha.buffer,
+                &img.depth.buffer,
+            ],
+            cam.tiles,
+        )?;
         ctx.submit(enc);
         Ok(img)
     }
 
-    /// Not a GPU kernel yet: downloads its inputs, runs
-    /// [`r4d_splat::reference::rasterize_vjp`] on the host and uploads the result.
+    /// `rasterize_vjp.wgsl`: one workgroup per tile replays each pixel's compositing, walks it
+    /// back to front and adds the per-Gaussian sums of each batch with float atomics.
     fn rasterize_vjp(
         &self,
         proj: &GpuBuffer<Projected<f32>>,
@@ -394,20 +456,39 @@ impl SplatKernels for WgpuSplat {
         cam: &CameraConsts,
         d_rgb: &GpuBuffer<f32>,
     ) -> Result<GpuBuffer<ProjectedGrad<f32>>, WgpuError> {
-        let proj = self.ctx.download(proj)?;
-        let tb = TileBins {
-            tiles_x: cam.tiles[0],
-            tiles_y: cam.tiles[1],
-            offsets: self.ctx.download(&bins.offsets)?,
-            ids: self.ctx.download(&bins.ids)?,
-        };
-        let d = self.ctx.download(d_rgb)?;
-        let g = reference::rasterize_vjp(&proj, &tb, &cam.params(), &cam.bg(), &d);
-        self.ctx.upload("splat_d_projected", &g)
+        let ctx = &self.ctx;
+        let out = self.zeros_bindable::<ProjectedGrad<f32>>("splat_d_projected", proj.len)?;
+        let [tx, ty] = cam.tiles;
+        if proj.len == 0 || bins.intersections == 0 || tx == 0 || ty == 0 {
+            return Ok(out);
+        }
+        let [w, h] = cam.size.map(|v| v as usize);
+        assert_eq!(
+            d_rgb.len,
+            w * h * 3,
+            "rasterize_vjp: dL/drgb must have 3 values per pixel"
+        );
+        let cam_u = ctx.uniform("splat_camera", cam)?;
+        let mut enc = ctx.encoder();
+        self.dispatch_tiles(
+            &mut enc,
+            "splat_rasterize_vjp",
+            &[
+                &cam_u.buffer,
+                &proj.buffer,
+                &bins.offsets.buffer,
+                &bins.ids.buffer,
+                &d_rgb.buffer,
+                &out.buffer,
+            ],
+            cam.tiles,
+        )?;
+        ctx.submit(enc);
+        Ok(out)
     }
 
-    /// Not a GPU kernel yet: downloads its inputs, runs
-    /// [`r4d_splat::reference::project_vjp`] on the host and uploads the results.
+    /// `project_vjp.wgsl` (one thread per Gaussian, into one sectioned buffer), then
+    /// `project_vjp_sh.wgsl` (dL/dsh) and copies of the sections into the gradient buffers.
     fn project_vjp(
         &self,
         scene: &SceneBufs<Self>,
@@ -415,21 +496,82 @@ impl SplatKernels for WgpuSplat {
         proj: &GpuBuffer<Projected<f32>>,
         d_proj: &GpuBuffer<ProjectedGrad<f32>>,
     ) -> Result<SceneGradBufs<Self>, WgpuError> {
-        let s = self.download_scene(scene)?;
-        let proj = self.ctx.download(proj)?;
-        let d = self.ctx.download(d_proj)?;
-        let g = reference::project_vjp(&s, &cam.params(), &proj, &d);
         let ctx = &self.ctx;
-        Ok(SceneGradBufs {
-            means: ctx.upload("splat_d_means", &g.means)?,
-            log_scales: ctx.upload("splat_d_log_scales", &g.log_scales)?,
-            quats: ctx.upload("splat_d_quats", &g.quats)?,
-            opacity_logits: ctx.upload("splat_d_opacity_logits", &g.opacity_logits)?,
-            sh: ctx.upload("splat_d_sh", &g.sh)?,
+        let n = scene.n;
+        assert!(
+            proj.len == n && d_proj.len == n,
+            "project_vjp: {n} Gaussians but {} projections and {} projection gradients",
+            proj.len,
+            d_proj.len
+        );
+        let params = SplatProjectParams::of(scene);
+        let out = SceneGradBufs {
+            means: ctx.zeros::<[f32; 3]>("splat_d_means", n)?,
+            log_scales: ctx.zeros::<[f32; 3]>("splat_d_log_scales", n)?,
+            quats: ctx.zeros::<[f32; 4]>("splat_d_quats", n)?,
+            opacity_logits: ctx.zeros::<f32>("splat_d_opacity_logits", n)?,
+            sh: self.zeros_bindable::<f32>("splat_d_sh", n * params.sh_len as usize)?,
             f: match scene.f {
-                Some(_) => Some(ctx.upload("splat_d_f", &g.f)?),
+                Some(_) => Some(ctx.zeros::<[[f32; 3]; 3]>("splat_d_f", n)?),
                 None => None,
             },
-        })
+        };
+        if n == 0 {
+            return Ok(out);
+        }
+        let width = match scene.f {
+            Some(_) => SECTION_F.0 + SECTION_F.1,
+            None => SECTION_F.0,
+        };
+        let packed = ctx.zeros::<f32>("splat_project_vjp_sections", n * width)?;
+        let cam_u = ctx.uniform("splat_camera", cam)?;
+        let params_u = ctx.uniform("splat_project_params", &params)?;
+        let no_f;
+        let f = match &scene.f {
+            Some(f) => &f.buffer,
+            None => {
+                no_f = ctx.zeros::<f32>("splat_no_f", 4)?;
+                &no_f.buffer
+            }
+        };
+        let mut enc = ctx.encoder();
+        ctx.dispatch(
+            &mut enc,
+            "splat_project_vjp",
+            &[
+                &cam_u.buffer,
+                &params_u.buffer,
+                &scene.means.buffer,
+                &scene.log_scales.buffer,
+                &scene.quats.buffer,
+                &scene.opacity_logits.buffer,
+                &scene.sh.buffer,
+                f,
+                &d_proj.buffer,
+                &packed.buffer,
+            ],
+            n as u32,
+            64,
+        )?;
+        ctx.dispatch(
+            &mut enc,
+            "splat_project_vjp_sh",
+            &[&params_u.buffer, &packed.buffer, &out.sh.buffer],
+            n as u32,
+            64,
+        )?;
+        let mut copy = |(start, width): (usize, usize), dst: &wgpu::Buffer| {
+            let (off, len) = (4 * (start * n) as u64, 4 * (width * n) as u64);
+            enc.copy_buffer_to_buffer(&packed.buffer, off, dst, 0, len);
+        };
+        copy(SECTION_MEAN, &out.means.buffer);
+        copy(SECTION_LOG_SCALE, &out.log_scales.buffer);
+        copy(SECTION_QUAT, &out.quats.buffer);
+        copy(SECTION_OPACITY, &out.opacity_logits.buffer);
+        if let Some(df) = &out.f {
+            copy(SECTION_F, &df.buffer);
+        }
+        ctx.submit(enc);
+        Ok(out)
     }
 }

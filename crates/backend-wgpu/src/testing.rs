@@ -4,9 +4,14 @@ use crate::WgpuContext;
 
 /// The device for a GPU test, or `None` (the test then returns early) when no adapter exists.
 /// With `R4D_REQUIRE_GPU=1` (set in CI) a missing adapter panics instead, so GPU tests can
-/// never pass by skipping.
+/// never pass by skipping. Native float atomics are used where the adapter has them, unless
+/// `R4D_WGPU_NO_FLOAT_ATOMICS` is set (as [`WgpuContext::new`]), so a whole suite can be run
+/// on the compare-exchange scatter.
 pub fn gpu_or_skip(test: &str) -> Option<WgpuContext> {
-    gpu_or_skip_with(test, true)
+    gpu_or_skip_with(
+        test,
+        std::env::var_os("R4D_WGPU_NO_FLOAT_ATOMICS").is_none(),
+    )
 }
 
 /// [`gpu_or_skip`] with the choice of native float atomics (`false`: the compare-exchange

@@ -1,9 +1,11 @@
 // Host-shared records of the splatting kernels and the tile rule they share.
 //
-// `CameraConsts` and `Projected` mirror the `#[repr(C)]` + Pod structs of `r4d_splat::kernels`
-// / `r4d_splat::project` field for field (a test compares the layouts naga reflects with the
-// Rust ones). `Projected` uses scalar fields (a `vec3<f32>` would be 16-byte aligned), so it is
-// 10 f32 + 2 u32 = 48 bytes, like `Projected<f32>`.
+// `CameraConsts`, `Projected` and `ProjectedGrad` mirror the `#[repr(C)]` + Pod structs of
+// `r4d_splat::kernels` / `r4d_splat::project`, `SplatProjectParams` the one of
+// `r4d_backend_wgpu::splat`, field for field (a test compares the layouts naga reflects with
+// the Rust ones). `Projected` and `ProjectedGrad` use scalar fields (a `vec3<f32>` would be
+// 16-byte aligned), so they are 10 f32 + 2 u32 = 48 bytes and 9 f32 = 36 bytes, like
+// `Projected<f32>` and `ProjectedGrad<f32>`.
 
 struct CameraConsts {
     // World-to-camera rotation rows (w unused).
@@ -35,6 +37,35 @@ struct Projected {
     color_b: f32,
     radius_x: u32,
     radius_y: u32,
+}
+
+// dL/d(a Projected); depth gets none.
+struct ProjectedGrad {
+    mean_x: f32,
+    mean_y: f32,
+    conic_a: f32,
+    conic_b: f32,
+    conic_c: f32,
+    opacity: f32,
+    color_r: f32,
+    color_g: f32,
+    color_b: f32,
+}
+
+// Offsets of the ProjectedGrad fields in f32 units (`rasterize_vjp` adds into a flat array).
+const PG_MEAN: u32 = 0u;
+const PG_CONIC: u32 = 2u;
+const PG_OPACITY: u32 = 5u;
+const PG_COLOR: u32 = 6u;
+const PG_LEN: u32 = 9u;
+
+// The per-Gaussian kernels' sizes (`project`, `project_vjp`, `project_vjp_sh`).
+struct SplatProjectParams {
+    n: u32,
+    has_f: u32,
+    sh_degree: u32,
+    // SH values per Gaussian (K * 3).
+    sh_len: u32,
 }
 
 // One (tile, Gaussian) intersection while it is sorted: the tile id, the depth as an
