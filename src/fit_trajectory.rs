@@ -5,8 +5,8 @@
 //! [`TrajectoryLoss`] at every frame against the targets, sweeps backward through every
 //! substep ([`r4d_mpm::adjoint`]) and updates the free parameters with AdamW in the log
 //! domain ([`r4d_optim`]). The simulation and its reverse sweep run in f64 on the CPU
-//! (`r4d_backend_cpu::adjoint::ParallelHost`, all cores); the backend-buffer adjoint kernels
-//! for GPUs are not written yet.
+//! (`r4d_backend_cpu::adjoint::ParallelHost`, all cores); the GPU sweep
+//! (`r4d_backend_wgpu::adjoint::WgpuAdjoint`) is not wired into this pipeline yet.
 
 use r4d_backend_cpu::adjoint::ParallelHost;
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing};

@@ -9,8 +9,9 @@
 //! * [`fit`]: the loop: initialisation, iterations, logs, checkpoints and resume.
 //!
 //! The simulation and its reverse sweep run on the CPU (`ParallelHost`, all cores, f64 by
-//! default); rendering and its VJP on the CPU splatting backend. GPU backward passes are
-//! issue 9.
+//! default); rendering and its VJP on the CPU splatting backend. The GPU reverse sweep
+//! (`r4d_backend_wgpu::adjoint::WgpuAdjoint`) and the GPU renderer backward exist but are not
+//! wired into the fit yet (`--backend wgpu` on `r4d fit`: issue 9).
 
 pub mod config;
 pub mod fit;

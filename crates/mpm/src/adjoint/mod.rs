@@ -21,10 +21,10 @@
 //!   `PerFrame`, `EveryN`) and `memory_plan`.
 //! * [`trajectory_loss`]: position and Chamfer losses with gradients.
 //!
-//! The parallel CPU version of the host sweep is `r4d_backend_cpu::adjoint::ParallelHost`.
-//! Not done yet (tracked in issue 3): `_vjp` kernel methods on
-//! [`MpmKernels`](crate::MpmKernels) so GPU backends run the sweep on their own buffers, and
-//! the fluid's adjoint.
+//! The parallel CPU version of the host sweep is `r4d_backend_cpu::adjoint::ParallelHost`;
+//! the GPU version `r4d_backend_wgpu::adjoint::WgpuAdjoint` (WGSL kernels, state and
+//! parameter gradients on the device). Both implement [`checkpoint::Differentiable`], so the
+//! checkpointing driver is written once. Not done yet: the fluid's adjoint.
 
 pub mod checkpoint;
 pub mod constitutive_vjp;
