@@ -10,6 +10,7 @@ mod prepare;
 mod render;
 mod run_hooks;
 mod scene;
+mod segment;
 mod simulate;
 
 use clap::{Parser, Subcommand, ValueEnum};
@@ -40,6 +41,8 @@ enum Command {
     Metrics(metrics::MetricsArgs),
     /// Chamfer distance, HD95 and F-score between simulated and reference point sequences.
     MetricsTrajectory(metrics_trajectory::MetricsTrajectoryArgs),
+    /// Lift 2D segmentation masks onto the Gaussians: the part labels `r4d fit --parts` reads.
+    Segment(segment::SegmentArgs),
 }
 
 /// Compute backend.
@@ -65,6 +68,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Prepare(a) => prepare::run(a),
         Command::Metrics(a) => metrics::run(a),
         Command::MetricsTrajectory(a) => metrics_trajectory::run(a),
+        Command::Segment(a) => segment::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -56,6 +56,7 @@ pub mod real;
 pub mod reference;
 pub mod renderer;
 pub mod sh;
+pub mod weights;
 
 pub use camera::{Camera, RasterizeMode, RenderSettings};
 pub use camera_io::{load_cameras, CameraSet};

@@ -1,0 +1,174 @@
+//! `r4d segment`: lift 2D segmentation masks onto a scene's Gaussians (part labels for
+//! `r4d fit --parts`).
+
+use anyhow::{bail, Context, Result};
+use r4d_backend_cpu::splat::CpuSplat;
+use r4d_segment::lift::{lift_with_progress, LiftConfig};
+use r4d_segment::smooth::{smooth_gaussians, SmoothConfig};
+use r4d_segment::{part_colour, MaskDir, MaskSource, Par, PartLabels};
+use r4d_splat::{load_cameras, Gaussians, RenderSettings, Renderer, SplatRenderer};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `r4d segment`.
+#[derive(clap::Args, Debug)]
+pub struct SegmentArgs {
+    /// The static 3DGS scene (INRIA PLY).
+    #[arg(long)]
+    scene: PathBuf,
+    /// Cameras of the masks (r4d/reference JSON, INRIA cameras.json, nerfstudio
+    /// transforms.json, COLMAP text); the rasterize mode comes from the file when it has one.
+    #[arg(long)]
+    cameras: PathBuf,
+    /// Mask folder: one mask per camera, named after the camera's image (or its index):
+    /// NAME.png (label map: 0 background, k part k-1), NAME.npy (M x H x W probabilities) or
+    /// NAME/CLASS.png or NAME/CLASS.npy (one probability map per class); optional
+    /// classes.json (see the README).
+    #[arg(long)]
+    masks: PathBuf,
+    /// Output parts file (JSON). Beside it: the scene with a `part` property (same name,
+    /// .ply) and a render of the labels from each camera next to its mask (NAME_views/).
+    #[arg(long)]
+    out: PathBuf,
+    /// Neighbours of the KNN smoothing in 3D (1: keep the raw lift's labels).
+    #[arg(long, default_value_t = 16)]
+    k: usize,
+    /// Softmax temperature over the normalised class weights (smaller: more confident).
+    #[arg(long, default_value_t = 0.1)]
+    temperature: f32,
+    /// Label clusters with fewer Gaussians are relabelled by their surroundings (default:
+    /// k).
+    #[arg(long)]
+    min_cluster: Option<usize>,
+}
+
+const Y0: f32 = 0.282_094_8;
+
+/// Runs `r4d segment`.
+pub fn run(a: SegmentArgs) -> Result<()> {
+    if a.k == 0 {
+        bail!("--k 0: use --k 1 for no smoothing");
+    }
+    if a.out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply"))
+    {
+        bail!(
+            "--out {}: name the JSON parts file (the scene PLY with the part property is written beside it)",
+            a.out.display()
+        );
+    }
+    let t0 = Instant::now();
+    let g = r4d_splat::ply::read_gaussians(&a.scene)?;
+    let set = load_cameras(&a.cameras)?;
+    let mut masks = MaskDir::open(&a.masks, &set.cameras)?;
+    let m = masks.class_names().len();
+    eprintln!(
+        "{}: {} Gaussians; {} views; {m} part(s): {}",
+        a.scene.display(),
+        g.len(),
+        set.cameras.len(),
+        masks.class_names().join(", ")
+    );
+    let lift_cfg = LiftConfig {
+        temperature: a.temperature,
+        mode: set.mode.unwrap_or_default(),
+        par: Par::Rayon,
+    };
+    let n_views = set.cameras.len();
+    let lifted = lift_with_progress(&g, &set.cameras, &mut masks, &lift_cfg, |v| {
+        eprintln!("  lifted view {}/{n_views}", v + 1)
+    })?;
+    let t_lift = t0.elapsed().as_secs_f64();
+    let (labels, confidence) = if a.k > 1 {
+        let cfg = SmoothConfig {
+            k: a.k,
+            min_cluster: a.min_cluster.unwrap_or(a.k),
+            ..Default::default()
+        };
+        smooth_gaussians(&g, &lifted.labels, &lifted.confidence, m, &cfg)?
+    } else {
+        (lifted.labels.clone(), lifted.confidence.clone())
+    };
+    let changed = labels
+        .iter()
+        .zip(&lifted.labels)
+        .filter(|(x, y)| x != y)
+        .count();
+    let parts = PartLabels::new(masks.class_names().to_vec(), labels, confidence);
+    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    parts.write_json(&a.out)?;
+    let ply = a.out.with_extension("ply");
+    parts.write_scene_ply(&a.scene, &ply)?;
+    let stem = a
+        .out
+        .file_stem()
+        .map_or("parts".into(), |s| s.to_string_lossy().into_owned());
+    let views = a.out.with_file_name(format!("{stem}_views"));
+    write_views(&g, &parts, &set, &mut masks, &views)?;
+    let stat = parts.labels.iter().filter(|&&l| l < 0).count();
+    eprintln!(
+        "lift {t_lift:.1} s ({} Gaussians seen by no view); KNN (k {}) changed {changed} label(s); total {:.1} s",
+        lifted.unobserved(),
+        a.k,
+        t0.elapsed().as_secs_f64()
+    );
+    for (k, name) in parts.class_names.iter().enumerate() {
+        eprintln!("  part {k} ({name}): {} Gaussians", parts.counts[k]);
+    }
+    eprintln!("  static (-1): {stat} Gaussians");
+    println!(
+        "wrote {}, {} and {}",
+        a.out.display(),
+        ply.display(),
+        views.display()
+    );
+    Ok(())
+}
+
+/// For every camera: the Gaussians rendered in their part colours (static grey) on the left,
+/// the mask's classes in the same colours on the right (ignored pixels black).
+fn write_views(
+    g: &Gaussians,
+    parts: &PartLabels,
+    set: &r4d_splat::CameraSet,
+    masks: &mut MaskDir,
+    dir: &Path,
+) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut coloured = g.clone();
+    coloured.sh_degree = 0;
+    coloured.sh = parts
+        .labels
+        .iter()
+        .flat_map(|&l| part_colour(l).map(|c| (c - 0.5) / Y0))
+        .collect();
+    let settings = RenderSettings {
+        background: [0.05; 3],
+        mode: set.mode.unwrap_or_default(),
+    };
+    let m = parts.num_parts;
+    let mut r = SplatRenderer::new(CpuSplat);
+    for (v, cam) in set.cameras.iter().enumerate() {
+        let img = r.render(&coloured, None, cam, &settings)?;
+        let mask = masks.mask(v, cam)?;
+        let (w, h) = (cam.width, cam.height);
+        let mut out = image::RgbImage::new(2 * w, h);
+        let to_u8 = |c: f32| (c.clamp(0.0, 1.0) * 255.0).round() as u8;
+        for j in 0..h {
+            for i in 0..w {
+                let k = (j * w + i) as usize;
+                let c = &img.rgb[3 * k..3 * k + 3];
+                out.put_pixel(i, j, image::Rgb([to_u8(c[0]), to_u8(c[1]), to_u8(c[2])]));
+                let mc = mask.argmax(i, j, m).map_or([0.0; 3], part_colour);
+                out.put_pixel(w + i, j, image::Rgb(mc.map(to_u8)));
+            }
+        }
+        let path = dir.join(format!("view_{v:04}.png"));
+        out.save(&path)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
