@@ -5,16 +5,22 @@
 //! [`TrajectoryLoss`] at every frame against the targets, sweeps backward through every
 //! substep ([`r4d_mpm::adjoint`]) and updates the free parameters with AdamW in the log
 //! domain ([`r4d_optim`]). The simulation and its reverse sweep run in f64 on the CPU
-//! (`r4d_backend_cpu::adjoint::ParallelHost`, all cores); the GPU sweep
-//! (`r4d_backend_wgpu::adjoint::WgpuAdjoint`) is not wired into this pipeline yet.
+//! (`r4d_backend_cpu::adjoint::ParallelHost`, all cores) by default, or in f32 on a GPU
+//! (`r4d_backend_wgpu::adjoint::WgpuAdjoint`) with [`FitBackend::Wgpu`]: there the states stay
+//! on the device, only the positions of each frame come back for the loss and its gradient
+//! goes back to the position adjoint on the device.
 
 use r4d_backend_cpu::adjoint::ParallelHost;
+use r4d_backend_wgpu::adjoint::{AdjointError, DeviceState, WgpuAdjoint};
+use r4d_backend_wgpu::{WgpuContext, WgpuError};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
 use r4d_optim::{AdamW, LogDomainOptimizer, ParamKind};
 use serde::Serialize;
+use std::cell::RefCell;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Errors of the fitting pipeline.
@@ -32,6 +38,32 @@ pub enum FitError {
     /// The loss or a gradient became NaN.
     #[error("iteration {0}: the loss or its gradient is not finite")]
     NonFinite(usize),
+    /// The wgpu backend failed: no adapter ([`WgpuError::NoAdapter`]), no device, a transfer.
+    #[error(transparent)]
+    Wgpu(#[from] WgpuError),
+    /// The wgpu adjoint refused the setup (a material without a device VJP).
+    #[error(transparent)]
+    Adjoint(AdjointError),
+}
+
+impl From<AdjointError> for FitError {
+    fn from(e: AdjointError) -> Self {
+        match e {
+            AdjointError::Wgpu(e) => FitError::Wgpu(e),
+            e => FitError::Adjoint(e),
+        }
+    }
+}
+
+/// Where the simulation and its reverse sweep run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FitBackend {
+    /// f64 on the CPU, all cores (`ParallelHost<f64>`).
+    #[default]
+    Cpu,
+    /// f32 on a GPU through wgpu (`WgpuAdjoint`); the adapter is chosen as by
+    /// [`WgpuContext::new`] (`R4D_WGPU_ADAPTER`).
+    Wgpu,
 }
 
 pub use crate::video_fit::params::Granularity;
@@ -63,6 +95,8 @@ pub struct FitOptions {
     pub checkpointing: Checkpointing,
     /// Part or object parameters.
     pub granularity: Granularity,
+    /// Where the simulation and its adjoint run.
+    pub backend: FitBackend,
 }
 
 impl Default for FitOptions {
@@ -79,6 +113,7 @@ impl Default for FitOptions {
             loss: TrajectoryLoss::Position,
             checkpointing: Checkpointing::PerFrame,
             granularity: Granularity::Part,
+            backend: FitBackend::Cpu,
         }
     }
 }
@@ -204,7 +239,13 @@ pub fn fit_trajectory_resumable(
     } else {
         HostSim::new(config, scene)?
     };
-    let stepper = ParallelHost::<f64>::new(&sim);
+    let stepper = match opts.backend {
+        FitBackend::Cpu => Stepper::Cpu(ParallelHost::<f64>::new(&sim)),
+        FitBackend::Wgpu => Stepper::Wgpu(Box::new(WgpuAdjoint::new(
+            Arc::new(WgpuContext::new()?),
+            &sim,
+        )?)),
+    };
     // Parameter values per slot: per part, or per particle.
     let mut parts: Vec<PartParams> = if per_particle {
         scene
@@ -267,34 +308,20 @@ pub fn fit_trajectory_resumable(
     for iter in first..opts.iters {
         let start = Instant::now();
         apply(&mut parts, &opt.theta());
-        let phys: Vec<PhysParams<f64>> = parts.iter().map(PhysParams::of).collect();
-        let v0 = vec![[0.0; 3]; sim.len()];
-        let init = sim.init(&phys, &v0);
-        let grad0 = vec![PhysParams::default(); parts.len()];
-        let scale = 1.0 / frames as f64;
-        let (loss, adj0, mut grad) = value_and_grad(
-            &stepper,
-            &init,
-            &phys,
-            substeps,
+        let sweep = Sweep {
+            sim: &sim,
+            parts: &parts,
+            targets,
+            loss: opts.loss,
+            checkpointing: opts.checkpointing,
+            frames,
             spf,
-            opts.checkpointing,
-            grad0,
-            |f, s| {
-                let mut g = vec![[0.0; 3]; s.x.len()];
-                scale * opts.loss.value_and_grad(&s.x, &targets[f - 1], &mut g)
-            },
-            |f, s, adj| {
-                let mut g = vec![[0.0; 3]; s.x.len()];
-                let _ = opts.loss.value_and_grad(&s.x, &targets[f - 1], &mut g);
-                for (a, gp) in adj.x.iter_mut().zip(&g) {
-                    for q in 0..3 {
-                        a[q] += scale * gp[q];
-                    }
-                }
-            },
-        );
-        sim.init_vjp(&adj0, &mut grad);
+            substeps,
+        };
+        let (loss, grad) = match &stepper {
+            Stepper::Cpu(d) => sweep.cpu(d),
+            Stepper::Wgpu(d) => sweep.wgpu(d)?,
+        };
         let g: Vec<f64> = slots
             .iter()
             .map(|&(i, k)| match i {
@@ -336,4 +363,133 @@ pub fn fit_trajectory_resumable(
         parts: summarize(&values),
         per_particle: per_particle.then_some(values),
     })
+}
+
+/// The simulator of a fit.
+enum Stepper<'a> {
+    Cpu(ParallelHost<'a, f64>),
+    Wgpu(Box<WgpuAdjoint<'a>>),
+}
+
+/// One evaluation of the loss and of its parameter gradient (per slot, with the yield stress
+/// gradient of the initial state).
+struct Sweep<'a> {
+    sim: &'a HostSim,
+    parts: &'a [PartParams],
+    targets: &'a [Vec<[f32; 3]>],
+    loss: TrajectoryLoss,
+    checkpointing: Checkpointing,
+    frames: usize,
+    spf: u32,
+    substeps: u64,
+}
+
+impl Sweep<'_> {
+    /// In f64 on the CPU.
+    fn cpu(&self, stepper: &ParallelHost<f64>) -> (f64, Vec<PhysParams<f64>>) {
+        let (sim, targets, opts_loss) = (self.sim, self.targets, self.loss);
+        let phys: Vec<PhysParams<f64>> = self.parts.iter().map(PhysParams::of).collect();
+        let v0 = vec![[0.0; 3]; sim.len()];
+        let init = sim.init(&phys, &v0);
+        let grad0 = vec![PhysParams::default(); self.parts.len()];
+        let scale = 1.0 / self.frames as f64;
+        let (loss, adj0, mut grad) = value_and_grad(
+            stepper,
+            &init,
+            &phys,
+            self.substeps,
+            self.spf,
+            self.checkpointing,
+            grad0,
+            |f, s| {
+                let mut g = vec![[0.0; 3]; s.x.len()];
+                scale * opts_loss.value_and_grad(&s.x, &targets[f - 1], &mut g)
+            },
+            |f, s, adj| {
+                let mut g = vec![[0.0; 3]; s.x.len()];
+                let _ = opts_loss.value_and_grad(&s.x, &targets[f - 1], &mut g);
+                for (a, gp) in adj.x.iter_mut().zip(&g) {
+                    for q in 0..3 {
+                        a[q] += scale * gp[q];
+                    }
+                }
+            },
+        );
+        sim.init_vjp(&adj0, &mut grad);
+        (loss, grad)
+    }
+
+    /// In f32 on the device. The loss of each frame is evaluated in f64 on the downloaded
+    /// positions during the forward pass; its gradient is kept and added to the position
+    /// adjoint on the device when the reverse sweep reaches the frame.
+    fn wgpu(&self, d: &WgpuAdjoint) -> Result<(f64, Vec<PhysParams<f64>>), FitError> {
+        let (sim, targets, loss_kind) = (self.sim, self.targets, self.loss);
+        let phys: Vec<PhysParams<f32>> = self.parts.iter().map(PhysParams::of).collect();
+        let init = d.init(&phys, &vec![[0.0f32; 3]; sim.len()])?;
+        let scale = 1.0 / self.frames as f64;
+        let ctx = d.context();
+        let error: RefCell<Option<WgpuError>> = RefCell::new(None);
+        let frame_grads: RefCell<Vec<Option<Vec<[f32; 3]>>>> =
+            RefCell::new(vec![None; self.frames + 1]);
+        // The loss at frame `f` of the state `s` and its (scaled) gradient.
+        let eval = |f: usize, s: &DeviceState| -> Option<(f64, Vec<[f32; 3]>)> {
+            let flat = match ctx.download(&s.x) {
+                Ok(v) => v,
+                Err(e) => {
+                    error.borrow_mut().get_or_insert(e);
+                    return None;
+                }
+            };
+            let x: Vec<[f64; 3]> = flat
+                .chunks_exact(3)
+                .map(|c| [c[0] as f64, c[1] as f64, c[2] as f64])
+                .collect();
+            let mut g = vec![[0.0f64; 3]; x.len()];
+            let l = loss_kind.value_and_grad(&x, &targets[f - 1], &mut g);
+            let g32 = g.iter().map(|gp| gp.map(|v| (scale * v) as f32)).collect();
+            Some((scale * l, g32))
+        };
+        let (loss, adj0, grad) = value_and_grad(
+            d,
+            &init,
+            &phys,
+            self.substeps,
+            self.spf,
+            self.checkpointing,
+            d.zero_grad()?,
+            |f, s| match eval(f, s) {
+                Some((l, g)) => {
+                    frame_grads.borrow_mut()[f] = Some(g);
+                    l
+                }
+                None => f64::NAN,
+            },
+            |f, s, adj| {
+                let cached = frame_grads.borrow_mut()[f].take();
+                let Some(g) = cached.or_else(|| eval(f, s).map(|(_, g)| g)) else {
+                    return;
+                };
+                if let Err(e) = adj.add_to_x(&g) {
+                    error.borrow_mut().get_or_insert(e);
+                }
+            },
+        );
+        if let Some(e) = error.into_inner() {
+            return Err(e.into());
+        }
+        let mut grad = d.grad_to_host(&grad, &phys)?;
+        sim.init_vjp(&adj0.download()?, &mut grad);
+        let grad = grad
+            .iter()
+            .map(|g| PhysParams {
+                youngs_modulus: g.youngs_modulus as f64,
+                poisson_ratio: g.poisson_ratio as f64,
+                yield_stress: g.yield_stress as f64,
+                plastic_viscosity: g.plastic_viscosity as f64,
+                friction_angle_deg: g.friction_angle_deg as f64,
+                density: g.density as f64,
+            })
+            .collect();
+        Ok((loss, grad))
+    }
 }

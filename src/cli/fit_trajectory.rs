@@ -7,7 +7,8 @@ use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
 use r4d_mpm::ply::read_ply;
 use r4d_optim::{AdamW, ParamKind};
 use resonance4d::fit_trajectory::{
-    fit_trajectory_resumable, FitCheckpoint, FitOptions, Granularity, PartRecord,
+    fit_trajectory_resumable, FitBackend, FitCheckpoint, FitError, FitOptions, Granularity,
+    PartRecord,
 };
 use serde_json::json;
 use std::io::{IsTerminal, Write};
@@ -59,6 +60,10 @@ pub struct FitTrajectoryArgs {
     /// Continue a killed run from OUT/checkpoint.json (written after every iteration).
     #[arg(long)]
     resume: bool,
+    /// Where the simulation and its reverse sweep run: cpu (f64, all cores) or wgpu (f32 on a
+    /// GPU; `R4D_WGPU_ADAPTER=name` picks the adapter).
+    #[arg(long, default_value = "cpu")]
+    backend: String,
 }
 
 fn read_targets(dir: &Path, max: usize) -> Result<Vec<Vec<[f32; 3]>>> {
@@ -127,6 +132,11 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         ),
         o => bail!("--checkpointing: unknown '{o}' (per-frame, store-all, every:N, nested:N)"),
     };
+    let backend = match a.backend.as_str() {
+        "cpu" => FitBackend::Cpu,
+        "wgpu" => FitBackend::Wgpu,
+        o => bail!("--backend: unknown '{o}' (cpu, wgpu)"),
+    };
     let targets = read_targets(&a.target, config.time.frames)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let log_path = a.out.join("log.jsonl");
@@ -173,6 +183,7 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         loss,
         checkpointing,
         granularity,
+        backend,
         ..Default::default()
     };
     let mut io_error = None;
@@ -207,7 +218,13 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
                 ck_error.get_or_insert(e);
             }
         },
-    )?;
+    )
+    .map_err(|e| match e {
+        e @ (FitError::Wgpu(_) | FitError::Adjoint(_)) => {
+            anyhow::Error::new(e).context("--backend wgpu")
+        }
+        e => e.into(),
+    })?;
     if let Some(e) = ck_error {
         return Err(e).with_context(|| format!("writing {}", ck_path.display()));
     }
