@@ -244,6 +244,7 @@ pub fn problem() -> Result<VideoProblem, FitError> {
             video: placeholder,
         }],
         fps: 40.0,
+        gpu: None,
     };
     let obj = Objective::new(&p, None, &r4d_loss::DmsConfig::default(), false)?;
     let videos = obj.render(&truth())?;
@@ -433,11 +434,17 @@ pub struct DemoRun {
     pub summary: DemoSummary,
 }
 
-/// Runs the demo: reference video, profiles, initialisation and fit.
-pub fn run_demo(opts: &DemoOptions, hooks: &mut dyn FitHooks) -> Result<DemoRun, FitError> {
+/// Runs the demo: reference video (always simulated on the CPU), profiles, initialisation and
+/// fit (simulated on `gpu` when given).
+pub fn run_demo(
+    opts: &DemoOptions,
+    hooks: &mut dyn FitHooks,
+    gpu: Option<crate::video_fit::GpuHandle>,
+) -> Result<DemoRun, FitError> {
     let t0 = Instant::now();
     let mut times = std::collections::BTreeMap::new();
-    let problem = problem()?;
+    let mut problem = problem()?;
+    problem.gpu = gpu;
     times.insert("reference".to_string(), t0.elapsed().as_secs_f64());
     let cfg = fit_config(opts);
     let t1 = Instant::now();

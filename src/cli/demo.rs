@@ -25,6 +25,10 @@ pub struct DemoArgs {
     /// Seed of the initialisation.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Where the fit's simulation and reverse sweep run: cpu or wgpu (f32 on a GPU; the
+    /// reference video is always simulated on the CPU).
+    #[arg(long, default_value = "cpu")]
+    backend: String,
 }
 
 /// Runs the command.
@@ -50,7 +54,8 @@ pub fn run(a: DemoArgs) -> Result<()> {
     );
     let cfg = resonance4d::demo::fit_config(&opts);
     let mut hooks = RunHooks::new(&out, &cfg, None)?;
-    let mut run = run_demo(&opts, &mut hooks)?;
+    let gpu = super::fit::gpu_for(&a.backend)?;
+    let mut run = run_demo(&opts, &mut hooks, gpu)?;
     hooks.finish()?;
     let files = write_results(
         &out,

@@ -42,7 +42,9 @@ pub struct FitArgs {
     /// Fit settings (TOML; see the README's `r4d fit` section).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Compute backend (the fit runs on the CPU; wgpu backward passes are issue 9).
+    /// Where the simulation and its reverse sweep run: cpu (all cores, f64 by default) or
+    /// wgpu (WGSL on a GPU, f32; `R4D_WGPU_ADAPTER=name` picks an adapter). Rendering and the
+    /// loss run on the CPU either way.
     #[arg(long, default_value = "cpu")]
     backend: String,
     /// Particles (PLY x, y, z[, volume]); default: the sim config's particles.
@@ -73,6 +75,21 @@ fn is_physgaussian(path: &Path) -> bool {
             .ok()
             .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
             .is_some_and(|v| v.get("time").is_none() && v.get("n_grid").is_some())
+}
+
+/// The GPU to simulate on for `--backend`: `None` for cpu.
+pub fn gpu_for(backend: &str) -> Result<Option<resonance4d::video_fit::GpuHandle>> {
+    match backend {
+        "cpu" => Ok(None),
+        "wgpu" => {
+            let ctx = r4d_backend_wgpu::context::WgpuContext::new()
+                .map_err(|e| anyhow::anyhow!("--backend wgpu: {e}"))?;
+            Ok(Some(resonance4d::video_fit::GpuHandle(
+                std::sync::Arc::new(ctx),
+            )))
+        }
+        o => bail!("--backend: unknown '{o}' (cpu, wgpu)"),
+    }
 }
 
 /// Loads every input into a problem.
@@ -148,6 +165,7 @@ pub fn load_problem(a: &FitArgs) -> Result<VideoProblem> {
             video,
         }],
         fps,
+        gpu: None,
     };
     problem.validate()?;
     let side = problem.views[0]
@@ -189,17 +207,13 @@ pub fn run(a: FitArgs) -> Result<()> {
             (a, out, None)
         }
     };
-    if a.backend != "cpu" {
-        bail!(
-            "--backend {}: fitting runs on the cpu backend for now (GPU backward passes are not written yet)",
-            a.backend
-        );
-    }
+    let gpu = gpu_for(&a.backend)?;
     let cfg = match &a.config {
         Some(p) => FitConfig::load(p)?,
         None => FitConfig::default(),
     };
-    let problem = load_problem(&a)?;
+    let mut problem = load_problem(&a)?;
+    problem.gpu = gpu;
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     write_json(&out.join("invocation.json"), &a)?;
     write_json(&out.join("fit_config.json"), &cfg)?;

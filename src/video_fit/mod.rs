@@ -9,9 +9,10 @@
 //! * [`fit`]: the loop: initialisation, iterations, logs, checkpoints and resume.
 //!
 //! The simulation and its reverse sweep run on the CPU (`ParallelHost`, all cores, f64 by
-//! default); rendering and its VJP on the CPU splatting backend. The GPU reverse sweep
-//! (`r4d_backend_wgpu::adjoint::WgpuAdjoint`) and the GPU renderer backward exist but are not
-//! wired into the fit yet (`--backend wgpu` on `r4d fit`: issue 9).
+//! default) or, with [`VideoProblem::gpu`], on a GPU (`r4d_backend_wgpu::adjoint::WgpuAdjoint`,
+//! f32, state and gradients on the device; positions and F are read back once per frame);
+//! rendering, its VJP and the loss run on the CPU (the GPU renderer's backward exists but is
+//! not used by the fit yet).
 
 pub mod config;
 pub mod fit;
@@ -24,7 +25,7 @@ pub use config::{FitConfig, InitConfig};
 pub use fit::{run_fit, FitHooks, FitOutcome, FitState, IterRecord};
 pub use params::{Granularity, ParamSpace};
 pub use parts::PartLabels;
-pub use problem::{Evaluation, Objective, Precision, TimeMap, VideoProblem, View};
+pub use problem::{Evaluation, GpuHandle, Objective, Precision, TimeMap, VideoProblem, View};
 
 /// Errors of video fitting.
 #[derive(Debug, thiserror::Error)]
@@ -51,6 +52,9 @@ pub enum FitError {
     /// The simulation exploded: a particle left the grid or became non-finite.
     #[error("the simulation exploded at {0} (try smaller substeps or tighter parameter bounds)")]
     Exploded(String),
+    /// The GPU backend failed (no adapter, a device error, an unsupported material).
+    #[error("wgpu backend: {0}")]
+    Gpu(String),
     /// A checkpoint that does not belong to this run.
     #[error("cannot resume: {0}")]
     Resume(String),

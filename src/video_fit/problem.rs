@@ -11,6 +11,8 @@
 use super::FitError;
 use r4d_backend_cpu::adjoint::ParallelHost;
 use r4d_backend_cpu::splat::CpuSplat;
+use r4d_backend_wgpu::adjoint::{DeviceState, WgpuAdjoint};
+use r4d_backend_wgpu::context::WgpuContext;
 use r4d_loss::{Dms, DmsConfig, DmsTerms, Video};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
@@ -19,6 +21,7 @@ use r4d_mpm::{PartParams, ParticleSet, SimConfig};
 use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SimLink, SplatRenderer};
 use serde::{Deserialize, Serialize};
 use std::cell::RefCell;
+use std::sync::Arc;
 
 /// One camera and the reference video seen from it.
 #[derive(Clone, Debug)]
@@ -48,6 +51,19 @@ pub struct VideoProblem {
     pub views: Vec<View>,
     /// Frame rate of the reference videos.
     pub fps: f64,
+    /// Simulate (forward and reverse) on this GPU; `None`: on the CPU. Rendering and the loss
+    /// stay on the CPU.
+    pub gpu: Option<GpuHandle>,
+}
+
+/// A wgpu device to simulate on ([`VideoProblem::gpu`]).
+#[derive(Clone)]
+pub struct GpuHandle(pub Arc<WgpuContext>);
+
+impl std::fmt::Debug for GpuHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("GpuHandle(wgpu device)")
+    }
 }
 
 /// Floating-point type of the simulation and its reverse sweep.
@@ -181,8 +197,10 @@ pub struct Objective<'a> {
     dms: Vec<Dms<f32>>,
     /// Checkpointing of the reverse sweep.
     pub checkpointing: Checkpointing,
-    /// Simulation precision.
+    /// Simulation precision (CPU; the GPU simulates in f32).
     pub precision: Precision,
+    /// Simulate on this GPU instead of the CPU (`None`: the CPU).
+    pub gpu: Option<Arc<WgpuContext>>,
 }
 
 fn first_err(slot: &RefCell<Option<FitError>>, e: FitError) {
@@ -233,6 +251,7 @@ impl<'a> Objective<'a> {
             dms,
             checkpointing: Checkpointing::PerFrame,
             precision: Precision::F64,
+            gpu: problem.gpu.as_ref().map(|h| h.0.clone()),
         })
     }
 
@@ -270,10 +289,7 @@ impl<'a> Objective<'a> {
 
     /// Simulates and renders every view (no gradient): the fitted videos.
     pub fn render(&self, slots: &[PartParams]) -> Result<Vec<Video<f32>>, FitError> {
-        match self.precision {
-            Precision::F32 => self.run::<f32>(slots, false).map(|r| r.2),
-            Precision::F64 => self.run::<f64>(slots, false).map(|r| r.2),
-        }
+        self.dispatch(slots, false).map(|r| r.2)
     }
 
     /// Simulates and renders every view and evaluates the loss (no gradient).
@@ -281,18 +297,12 @@ impl<'a> Objective<'a> {
         &self,
         slots: &[PartParams],
     ) -> Result<(Evaluation, Vec<Video<f32>>), FitError> {
-        match self.precision {
-            Precision::F32 => self.run::<f32>(slots, false).map(|r| (r.0, r.2)),
-            Precision::F64 => self.run::<f64>(slots, false).map(|r| (r.0, r.2)),
-        }
+        self.dispatch(slots, false).map(|r| (r.0, r.2))
     }
 
     /// The loss (no gradient).
     pub fn value(&self, slots: &[PartParams]) -> Result<Evaluation, FitError> {
-        match self.precision {
-            Precision::F32 => self.run::<f32>(slots, false).map(|r| r.0),
-            Precision::F64 => self.run::<f64>(slots, false).map(|r| r.0),
-        }
+        self.dispatch(slots, false).map(|r| r.0)
     }
 
     /// The loss and its gradient with respect to every slot's parameters.
@@ -300,19 +310,95 @@ impl<'a> Objective<'a> {
         &self,
         slots: &[PartParams],
     ) -> Result<(Evaluation, Vec<PhysParams<f64>>), FitError> {
-        let r = match self.precision {
-            Precision::F32 => self.run::<f32>(slots, true)?,
-            Precision::F64 => self.run::<f64>(slots, true)?,
-        };
+        let r = self.dispatch(slots, true)?;
         Ok((r.0, r.1.expect("gradient requested")))
     }
 
-    /// Renders one simulated state from every view.
-    fn render_state<T: Real>(
+    /// Runs on the chosen simulator: the CPU (`ParallelHost` in f32 or f64) or the GPU
+    /// (`WgpuAdjoint`, f32).
+    fn dispatch(&self, slots: &[PartParams], grad: bool) -> Result<RunOut, FitError> {
+        for (i, p) in slots.iter().enumerate() {
+            p.validate(&format!("parameters of slot {i}"))?;
+        }
+        if let Some(ctx) = &self.gpu {
+            return self.run_gpu(ctx.clone(), slots, grad);
+        }
+        match self.precision {
+            Precision::F32 => self.run_cpu::<f32>(slots, grad),
+            Precision::F64 => self.run_cpu::<f64>(slots, grad),
+        }
+    }
+
+    fn run_cpu<T: Real>(&self, slots: &[PartParams], grad: bool) -> Result<RunOut, FitError> {
+        let phys: Vec<PhysParams<T>> = slots.iter().map(PhysParams::of).collect();
+        let init = self.sim.init(&phys, &vec![[T::zero(); 3]; self.sim.len()]);
+        let stepper = ParallelHost::<T>::new(&self.sim);
+        let grad0 = vec![PhysParams::<T>::default(); self.sim.slots()];
+        let read = |s: &HostState<T>| -> Result<Frame, FitError> {
+            Ok(Frame {
+                x: s.x.iter().map(|p| p.map(|c| c.f64() as f32)).collect(),
+                f: s.f.iter().map(|m| m.map(|c| c.f64() as f32)).collect(),
+            })
+        };
+        let add = |adj: &mut HostState<T>, d: &FrameGrad| -> Result<(), FitError> {
+            for (a, g) in adj.x.iter_mut().zip(&d.x) {
+                for q in 0..3 {
+                    a[q] += T::c(g[q]);
+                }
+            }
+            for (a, g) in adj.f.iter_mut().zip(&d.f) {
+                for q in 0..9 {
+                    a[q] += T::c(g[q]);
+                }
+            }
+            Ok(())
+        };
+        let (ev, back, videos) = self.run_with(&stepper, &init, &phys, grad0, grad, &read, &add)?;
+        let g = back.map(|(adj0, mut g)| {
+            self.sim.init_vjp(&adj0, &mut g);
+            g.iter().map(to_f64).collect::<Vec<_>>()
+        });
+        Ok((ev, check_grad(g)?, videos))
+    }
+
+    fn run_gpu(
         &self,
-        s: &HostState<T>,
-        what: &str,
-    ) -> Result<Vec<Vec<f32>>, FitError> {
+        ctx: Arc<WgpuContext>,
+        slots: &[PartParams],
+        grad: bool,
+    ) -> Result<RunOut, FitError> {
+        let gpu = |e: r4d_backend_wgpu::context::WgpuError| FitError::Gpu(e.to_string());
+        let d = WgpuAdjoint::new(ctx, &self.sim).map_err(|e| FitError::Gpu(e.to_string()))?;
+        let phys: Vec<PhysParams<f32>> = slots.iter().map(PhysParams::of).collect();
+        let init = d
+            .init(&phys, &vec![[0.0; 3]; self.sim.len()])
+            .map_err(gpu)?;
+        let grad0 = d.zero_grad().map_err(gpu)?;
+        let read = |s: &DeviceState| -> Result<Frame, FitError> {
+            let h = s.download().map_err(gpu)?;
+            Ok(Frame { x: h.x, f: h.f })
+        };
+        let add = |adj: &mut DeviceState, g: &FrameGrad| -> Result<(), FitError> {
+            let dx: Vec<[f32; 3]> = g.x.iter().map(|v| v.map(|c| c as f32)).collect();
+            let df: Vec<[f32; 9]> = g.f.iter().map(|v| v.map(|c| c as f32)).collect();
+            adj.add_to_x(&dx).map_err(gpu)?;
+            adj.add_to_f(&df).map_err(gpu)
+        };
+        let (ev, back, videos) = self.run_with(&d, &init, &phys, grad0, grad, &read, &add)?;
+        let g = match back {
+            Some((adj0, g)) => {
+                let mut host = d.grad_to_host(&g, &phys).map_err(gpu)?;
+                let adj0 = adj0.download().map_err(gpu)?;
+                self.sim.init_vjp(&adj0, &mut host);
+                Some(host.iter().map(to_f64).collect::<Vec<_>>())
+            }
+            None => None,
+        };
+        Ok((ev, check_grad(g)?, videos))
+    }
+
+    /// Renders one simulated frame from every view.
+    fn render_state(&self, s: &Frame, what: &str) -> Result<Vec<Vec<f32>>, FitError> {
         self.check_domain(s, what)?;
         let d = self.deformation(s, what)?;
         let mut r = SplatRenderer::new(CpuSplat);
@@ -333,13 +419,13 @@ impl<'a> Objective<'a> {
     }
 
     /// An exploded simulation: a particle outside the grid's interior or non-finite.
-    fn check_domain<T: Real>(&self, s: &HostState<T>, what: &str) -> Result<(), FitError> {
+    fn check_domain(&self, s: &Frame, what: &str) -> Result<(), FitError> {
         let setup = &self.sim.setup;
         let inv_dx = 1.0 / setup.dx;
         let hi = setup.n as f64 - 1.5;
         if let Some(i) = s.x.iter().position(|p| {
-            !p.iter().all(|c| {
-                let g = c.f64() * inv_dx;
+            !p.iter().all(|&c| {
+                let g = c as f64 * inv_dx;
                 g.is_finite() && (0.5..hi).contains(&g)
             })
         }) {
@@ -348,28 +434,25 @@ impl<'a> Objective<'a> {
         Ok(())
     }
 
-    fn deformation<T: Real>(&self, s: &HostState<T>, what: &str) -> Result<Deformation, FitError> {
-        let x: Vec<[f32; 3]> = s.x.iter().map(|p| p.map(|c| c.f64() as f32)).collect();
+    fn deformation(&self, s: &Frame, what: &str) -> Result<Deformation, FitError> {
         let f: Vec<[[f32; 3]; 3]> =
             s.f.iter()
-                .map(|m| {
-                    let g = |i: usize| m[i].f64() as f32;
-                    [[g(0), g(1), g(2)], [g(3), g(4), g(5)], [g(6), g(7), g(8)]]
-                })
+                .map(|m| [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
                 .collect();
         Ok(self
             .problem
             .link
-            .deformation(&self.problem.scene, &x, Some(&f), what)?)
+            .deformation(&self.problem.scene, &s.x, Some(&f), what)?)
     }
 
-    /// Adds the gradient of `sum(d_rgb * render(s))` over every view to `adj`.
-    fn render_vjp_into<T: Real>(
-        &self,
-        s: &HostState<T>,
-        d_rgb: &[Vec<f32>],
-        adj: &mut HostState<T>,
-    ) -> Result<(), FitError> {
+    /// The gradient of `sum(d_rgb * render(s))` over every view with respect to the
+    /// particles' positions and deformation gradients (simulation space).
+    fn render_vjp(&self, s: &Frame, d_rgb: &[Vec<f32>]) -> Result<FrameGrad, FitError> {
+        let n = s.x.len();
+        let mut out = FrameGrad {
+            x: vec![[0.0; 3]; n],
+            f: vec![[0.0; 9]; n],
+        };
         let d = self.deformation(s, "reverse sweep")?;
         let mut r = SplatRenderer::new(CpuSplat);
         let link = &self.problem.link;
@@ -390,8 +473,8 @@ impl<'a> Objective<'a> {
             for (p, &gi) in link.simulated.iter().enumerate() {
                 let gm = gr.means[gi as usize];
                 for a in 0..3 {
-                    let v: f64 = (0..3).map(|b| rot[a][b] * gm[b] as f64).sum::<f64>() / link.scale;
-                    adj.x[p][a] += T::c(v);
+                    out.x[p][a] +=
+                        (0..3).map(|b| rot[a][b] * gm[b] as f64).sum::<f64>() / link.scale;
                 }
                 let gf = gr.f[gi as usize];
                 for a in 0..3 {
@@ -402,12 +485,12 @@ impl<'a> Objective<'a> {
                                 v += rot[a][c] * gf[c][e] as f64 * rot[b][e];
                             }
                         }
-                        adj.f[p][a * 3 + b] += T::c(v);
+                        out.f[p][a * 3 + b] += v;
                     }
                 }
             }
         }
-        Ok(())
+        Ok(out)
     }
 
     /// Assembles the rendered videos from the per-simulated-frame renders, moving frames out
@@ -523,31 +606,34 @@ impl<'a> Objective<'a> {
         Ok(ev)
     }
 
-    /// Forward (and with `grad` the reverse sweep) in precision `T`. Returns the rendered
-    /// videos only without `grad` (with it they are freed as soon as the loss is evaluated).
-    #[allow(clippy::type_complexity)]
-    fn run<T: Real>(
+    /// Forward (and with `grad` the reverse sweep) on stepper `d`: `read` brings a state's
+    /// positions and deformation gradients to the host for rendering, `add` adds a frame's
+    /// rendering gradient to an adjoint state. Returns the rendered videos only without
+    /// `grad` (with it they are freed as soon as the loss is evaluated), and with `grad` the
+    /// initial state's adjoint and the parameter gradient.
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn run_with<D: Differentiable>(
         &self,
-        slots: &[PartParams],
+        d: &D,
+        init: &D::State,
+        params: &D::Params,
+        grad0: D::Grad,
         grad: bool,
-    ) -> Result<(Evaluation, Option<Vec<PhysParams<f64>>>, Vec<Video<f32>>), FitError> {
-        for (i, p) in slots.iter().enumerate() {
-            p.validate(&format!("parameters of slot {i}"))?;
-        }
-        let phys: Vec<PhysParams<T>> = slots.iter().map(PhysParams::of).collect();
-        let v0 = vec![[T::zero(); 3]; self.sim.len()];
-        let init = self.sim.init(&phys, &v0);
-        let stepper = ParallelHost::<T>::new(&self.sim);
+        read: &dyn Fn(&D::State) -> Result<Frame, FitError>,
+        add: &dyn Fn(&mut D::State, &FrameGrad) -> Result<(), FitError>,
+    ) -> Result<(Evaluation, Option<(D::State, D::Grad)>, Vec<Video<f32>>), FitError> {
         let spf = self.sim.setup.substeps_per_frame;
         let need = self.needed();
         let nframes = self.time.sim_frames;
         let substeps = nframes as u64 * spf as u64;
         let error: RefCell<Option<FitError>> = RefCell::new(None);
         let renders: RefCell<Vec<Option<Vec<Vec<f32>>>>> = RefCell::new(vec![None; nframes + 1]);
-        renders.borrow_mut()[0] = Some(self.render_state(&init, "frame 0")?);
-        let render_frame = |f: usize, s: &HostState<T>| {
+        renders.borrow_mut()[0] = Some(self.render_state(&read(init)?, "frame 0")?);
+        let render_frame = |f: usize, s: &D::State| {
             if need[f] && error.borrow().is_none() {
-                match self.render_state(s, &format!("simulated frame {f}")) {
+                let r =
+                    read(s).and_then(|fr| self.render_state(&fr, &format!("simulated frame {f}")));
+                match r {
                     Ok(r) => renders.borrow_mut()[f] = Some(r),
                     Err(e) => first_err(&error, e),
                 }
@@ -556,7 +642,7 @@ impl<'a> Objective<'a> {
         if !grad {
             let mut s = init.clone();
             for j in 0..substeps {
-                stepper.step(&mut s, &phys, j);
+                d.step(&mut s, params, j);
                 if (j + 1) % spf as u64 == 0 {
                     render_frame(((j + 1) / spf as u64) as usize, &s);
                     if let Some(e) = error.borrow_mut().take() {
@@ -573,12 +659,11 @@ impl<'a> Objective<'a> {
         // videos (freeing the renders), evaluates the loss and keeps only dL/dvideo.
         let video_grads: RefCell<Option<Vec<Vec<f32>>>> = RefCell::new(None);
         let eval_out: RefCell<Option<Evaluation>> = RefCell::new(None);
-        let grad0 = vec![PhysParams::<T>::default(); self.sim.slots()];
         let mut frame_buf: Vec<f32> = Vec::new();
-        let (_, adj0, mut g) = value_and_grad(
-            &stepper,
-            &init,
-            &phys,
+        let (_, adj0, g) = value_and_grad(
+            d,
+            init,
+            params,
             substeps,
             spf,
             self.checkpointing,
@@ -610,15 +695,23 @@ impl<'a> Objective<'a> {
                 let gs = video_grads.borrow();
                 let gs = gs.as_ref().expect("video gradients");
                 let mut d_rgb = Vec::with_capacity(gs.len());
+                let mut any = false;
                 for (v, gv) in gs.iter().enumerate() {
                     frame_buf.resize(self.problem.views[v].video.frame_len(), 0.0);
                     if self.frame_grad(gv, f, &mut frame_buf) {
                         d_rgb.push(frame_buf.clone());
+                        any = true;
                     } else {
                         d_rgb.push(Vec::new());
                     }
                 }
-                if let Err(e) = self.render_vjp_into(s, &d_rgb, adj) {
+                if !any {
+                    return;
+                }
+                let r = read(s)
+                    .and_then(|fr| self.render_vjp(&fr, &d_rgb))
+                    .and_then(|fg| add(adj, &fg));
+                if let Err(e) = r {
                     first_err(&error, e);
                 }
             },
@@ -626,7 +719,6 @@ impl<'a> Objective<'a> {
         if let Some(e) = error.borrow_mut().take() {
             return Err(e);
         }
-        self.sim.init_vjp(&adj0, &mut g);
         let ev = match eval_out.borrow_mut().take() {
             Some(ev) => ev,
             None => {
@@ -634,18 +726,41 @@ impl<'a> Objective<'a> {
                 self.loss(&videos, None)?
             }
         };
-        let g64: Vec<PhysParams<f64>> = g
-            .iter()
-            .map(|p| PhysParams {
-                youngs_modulus: p.youngs_modulus.f64(),
-                poisson_ratio: p.poisson_ratio.f64(),
-                yield_stress: p.yield_stress.f64(),
-                plastic_viscosity: p.plastic_viscosity.f64(),
-                friction_angle_deg: p.friction_angle_deg.f64(),
-                density: p.density.f64(),
-            })
-            .collect();
-        if g64.iter().any(|p| {
+        Ok((ev, Some((adj0, g)), Vec::new()))
+    }
+}
+
+/// What a run returns: the loss, the parameter gradient (when asked) and the rendered videos
+/// (forward-only runs).
+type RunOut = (Evaluation, Option<Vec<PhysParams<f64>>>, Vec<Video<f32>>);
+
+/// A simulated frame on the host: positions and row-major deformation gradients.
+struct Frame {
+    x: Vec<[f32; 3]>,
+    f: Vec<[f32; 9]>,
+}
+
+/// A frame's rendering gradient with respect to positions and deformation gradients.
+struct FrameGrad {
+    x: Vec<[f64; 3]>,
+    f: Vec<[f64; 9]>,
+}
+
+fn to_f64<T: Real>(p: &PhysParams<T>) -> PhysParams<f64> {
+    PhysParams {
+        youngs_modulus: p.youngs_modulus.f64(),
+        poisson_ratio: p.poisson_ratio.f64(),
+        yield_stress: p.yield_stress.f64(),
+        plastic_viscosity: p.plastic_viscosity.f64(),
+        friction_angle_deg: p.friction_angle_deg.f64(),
+        density: p.density.f64(),
+    }
+}
+
+/// A non-finite parameter gradient is an error.
+fn check_grad(g: Option<Vec<PhysParams<f64>>>) -> Result<Option<Vec<PhysParams<f64>>>, FitError> {
+    if let Some(g) = &g {
+        if g.iter().any(|p| {
             ![
                 p.youngs_modulus,
                 p.poisson_ratio,
@@ -659,6 +774,6 @@ impl<'a> Objective<'a> {
         }) {
             return Err(FitError::NonFinite("the parameter gradient".into()));
         }
-        Ok((ev, Some(g64), Vec::new()))
     }
+    Ok(g)
 }

@@ -160,11 +160,26 @@ impl DeviceState {
     /// gradient enters an adjoint state).
     pub fn add_to_x(&self, dx: &[[f32; 3]]) -> Result<(), WgpuError> {
         assert_eq!(dx.len(), self.len(), "add_to_x: one vector per particle");
-        let src: GpuBuffer<f32> = self.ctx.upload("adjoint dx", bytemuck::cast_slice(dx))?;
+        self.add_into(&self.x, bytemuck::cast_slice(dx))
+    }
+
+    /// Adds `df` (one row-major 3x3 matrix per particle) to the deformation gradients on the
+    /// device (how a rendering loss's dL/dF enters an adjoint state).
+    pub fn add_to_f(&self, df: &[[f32; 9]]) -> Result<(), WgpuError> {
+        assert_eq!(df.len(), self.len(), "add_to_f: one matrix per particle");
+        self.add_into(&self.f, bytemuck::cast_slice(df))
+    }
+
+    /// `dst += values` on the device.
+    fn add_into(&self, dst: &GpuBuffer<f32>, values: &[f32]) -> Result<(), WgpuError> {
+        if values.is_empty() {
+            return Ok(());
+        }
+        let src: GpuBuffer<f32> = self.ctx.upload("adjoint increment", values)?;
         let counts = self.ctx.uniform(
             "Counts",
             &Counts {
-                particles: 3 * dx.len() as u32,
+                particles: values.len() as u32,
                 n_grid: 0,
                 _pad: [0; 2],
             },
@@ -173,8 +188,8 @@ impl DeviceState {
         self.ctx.dispatch(
             &mut enc,
             "mpm_add_vjp",
-            &[&counts.buffer, &src.buffer, &self.x.buffer],
-            3 * dx.len() as u32,
+            &[&counts.buffer, &src.buffer, &dst.buffer],
+            values.len() as u32,
             64,
         )?;
         self.ctx.submit(enc);
