@@ -16,9 +16,7 @@ use r4d_mpm::adjoint::host::{HostSim, HostStepper, PhysParams};
 use r4d_mpm::{
     BoundaryCondition, Domain, PartParams, ParticleSet, Shape, SimConfig, Surface, TimeConfig,
 };
-#[path = "common/alloc.rs"]
-mod alloc;
-use alloc::{peak_since, reset_peak, Counting};
+use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use std::time::Instant;
 
 #[global_allocator]

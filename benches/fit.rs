@@ -11,10 +11,8 @@
 )]
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use resonance4d::video_fit::{Objective, Precision};
-#[path = "common/alloc.rs"]
-mod alloc;
-use alloc::{peak_since, reset_peak, Counting};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;

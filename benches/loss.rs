@@ -15,10 +15,8 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use r4d_loss::{Dms, DmsConfig, DmsWeights, Loss, Spectral, SpectralConfig, Video};
+use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use std::time::Instant;
-#[path = "common/alloc.rs"]
-mod alloc;
-use alloc::{peak_since, reset_peak, Counting};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;

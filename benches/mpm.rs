@@ -17,10 +17,8 @@ use r4d_mpm::{
     reference::ReferenceBackend, BoundaryCondition, MpmKernels, MpmSim, PartParams, ParticleSet,
     Shape, SimConfig, Simulator, Surface,
 };
+use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use std::sync::Arc;
-#[path = "common/alloc.rs"]
-mod alloc;
-use alloc::{peak_since, reset_peak, Counting};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;

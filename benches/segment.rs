@@ -26,10 +26,8 @@ use r4d_segment::smooth::{smooth_gaussians, SmoothConfig};
 use r4d_segment::synthetic::{self, Rng};
 use r4d_segment::{InMemoryMasks, Mask, MaskData};
 use r4d_splat::{Camera, Gaussians};
+use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use std::time::Duration;
-#[path = "common/alloc.rs"]
-mod alloc;
-use alloc::{peak_since, reset_peak, Counting};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;

@@ -23,10 +23,8 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use r4d_backend_cpu::splat::CpuSplat;
 use r4d_backend_wgpu::{splat::WgpuSplat, WgpuContext};
 use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SplatRenderer};
+use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use std::sync::Arc;
-#[path = "common/alloc.rs"]
-mod alloc;
-use alloc::{peak_since, reset_peak, Counting};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;

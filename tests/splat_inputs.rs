@@ -1,14 +1,12 @@
 //! Renderer inputs: INRIA PLY round trip and malformed files (typed errors, bounded memory),
 //! and the four camera formats agreeing on the same cameras.
 
-#[path = "../benches/common/alloc.rs"]
-mod alloc;
 mod common;
 
-use alloc::{peak_since, reset_peak, Counting};
 use common::fixture;
 use r4d_splat::ply::{parse_gaussians, read_gaussians, write_gaussians};
 use r4d_splat::{load_cameras, Camera, Error};
+use resonance4d::alloc::{peak_since, reset_peak, Counting};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
