@@ -235,15 +235,15 @@ impl<'a> Objective<'a> {
             .views
             .iter()
             .map(|v| {
-                let r = Video::from_frames(
+                Video::from_frames(
                     v.video.height(),
                     v.video.width(),
                     (0..frames).map(|t| v.video.frame(t).to_vec()),
-                )?;
-                Dms::new(r, dms.clone())
+                )
+                .and_then(|r| Dms::new(r, dms.clone()))
+                .map_err(|e| FitError::Input(format!("{}: reference video: {e}", v.name)))
             })
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| FitError::Input(format!("reference video: {e}")))?;
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Objective {
             problem,
             sim,
