@@ -241,14 +241,14 @@ pub fn problem() -> Result<VideoProblem, FitError> {
         views: vec![View {
             name: "demo reference".into(),
             camera: cam,
-            video: placeholder,
+            video: placeholder.into(),
         }],
         fps: 40.0,
         gpu: None,
     };
     let obj = Objective::new(&p, None, &r4d_loss::DmsConfig::default(), false)?;
     let videos = obj.render(&truth())?;
-    p.views[0].video = videos.into_iter().next().expect("one view");
+    p.views[0].video = videos.into_iter().next().expect("one view").into();
     let mut start = truth();
     for s in &mut start {
         s.youngs_modulus_pa = 1e5;

@@ -72,7 +72,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let inputs = out.join("inputs");
     std::fs::create_dir_all(&inputs)?;
     r4d_splat::ply::write_gaussians(&inputs.join("scene.ply"), &p.scene)?;
-    r4d_loss::io::write_npy(&inputs.join("reference.npy"), &p.views[0].video)?;
+    r4d_loss::io::write_npy(&inputs.join("reference.npy"), &p.views[0].video.to_f32())?;
     // TOML: the clamp's end time is +infinity, which JSON cannot hold.
     let mut sim = p.config.clone();
     sim.particles = Some("particles.ply".into());

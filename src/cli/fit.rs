@@ -162,7 +162,8 @@ pub fn load_problem(a: &FitArgs) -> Result<VideoProblem> {
         views: vec![View {
             name: video_path.display().to_string(),
             camera,
-            video,
+            // 8-bit frames are kept as bytes (a quarter of f32, exact).
+            video: video.into(),
         }],
         fps,
         gpu: None,

@@ -158,7 +158,7 @@ pub fn ms_ssim_score(problem: &VideoProblem, rendered: &[Video<f32>]) -> Result<
         let reference = Video::from_frames(
             v.video.height(),
             v.video.width(),
-            (0..r.frames()).map(|t| v.video.frame(t).to_vec()),
+            (0..r.frames()).map(|t| v.video.frame_f32(t)),
         )?;
         let side = r.height().min(r.width());
         let cfg = if side > 160 {

@@ -13,7 +13,9 @@ use r4d_backend_cpu::adjoint::ParallelHost;
 use r4d_backend_cpu::splat::CpuSplat;
 use r4d_backend_wgpu::adjoint::{DeviceState, WgpuAdjoint};
 use r4d_backend_wgpu::context::WgpuContext;
-use r4d_loss::{Dms, DmsConfig, DmsTerms, Video};
+use r4d_backend_wgpu::splat::WgpuSplat;
+use r4d_loss::bands::{BandedDms, ReferenceVideo};
+use r4d_loss::{DmsConfig, DmsTerms, Video};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
 use r4d_mpm::math::Real;
@@ -21,7 +23,8 @@ use r4d_mpm::{PartParams, ParticleSet, SimConfig};
 use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SimLink, SplatRenderer};
 use serde::{Deserialize, Serialize};
 use std::cell::RefCell;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
 /// One camera and the reference video seen from it.
 #[derive(Clone, Debug)]
@@ -30,8 +33,9 @@ pub struct View {
     pub name: String,
     /// The camera.
     pub camera: Camera,
-    /// The reference video `(T, H, W, 3)`, same size as the camera.
-    pub video: Video<f32>,
+    /// The reference video `(T, H, W, 3)`, same size as the camera (8-bit sources are kept
+    /// as bytes: `ReferenceVideo::from(video)` picks the compact form).
+    pub video: ReferenceVideo,
 }
 
 /// Everything a video fit needs.
@@ -51,8 +55,8 @@ pub struct VideoProblem {
     pub views: Vec<View>,
     /// Frame rate of the reference videos.
     pub fps: f64,
-    /// Simulate (forward and reverse) on this GPU; `None`: on the CPU. Rendering and the loss
-    /// stay on the CPU.
+    /// Simulate (forward and reverse) and render on this GPU; `None`: on the CPU. The loss
+    /// stays on the CPU ([`Objective::render_on_gpu`]).
     pub gpu: Option<GpuHandle>,
 }
 
@@ -189,18 +193,63 @@ pub struct Evaluation {
     pub views: Vec<DmsTerms>,
 }
 
+/// Where the time and memory of the last evaluation went ([`Objective::profile`]). Peaks are
+/// the process's live heap bytes at the highest point of each stage, read from the counting
+/// allocator ([`crate::alloc`]; 0 when it is not installed); on a GPU, the device's own
+/// accounting of its buffers.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct StageProfile {
+    /// Forward simulation (with checkpointing), reading the frames back excluded.
+    pub forward_s: f64,
+    /// Rendering every band of every frame and view.
+    pub render_s: f64,
+    /// The DMS loss (value and, with a gradient, its gradient), band by band.
+    pub loss_s: f64,
+    /// The renderer's VJP, band by band.
+    pub render_vjp_s: f64,
+    /// Reverse sweep of the simulation (its recomputation included).
+    pub backward_s: f64,
+    /// Heap peak during the forward simulation.
+    pub forward_peak_bytes: usize,
+    /// Heap peak while rendering, evaluating and differentiating the loss.
+    pub loss_peak_bytes: usize,
+    /// Heap peak during the reverse sweep.
+    pub backward_peak_bytes: usize,
+    /// Device peak (simulation and rendering on the GPU), when one is used.
+    pub device_peak_bytes: Option<u64>,
+    /// Row bands per view.
+    pub bands: usize,
+}
+
+/// Row bands of the loss by default ([`Objective::set_band_rows`]).
+pub const DEFAULT_BAND_ROWS: usize = 128;
+
 /// The differentiable objective over the first `frames` video frames.
+///
+/// # Memory
+/// The forward pass keeps only the simulated frames' positions and deformation gradients
+/// (`12` floats per particle per frame). The loss is then evaluated in row bands of every
+/// view ([`r4d_loss::bands::BandedDms`]): each band of every frame is rendered with a
+/// cropped camera, its loss and gradient evaluated, and the gradient pulled back through the
+/// renderer at once, so no whole rendered video, video gradient or f32 reference is held;
+/// 8-bit references stay bytes. The result equals the whole-frame loss up to rounding.
 pub struct Objective<'a> {
     problem: &'a VideoProblem,
     sim: HostSim,
     time: TimeMap,
-    dms: Vec<Dms<f32>>,
+    dms_config: DmsConfig,
+    dms: Vec<BandedDms<'a>>,
     /// Checkpointing of the reverse sweep.
     pub checkpointing: Checkpointing,
     /// Simulation precision (CPU; the GPU simulates in f32).
     pub precision: Precision,
     /// Simulate on this GPU instead of the CPU (`None`: the CPU).
     pub gpu: Option<Arc<WgpuContext>>,
+    /// Render (and differentiate the renderer) on [`Objective::gpu`] too (default `true`
+    /// when a GPU is given); the loss runs on the CPU.
+    pub render_on_gpu: bool,
+    gpu_renderer: Mutex<Option<SplatRenderer<WgpuSplat>>>,
+    profile: Mutex<StageProfile>,
 }
 
 fn first_err(slot: &RefCell<Option<FitError>>, e: FitError) {
@@ -208,6 +257,20 @@ fn first_err(slot: &RefCell<Option<FitError>>, e: FitError) {
     if s.is_none() {
         *s = Some(e);
     }
+}
+
+/// Starts a stage's heap peak; returns the peak so far, to be restored by [`stage_end`].
+fn stage_begin() -> usize {
+    let saved = crate::alloc::peak();
+    crate::alloc::reset_peak();
+    saved
+}
+
+/// The stage's peak (absolute live bytes); the overall peak is restored.
+fn stage_end(saved: usize) -> usize {
+    let p = crate::alloc::peak();
+    crate::alloc::PEAK.fetch_max(saved, std::sync::atomic::Ordering::Relaxed);
+    p
 }
 
 impl<'a> Objective<'a> {
@@ -231,33 +294,50 @@ impl<'a> Objective<'a> {
         let t = &problem.config.time;
         let frame_dt = t.substeps() as f64 * t.substep_dt;
         let time = TimeMap::new(frames, problem.fps, frame_dt);
-        let dms = problem
-            .views
-            .iter()
-            .map(|v| {
-                Video::from_frames(
-                    v.video.height(),
-                    v.video.width(),
-                    (0..frames).map(|t| v.video.frame(t).to_vec()),
-                )
-                .and_then(|r| Dms::new(r, dms.clone()))
-                .map_err(|e| FitError::Input(format!("{}: reference video: {e}", v.name)))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        Ok(Objective {
+        let gpu = problem.gpu.as_ref().map(|h| h.0.clone());
+        let mut obj = Objective {
             problem,
             sim,
             time,
-            dms,
+            dms_config: dms.clone(),
+            dms: Vec::new(),
             checkpointing: Checkpointing::PerFrame,
             precision: Precision::F64,
-            gpu: problem.gpu.as_ref().map(|h| h.0.clone()),
-        })
+            render_on_gpu: gpu.is_some(),
+            gpu,
+            gpu_renderer: Mutex::new(None),
+            profile: Mutex::new(StageProfile::default()),
+        };
+        obj.set_band_rows(DEFAULT_BAND_ROWS)?;
+        Ok(obj)
+    }
+
+    /// Evaluates the loss in bands of about `rows` rows (rounded up to a multiple of the
+    /// 16-px patch and tile size). Smaller bands hold less memory and re-project the
+    /// Gaussians more often; the value does not change (up to rounding).
+    pub fn set_band_rows(&mut self, rows: usize) -> Result<(), FitError> {
+        let frames = self.time.taps.len();
+        let rows = rows.max(1).div_ceil(16) * 16;
+        self.dms = self
+            .problem
+            .views
+            .iter()
+            .map(|v| {
+                BandedDms::new(&v.video, frames, self.dms_config.clone(), rows)
+                    .map_err(|e| FitError::Input(format!("{}: reference video: {e}", v.name)))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(())
     }
 
     /// The host simulator (its `slot` gives each particle's parameter slot).
     pub fn sim(&self) -> &HostSim {
         &self.sim
+    }
+
+    /// Time and memory of the stages of the last evaluation.
+    pub fn profile(&self) -> StageProfile {
+        self.profile.lock().map(|p| p.clone()).unwrap_or_default()
     }
 
     /// The part of every parameter slot.
@@ -289,7 +369,7 @@ impl<'a> Objective<'a> {
 
     /// Simulates and renders every view (no gradient): the fitted videos.
     pub fn render(&self, slots: &[PartParams]) -> Result<Vec<Video<f32>>, FitError> {
-        self.dispatch(slots, false).map(|r| r.2)
+        self.dispatch(slots, Mode::Render).map(|r| r.2)
     }
 
     /// Simulates and renders every view and evaluates the loss (no gradient).
@@ -297,12 +377,12 @@ impl<'a> Objective<'a> {
         &self,
         slots: &[PartParams],
     ) -> Result<(Evaluation, Vec<Video<f32>>), FitError> {
-        self.dispatch(slots, false).map(|r| (r.0, r.2))
+        self.dispatch(slots, Mode::Render).map(|r| (r.0, r.2))
     }
 
     /// The loss (no gradient).
     pub fn value(&self, slots: &[PartParams]) -> Result<Evaluation, FitError> {
-        self.dispatch(slots, false).map(|r| r.0)
+        self.dispatch(slots, Mode::Value).map(|r| r.0)
     }
 
     /// The loss and its gradient with respect to every slot's parameters.
@@ -310,26 +390,31 @@ impl<'a> Objective<'a> {
         &self,
         slots: &[PartParams],
     ) -> Result<(Evaluation, Vec<PhysParams<f64>>), FitError> {
-        let r = self.dispatch(slots, true)?;
+        let r = self.dispatch(slots, Mode::Grad)?;
         Ok((r.0, r.1.expect("gradient requested")))
     }
 
     /// Runs on the chosen simulator: the CPU (`ParallelHost` in f32 or f64) or the GPU
     /// (`WgpuAdjoint`, f32).
-    fn dispatch(&self, slots: &[PartParams], grad: bool) -> Result<RunOut, FitError> {
+    fn dispatch(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
         for (i, p) in slots.iter().enumerate() {
             p.validate(&format!("parameters of slot {i}"))?;
         }
         if let Some(ctx) = &self.gpu {
-            return self.run_gpu(ctx.clone(), slots, grad);
+            ctx.reset_peak();
+            let r = self.run_gpu(ctx.clone(), slots, mode);
+            if let Ok(mut p) = self.profile.lock() {
+                p.device_peak_bytes = Some(ctx.peak_bytes());
+            }
+            return r;
         }
         match self.precision {
-            Precision::F32 => self.run_cpu::<f32>(slots, grad),
-            Precision::F64 => self.run_cpu::<f64>(slots, grad),
+            Precision::F32 => self.run_cpu::<f32>(slots, mode),
+            Precision::F64 => self.run_cpu::<f64>(slots, mode),
         }
     }
 
-    fn run_cpu<T: Real>(&self, slots: &[PartParams], grad: bool) -> Result<RunOut, FitError> {
+    fn run_cpu<T: Real>(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
         let phys: Vec<PhysParams<T>> = slots.iter().map(PhysParams::of).collect();
         let init = self.sim.init(&phys, &vec![[T::zero(); 3]; self.sim.len()]);
         let stepper = ParallelHost::<T>::new(&self.sim);
@@ -353,7 +438,7 @@ impl<'a> Objective<'a> {
             }
             Ok(())
         };
-        let (ev, back, videos) = self.run_with(&stepper, &init, &phys, grad0, grad, &read, &add)?;
+        let (ev, back, videos) = self.run_with(&stepper, &init, &phys, grad0, mode, &read, &add)?;
         let g = back.map(|(adj0, mut g)| {
             self.sim.init_vjp(&adj0, &mut g);
             g.iter().map(to_f64).collect::<Vec<_>>()
@@ -365,7 +450,7 @@ impl<'a> Objective<'a> {
         &self,
         ctx: Arc<WgpuContext>,
         slots: &[PartParams],
-        grad: bool,
+        mode: Mode,
     ) -> Result<RunOut, FitError> {
         let gpu = |e: r4d_backend_wgpu::context::WgpuError| FitError::Gpu(e.to_string());
         let d = WgpuAdjoint::new(ctx, &self.sim).map_err(|e| FitError::Gpu(e.to_string()))?;
@@ -384,7 +469,7 @@ impl<'a> Objective<'a> {
             adj.add_to_x(&dx).map_err(gpu)?;
             adj.add_to_f(&df).map_err(gpu)
         };
-        let (ev, back, videos) = self.run_with(&d, &init, &phys, grad0, grad, &read, &add)?;
+        let (ev, back, videos) = self.run_with(&d, &init, &phys, grad0, mode, &read, &add)?;
         let g = match back {
             Some((adj0, g)) => {
                 let mut host = d.grad_to_host(&g, &phys).map_err(gpu)?;
@@ -397,25 +482,33 @@ impl<'a> Objective<'a> {
         Ok((ev, check_grad(g)?, videos))
     }
 
-    /// Renders one simulated frame from every view.
-    fn render_state(&self, s: &Frame, what: &str) -> Result<Vec<Vec<f32>>, FitError> {
-        self.check_domain(s, what)?;
+    /// Runs `f` with the renderer of this objective: the GPU's (built once) or the CPU's.
+    fn with_renderer<R>(
+        &self,
+        f: impl FnOnce(&mut dyn Renderer) -> Result<R, FitError>,
+    ) -> Result<R, FitError> {
+        match (&self.gpu, self.render_on_gpu) {
+            (Some(ctx), true) => {
+                let mut guard = self
+                    .gpu_renderer
+                    .lock()
+                    .map_err(|_| FitError::Gpu("the GPU renderer panicked earlier".into()))?;
+                let r =
+                    guard.get_or_insert_with(|| SplatRenderer::new(WgpuSplat::new(ctx.clone())));
+                f(r)
+            }
+            _ => f(&mut SplatRenderer::new(CpuSplat)),
+        }
+    }
+
+    /// Renders one simulated frame from `cam` (a view's camera or a band of it).
+    fn render_frame(&self, s: &Frame, cam: &Camera, what: &str) -> Result<Vec<f32>, FitError> {
         let d = self.deformation(s, what)?;
-        let mut r = SplatRenderer::new(CpuSplat);
-        self.problem
-            .views
-            .iter()
-            .map(|v| {
-                r.render(
-                    &self.problem.scene,
-                    Some(&d),
-                    &v.camera,
-                    &self.problem.settings,
-                )
+        self.with_renderer(|r| {
+            r.render(&self.problem.scene, Some(&d), cam, &self.problem.settings)
                 .map(|img| img.rgb)
                 .map_err(FitError::from)
-            })
-            .collect()
+        })
     }
 
     /// An exploded simulation: a particle outside the grid's interior or non-finite.
@@ -445,64 +538,57 @@ impl<'a> Objective<'a> {
             .deformation(&self.problem.scene, &s.x, Some(&f), what)?)
     }
 
-    /// The gradient of `sum(d_rgb * render(s))` over every view with respect to the
-    /// particles' positions and deformation gradients (simulation space).
-    fn render_vjp(&self, s: &Frame, d_rgb: &[Vec<f32>]) -> Result<FrameGrad, FitError> {
-        let n = s.x.len();
-        let mut out = FrameGrad {
-            x: vec![[0.0; 3]; n],
-            f: vec![[0.0; 9]; n],
-        };
+    /// Adds the gradient of `sum(d_rgb * render(s, cam))` with respect to the particles'
+    /// positions and deformation gradients (simulation space) to `out`.
+    fn render_vjp_into(
+        &self,
+        s: &Frame,
+        cam: &Camera,
+        d_rgb: &[f32],
+        out: &mut FrameGrad,
+    ) -> Result<(), FitError> {
         let d = self.deformation(s, "reverse sweep")?;
-        let mut r = SplatRenderer::new(CpuSplat);
-        let link = &self.problem.link;
-        let rot = link.rotation;
-        for (v, g) in self.problem.views.iter().zip(d_rgb) {
-            if g.iter().all(|&x| x == 0.0) {
-                continue;
-            }
-            let gr = r.render_vjp(
+        let gr = self.with_renderer(|r| {
+            r.render_vjp(
                 &self.problem.scene,
                 Some(&d),
-                &v.camera,
+                cam,
                 &self.problem.settings,
-                g,
-            )?;
-            // x_world = R^T ((x_sim - shift) / scale + centre): dL/dx_sim = R dL/dx_world / scale.
-            // F_world = R^T F_sim R: dL/dF_sim = R dL/dF_world R^T.
-            for (p, &gi) in link.simulated.iter().enumerate() {
-                let gm = gr.means[gi as usize];
-                for a in 0..3 {
-                    out.x[p][a] +=
-                        (0..3).map(|b| rot[a][b] * gm[b] as f64).sum::<f64>() / link.scale;
-                }
-                let gf = gr.f[gi as usize];
-                for a in 0..3 {
-                    for b in 0..3 {
-                        let mut v = 0.0;
-                        for c in 0..3 {
-                            for e in 0..3 {
-                                v += rot[a][c] * gf[c][e] as f64 * rot[b][e];
-                            }
+                d_rgb,
+            )
+            .map_err(FitError::from)
+        })?;
+        drop(d);
+        let link = &self.problem.link;
+        let rot = link.rotation;
+        // x_world = R^T ((x_sim - shift) / scale + centre): dL/dx_sim = R dL/dx_world / scale.
+        // F_world = R^T F_sim R: dL/dF_sim = R dL/dF_world R^T.
+        for (p, &gi) in link.simulated.iter().enumerate() {
+            let gm = gr.means[gi as usize];
+            for a in 0..3 {
+                out.x[p][a] += (0..3).map(|b| rot[a][b] * gm[b] as f64).sum::<f64>() / link.scale;
+            }
+            let gf = gr.f[gi as usize];
+            for a in 0..3 {
+                for b in 0..3 {
+                    let mut v = 0.0;
+                    for c in 0..3 {
+                        for e in 0..3 {
+                            v += rot[a][c] * gf[c][e] as f64 * rot[b][e];
                         }
-                        out.f[p][a * 3 + b] += v;
                     }
+                    out.f[p][a * 3 + b] += v;
                 }
             }
         }
-        Ok(out)
+        Ok(())
     }
 
-    /// Assembles the rendered videos from the per-simulated-frame renders, moving frames out
-    /// of `frames` (each is freed once no later video frame needs it), so the peak is one
-    /// video per view plus a frame.
-    fn assemble_take(
-        &self,
-        frames: &mut [Option<Vec<Vec<f32>>>],
-    ) -> Result<Vec<Video<f32>>, FitError> {
-        let views = &self.problem.views;
+    /// A video (or a band of one, `len` values per frame) from per-simulated-frame renders
+    /// through the time map, moving frames out of `frames` (each freed once no later video
+    /// frame needs it).
+    fn assemble(&self, frames: &mut [Option<Vec<f32>>], len: usize) -> Vec<f32> {
         let taps = &self.time.taps;
-        // Last video frame that reads each simulated frame.
         let mut last_use = vec![usize::MAX; frames.len()];
         for (k, &(j0, j1, a)) in taps.iter().enumerate() {
             last_use[j0] = k;
@@ -510,40 +596,28 @@ impl<'a> Objective<'a> {
                 last_use[j1] = k;
             }
         }
-        let mut out = Vec::with_capacity(views.len());
-        for v in 0..views.len() {
-            let (h, w) = (views[v].video.height(), views[v].video.width());
-            let last_view = v + 1 == views.len();
-            let mut get = |j: usize, k: usize| -> Vec<f32> {
-                let f = frames[j].as_mut().expect("rendered frame");
-                if last_use[j] == k {
-                    std::mem::take(&mut f[v])
-                } else {
-                    f[v].clone()
-                }
-            };
-            let mut data = Vec::with_capacity(taps.len() * h * w * 3);
-            for (k, &(j0, j1, a)) in taps.iter().enumerate() {
-                let f0 = get(j0, k);
-                if a == 0.0 {
-                    data.extend_from_slice(&f0);
-                } else {
-                    let f1 = get(j1, k);
-                    data.extend(f0.iter().zip(&f1).map(|(x, y)| x + a * (y - x)));
-                }
+        let mut get = |j: usize, k: usize| -> Vec<f32> {
+            if last_use[j] == k {
+                frames[j].take().expect("rendered frame")
+            } else {
+                frames[j].clone().expect("rendered frame")
             }
-            if last_view {
-                frames.iter_mut().for_each(|f| *f = None);
+        };
+        let mut data = Vec::with_capacity(taps.len() * len);
+        for (k, &(j0, j1, a)) in taps.iter().enumerate() {
+            let f0 = get(j0, k);
+            if a == 0.0 {
+                data.extend_from_slice(&f0);
+            } else {
+                let f1 = get(j1, k);
+                data.extend(f0.iter().zip(&f1).map(|(x, y)| x + a * (y - x)));
             }
-            out.push(
-                Video::new(taps.len(), h, w, data).map_err(|e| FitError::Input(e.to_string()))?,
-            );
         }
-        Ok(out)
+        data
     }
 
-    /// `dL/d(rendered frame j)` of view `v` from the gradient of its video (`gv`, the
-    /// video's layout), through the time map.
+    /// `dL/d(rendered frame j)` from the gradient of a video (`gv`, the video's layout, frames
+    /// of `out.len()` values), through the time map. False when frame `j` is not used.
     fn frame_grad(&self, gv: &[f32], j: usize, out: &mut [f32]) -> bool {
         let fl = out.len();
         out.fill(0.0);
@@ -577,26 +651,112 @@ impl<'a> Objective<'a> {
         need
     }
 
-    /// DMS of every view: the mean total and the terms; with `grads`, also the gradient of
-    /// the mean with respect to each view's video (its layout).
-    fn loss(
+    /// Renders every view at full size from the stored frames (forward-only runs).
+    fn render_videos(&self, frames: &[Option<Frame>]) -> Result<Vec<Video<f32>>, FitError> {
+        let mut out = Vec::new();
+        for v in &self.problem.views {
+            let (h, w) = (v.video.height(), v.video.width());
+            let mut renders: Vec<Option<Vec<f32>>> = frames
+                .iter()
+                .enumerate()
+                .map(|(j, f)| {
+                    f.as_ref()
+                        .map(|f| self.render_frame(f, &v.camera, &format!("simulated frame {j}")))
+                        .transpose()
+                })
+                .collect::<Result<_, _>>()?;
+            let data = self.assemble(&mut renders, h * w * 3);
+            out.push(
+                Video::new(self.time.taps.len(), h, w, data)
+                    .map_err(|e| FitError::Input(e.to_string()))?,
+            );
+        }
+        Ok(out)
+    }
+
+    /// The DMS of every view, band by band: each band of every needed frame is rendered with
+    /// a cropped camera (or cut out of `videos` when given), its terms evaluated and, with
+    /// `grads`, its gradient pulled back through the time map and the renderer into the
+    /// per-frame gradients. Returns the mean over views.
+    fn banded_loss(
         &self,
-        videos: &[Video<f32>],
-        mut grads: Option<&mut Vec<Vec<f32>>>,
+        frames: &[Option<Frame>],
+        videos: Option<&[Video<f32>]>,
+        mut grads: Option<&mut [Option<FrameGrad>]>,
+        prof: &mut StageProfile,
     ) -> Result<Evaluation, FitError> {
         let mut ev = Evaluation::default();
         let nv = self.dms.len() as f64;
-        for (dms, video) in self.dms.iter().zip(videos) {
-            let terms = match grads.as_deref_mut() {
-                Some(gs) => {
-                    let mut g = vec![0.0f32; video.data().len()];
-                    let t = dms.terms_and_grad_into(video, &mut g)?;
-                    g.iter_mut().for_each(|x| *x /= nv as f32);
-                    gs.push(g);
-                    t
+        let nt = self.time.taps.len();
+        let n = self.sim.len();
+        prof.bands = self.dms.iter().map(|d| d.len()).max().unwrap_or(0);
+        for (v, (dms, view)) in self.dms.iter().zip(&self.problem.views).enumerate() {
+            let w = view.video.width();
+            let mut terms = DmsTerms::default();
+            for (b, band) in dms.bands().enumerate() {
+                let rows = band.rows.clone();
+                let len = rows.len() * w * 3;
+                let cam = view.camera.crop_rows(rows.start as u32..rows.end as u32);
+                let t0 = Instant::now();
+                let data = match videos {
+                    Some(vs) => {
+                        let mut d = Vec::with_capacity(nt * len);
+                        for t in 0..nt {
+                            d.extend_from_slice(
+                                &vs[v].frame(t)[rows.start * w * 3..rows.end * w * 3],
+                            );
+                        }
+                        d
+                    }
+                    None => {
+                        let mut renders: Vec<Option<Vec<f32>>> = frames
+                            .iter()
+                            .enumerate()
+                            .map(|(j, f)| {
+                                f.as_ref()
+                                    .map(|f| {
+                                        self.render_frame(f, &cam, &format!("simulated frame {j}"))
+                                    })
+                                    .transpose()
+                            })
+                            .collect::<Result<_, _>>()?;
+                        self.assemble(&mut renders, len)
+                    }
+                };
+                let video = Video::new(nt, rows.len(), w, data)
+                    .map_err(|e| FitError::Input(e.to_string()))?;
+                let t1 = Instant::now();
+                prof.render_s += (t1 - t0).as_secs_f64();
+                match grads.as_deref_mut() {
+                    None => {
+                        let t = dms.band_terms(b, &video)?;
+                        prof.loss_s += t1.elapsed().as_secs_f64();
+                        terms.add(&t);
+                    }
+                    Some(gs) => {
+                        let mut g = vec![0.0f32; video.data().len()];
+                        let t = dms.band_terms_and_grad_into(b, &video, &mut g)?;
+                        drop(video);
+                        g.iter_mut().for_each(|x| *x /= nv as f32);
+                        terms.add(&t);
+                        let t2 = Instant::now();
+                        prof.loss_s += (t2 - t1).as_secs_f64();
+                        let mut buf = vec![0.0f32; len];
+                        for (j, f) in frames.iter().enumerate() {
+                            let Some(f) = f else { continue };
+                            if !self.frame_grad(&g, j, &mut buf) || buf.iter().all(|&x| x == 0.0) {
+                                continue;
+                            }
+                            let acc = gs[j].get_or_insert_with(|| FrameGrad {
+                                x: vec![[0.0; 3]; n],
+                                f: vec![[0.0; 9]; n],
+                            });
+                            self.render_vjp_into(f, &cam, &buf, acc)?;
+                        }
+                        prof.render_vjp_s += t2.elapsed().as_secs_f64();
+                    }
                 }
-                None => dms.terms(video)?,
-            };
+            }
             ev.total += terms.total / nv;
             ev.views.push(terms);
         }
@@ -606,11 +766,11 @@ impl<'a> Objective<'a> {
         Ok(ev)
     }
 
-    /// Forward (and with `grad` the reverse sweep) on stepper `d`: `read` brings a state's
-    /// positions and deformation gradients to the host for rendering, `add` adds a frame's
-    /// rendering gradient to an adjoint state. Returns the rendered videos only without
-    /// `grad` (with it they are freed as soon as the loss is evaluated), and with `grad` the
-    /// initial state's adjoint and the parameter gradient.
+    /// Forward (and in [`Mode::Grad`] the reverse sweep) on stepper `d`: `read` brings a
+    /// state's positions and deformation gradients to the host, `add` adds a frame's
+    /// rendering gradient to an adjoint state. Returns the rendered videos in
+    /// [`Mode::Render`], and in [`Mode::Grad`] the initial state's adjoint and the parameter
+    /// gradient.
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn run_with<D: Differentiable>(
         &self,
@@ -618,7 +778,7 @@ impl<'a> Objective<'a> {
         init: &D::State,
         params: &D::Params,
         grad0: D::Grad,
-        grad: bool,
+        mode: Mode,
         read: &dyn Fn(&D::State) -> Result<Frame, FitError>,
         add: &dyn Fn(&mut D::State, &FrameGrad) -> Result<(), FitError>,
     ) -> Result<(Evaluation, Option<(D::State, D::Grad)>, Vec<Video<f32>>), FitError> {
@@ -627,39 +787,65 @@ impl<'a> Objective<'a> {
         let nframes = self.time.sim_frames;
         let substeps = nframes as u64 * spf as u64;
         let error: RefCell<Option<FitError>> = RefCell::new(None);
-        let renders: RefCell<Vec<Option<Vec<Vec<f32>>>>> = RefCell::new(vec![None; nframes + 1]);
-        renders.borrow_mut()[0] = Some(self.render_state(&read(init)?, "frame 0")?);
-        let render_frame = |f: usize, s: &D::State| {
+        let prof = RefCell::new(StageProfile::default());
+        let read_time = RefCell::new(0.0f64);
+        let stored: RefCell<Vec<Option<Frame>>> =
+            RefCell::new((0..=nframes).map(|_| None).collect());
+        let store = |f: usize, s: &D::State| {
             if need[f] && error.borrow().is_none() {
-                let r =
-                    read(s).and_then(|fr| self.render_state(&fr, &format!("simulated frame {f}")));
+                let t = Instant::now();
+                let what = format!("simulated frame {f}");
+                let r = read(s).and_then(|fr| self.check_domain(&fr, &what).map(|_| fr));
+                *read_time.borrow_mut() += t.elapsed().as_secs_f64();
                 match r {
-                    Ok(r) => renders.borrow_mut()[f] = Some(r),
+                    Ok(fr) => stored.borrow_mut()[f] = Some(fr),
                     Err(e) => first_err(&error, e),
                 }
             }
         };
-        if !grad {
+        let t_start = Instant::now();
+        let saved = stage_begin();
+        store(0, init);
+        if mode != Mode::Grad {
             let mut s = init.clone();
             for j in 0..substeps {
                 d.step(&mut s, params, j);
                 if (j + 1) % spf as u64 == 0 {
-                    render_frame(((j + 1) / spf as u64) as usize, &s);
+                    store(((j + 1) / spf as u64) as usize, &s);
                     if let Some(e) = error.borrow_mut().take() {
+                        stage_end(saved);
                         return Err(e);
                     }
                 }
             }
             drop(s);
-            let videos = self.assemble_take(&mut renders.borrow_mut())?;
-            let ev = self.loss(&videos, None)?;
-            return Ok((ev, None, videos));
+            let mut p = prof.borrow_mut();
+            p.forward_peak_bytes = stage_end(saved);
+            p.forward_s = t_start.elapsed().as_secs_f64() - *read_time.borrow();
+            let saved = stage_begin();
+            let frames = std::mem::take(&mut *stored.borrow_mut());
+            let r = if mode == Mode::Render {
+                let t = Instant::now();
+                let videos = self.render_videos(&frames);
+                p.render_s += t.elapsed().as_secs_f64();
+                videos.and_then(|videos| {
+                    let ev = self.banded_loss(&frames, Some(&videos), None, &mut p)?;
+                    Ok((ev, None, videos))
+                })
+            } else {
+                self.banded_loss(&frames, None, None, &mut p)
+                    .map(|ev| (ev, None, Vec::new()))
+            };
+            p.loss_peak_bytes = stage_end(saved);
+            self.save_profile(&p);
+            return r;
         }
-        // Reverse mode: the forward pass renders; the first reverse call assembles the
-        // videos (freeing the renders), evaluates the loss and keeps only dL/dvideo.
-        let video_grads: RefCell<Option<Vec<Vec<f32>>>> = RefCell::new(None);
+        // Reverse mode: the forward pass stores the frames; the first reverse call evaluates
+        // the loss band by band, pulling each band's gradient back to dL/dx, dL/dF of every
+        // frame, and the reverse sweep adds them frame by frame.
+        let frame_grads: RefCell<Option<Vec<Option<FrameGrad>>>> = RefCell::new(None);
         let eval_out: RefCell<Option<Evaluation>> = RefCell::new(None);
-        let mut frame_buf: Vec<f32> = Vec::new();
+        let stage: RefCell<(usize, Instant)> = RefCell::new((saved, t_start));
         let (_, adj0, g) = value_and_grad(
             d,
             init,
@@ -669,65 +855,83 @@ impl<'a> Objective<'a> {
             self.checkpointing,
             grad0,
             |f, s| {
-                render_frame(f, s);
+                store(f, s);
                 0.0
             },
             |f, s, adj| {
+                let _ = s;
                 if error.borrow().is_some() {
                     return;
                 }
-                if video_grads.borrow().is_none() {
-                    let r = self
-                        .assemble_take(&mut renders.borrow_mut())
-                        .and_then(|videos| {
-                            let mut gs = Vec::with_capacity(videos.len());
-                            let ev = self.loss(&videos, Some(&mut gs))?;
-                            Ok((ev, gs))
-                        });
+                if frame_grads.borrow().is_none() {
+                    let mut p = prof.borrow_mut();
+                    let (saved, t0) = *stage.borrow();
+                    p.forward_peak_bytes = stage_end(saved);
+                    p.forward_s = t0.elapsed().as_secs_f64() - *read_time.borrow();
+                    let saved = stage_begin();
+                    let frames = std::mem::take(&mut *stored.borrow_mut());
+                    let mut gs: Vec<Option<FrameGrad>> = (0..frames.len()).map(|_| None).collect();
+                    let r = self.banded_loss(&frames, None, Some(&mut gs), &mut p);
+                    drop(frames);
+                    p.loss_peak_bytes = stage_end(saved);
+                    *stage.borrow_mut() = (stage_begin(), Instant::now());
                     match r {
-                        Ok((ev, gs)) => {
+                        Ok(ev) => {
                             *eval_out.borrow_mut() = Some(ev);
-                            *video_grads.borrow_mut() = Some(gs);
+                            *frame_grads.borrow_mut() = Some(gs);
                         }
                         Err(e) => return first_err(&error, e),
                     }
                 }
-                let gs = video_grads.borrow();
-                let gs = gs.as_ref().expect("video gradients");
-                let mut d_rgb = Vec::with_capacity(gs.len());
-                let mut any = false;
-                for (v, gv) in gs.iter().enumerate() {
-                    frame_buf.resize(self.problem.views[v].video.frame_len(), 0.0);
-                    if self.frame_grad(gv, f, &mut frame_buf) {
-                        d_rgb.push(frame_buf.clone());
-                        any = true;
-                    } else {
-                        d_rgb.push(Vec::new());
+                let g = frame_grads
+                    .borrow_mut()
+                    .as_mut()
+                    .and_then(|gs| gs.get_mut(f).and_then(Option::take));
+                if let Some(g) = g {
+                    if let Err(e) = add(adj, &g) {
+                        first_err(&error, e);
                     }
-                }
-                if !any {
-                    return;
-                }
-                let r = read(s)
-                    .and_then(|fr| self.render_vjp(&fr, &d_rgb))
-                    .and_then(|fg| add(adj, &fg));
-                if let Err(e) = r {
-                    first_err(&error, e);
                 }
             },
         );
+        {
+            let mut p = prof.borrow_mut();
+            let (saved, t0) = *stage.borrow();
+            p.backward_peak_bytes = stage_end(saved);
+            p.backward_s = t0.elapsed().as_secs_f64();
+            self.save_profile(&p);
+        }
         if let Some(e) = error.borrow_mut().take() {
             return Err(e);
         }
         let ev = match eval_out.borrow_mut().take() {
             Some(ev) => ev,
             None => {
-                let videos = self.assemble_take(&mut renders.borrow_mut())?;
-                self.loss(&videos, None)?
+                let frames = std::mem::take(&mut *stored.borrow_mut());
+                self.banded_loss(&frames, None, None, &mut prof.borrow_mut())?
             }
         };
         Ok((ev, Some((adj0, g)), Vec::new()))
     }
+
+    fn save_profile(&self, p: &StageProfile) {
+        if let Ok(mut slot) = self.profile.lock() {
+            let device = slot.device_peak_bytes;
+            *slot = p.clone();
+            slot.device_peak_bytes = device;
+        }
+    }
+}
+
+/// What a run computes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    /// Render the videos and evaluate the loss.
+    Render,
+    /// The loss only.
+    Value,
+    /// The loss and the parameter gradient.
+    Grad,
 }
 
 /// What a run returns: the loss, the parameter gradient (when asked) and the rendered videos

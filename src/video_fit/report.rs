@@ -84,7 +84,7 @@ pub fn write_results(
         let reference = r4d_loss::Video::from_frames(
             v.video.height(),
             v.video.width(),
-            (0..fitted.frames()).map(|t| v.video.frame(t).to_vec()),
+            (0..fitted.frames()).map(|t| v.video.frame_f32(t)),
         )?;
         views.push(
             write_fit_diagnostics(&vdir, &reference, fitted, row, problem.fps)

@@ -13,6 +13,8 @@
 //! * Metrics: [`metrics::psnr`] (per frame, mean over frames, whole video),
 //!   [`metrics::l1`], [`ssim::ssim`], [`ssim::ms_ssim`] (5 scales, pytorch-msssim's pooling
 //!   and its > 160 px rule, with a documented smaller-window fallback).
+//! * [`bands`]: the DMS loss band by band (rows of every frame), exactly equal to the whole
+//!   video's, with a compact 8-bit reference: for paper-scale videos that do not fit in memory.
 //! * [`io`]: videos as directories of PNG frames or float32 `.npy` `(T, H, W, 3)`.
 //! * [`trajectory`]: point-trajectory metrics.
 //!
@@ -54,6 +56,7 @@
 //! assert_eq!(grad.data().len(), 4 * 32 * 32 * 3);
 //! ```
 
+pub mod bands;
 pub mod dms;
 mod error;
 pub mod io;

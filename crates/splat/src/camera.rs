@@ -30,6 +30,21 @@ pub struct Camera {
     /// Far plane: Gaussians with `z >= far` are dropped.
     #[serde(default = "default_far")]
     pub far: f64,
+    /// When this camera renders a horizontal band of a taller image ([`Camera::crop_rows`]):
+    /// where the band lies. The projection's frustum clamp then uses the full image, so every
+    /// pixel of the band equals the full image's pixel up to rounding (for bands starting on a
+    /// tile row).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crop: Option<RowCrop>,
+}
+
+/// Rows `row0 .. row0 + height` of an image of `full_height` rows (see [`Camera::crop`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RowCrop {
+    /// First row of the band in the full image.
+    pub row0: u32,
+    /// Rows of the full image.
+    pub full_height: u32,
 }
 
 fn default_near() -> f64 {
@@ -89,6 +104,40 @@ impl Camera {
             world_to_camera: m,
             near: default_near(),
             far: default_far(),
+            crop: None,
+        }
+    }
+
+    /// The camera rendering only rows `rows` of this camera's image: same pose and focal
+    /// lengths, principal point moved up by `rows.start`, height `rows.len()`; the frustum
+    /// clamp of the projection stays that of the full image ([`Camera::crop`]). A band starting
+    /// on a multiple of the tile size (16) renders the full image's rows up to rounding.
+    pub fn crop_rows(&self, rows: std::ops::Range<u32>) -> Camera {
+        let base = self.crop.unwrap_or(RowCrop {
+            row0: 0,
+            full_height: self.height,
+        });
+        assert!(
+            rows.start < rows.end && rows.end <= self.height,
+            "rows {rows:?} of a {}-row image",
+            self.height
+        );
+        Camera {
+            height: rows.end - rows.start,
+            cy: self.cy - rows.start as f64,
+            crop: Some(RowCrop {
+                row0: base.row0 + rows.start,
+                full_height: base.full_height,
+            }),
+            ..self.clone()
+        }
+    }
+
+    /// Height and principal point `cy` of the full image (this camera's own unless cropped).
+    pub fn full_frame_y(&self) -> (u32, f64) {
+        match self.crop {
+            Some(c) => (c.full_height, self.cy + c.row0 as f64),
+            None => (self.height, self.cy),
         }
     }
 
@@ -174,6 +223,16 @@ impl Camera {
                 "{what}: camera '{name}': near {} / far {}",
                 self.near, self.far
             ));
+        }
+        if let Some(c) = self.crop {
+            if c.row0 as u64 + self.height as u64 > c.full_height as u64 {
+                return Err(format!(
+                    "{what}: camera '{name}': crop rows {}..{} of a {}-row image",
+                    c.row0,
+                    c.row0 + self.height,
+                    c.full_height
+                ));
+            }
         }
         Ok(())
     }

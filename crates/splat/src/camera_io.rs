@@ -168,6 +168,7 @@ fn parse_r4d(v: &Value, file: &str) -> Result<CameraSet> {
             cx: num(c, "cx", file, &ctx)?,
             cy: num(c, "cy", file, &ctx)?,
             world_to_camera: matrix::<4, 4>(c, "world_to_camera", file, &ctx)?,
+            crop: None,
             near: c.get("near").and_then(Value::as_f64).unwrap_or(0.01),
             far: c.get("far").and_then(Value::as_f64).unwrap_or(1e10),
         });
@@ -398,6 +399,7 @@ pub fn parse_colmap(cameras_txt: &str, images_txt: &str, what: &str) -> Result<C
             cx: k[2],
             cy: k[3],
             world_to_camera: m,
+            crop: None,
             near: 0.01,
             far: 1e10,
         });

@@ -37,6 +37,8 @@ pub struct CameraConsts {
     pub antialiased: u32,
     /// SH degree.
     pub sh_degree: u32,
+    /// Frustum clamp `[x+, x-, y+, y-]` ([`CamParams::lims`]; the full image's for a crop).
+    pub lims: [f32; 4],
 }
 
 impl CameraConsts {
@@ -55,6 +57,7 @@ impl CameraConsts {
             tiles: [cam.width.div_ceil(t), cam.height.div_ceil(t)],
             antialiased: (s.mode == RasterizeMode::Antialiased) as u32,
             sh_degree,
+            lims: p.lims,
         }
     }
 
@@ -73,6 +76,7 @@ impl CameraConsts {
             near: self.near_far[0],
             far: self.near_far[1],
             antialiased: self.antialiased != 0,
+            lims: self.lims,
         }
     }
 

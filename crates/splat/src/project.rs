@@ -35,12 +35,29 @@ pub struct CamParams<T> {
     pub far: T,
     /// Antialiased mode (opacity compensation).
     pub antialiased: bool,
+    /// Frustum clamp of the projection's Jacobian, `[x+, x-, y+, y-]` (limits of `x / z`
+    /// and `y / z`, gsplat's `(W - cx) / fx + 0.3 tan_x` ...), from the full image when the
+    /// camera is a crop.
+    pub lims: [T; 4],
 }
 
 impl<T: Real> CamParams<T> {
     /// Converts a [`Camera`] (f64) and the rasterize mode.
     pub fn new(cam: &Camera, mode: RasterizeMode) -> Self {
+        let c = T::c;
+        let (w, fx, fy, cx) = (c(cam.width as f64), c(cam.fx), c(cam.fy), c(cam.cx));
+        let (full_h, full_cy) = cam.full_frame_y();
+        let (h, cy) = (c(full_h as f64), c(full_cy));
+        let tan_x = c(0.5) * w / fx;
+        let tan_y = c(0.5) * h / fy;
+        let lims = [
+            (w - cx) / fx + c(0.3) * tan_x,
+            cx / fx + c(0.3) * tan_x,
+            (h - cy) / fy + c(0.3) * tan_y,
+            cy / fy + c(0.3) * tan_y,
+        ];
         CamParams {
+            lims,
             rot: cast3(&cam.rotation()),
             trans: castv(&cam.translation()),
             campos: castv(&cam.position()),
@@ -178,13 +195,7 @@ fn forward<T: Real>(g: &GaussianIn<T>, cam: &CamParams<T>) -> Option<Fwd<T>> {
         None => sigma0,
     };
     let sc = mul_bt(&mul(&cam.rot, &sigma), &cam.rot);
-    let (w, h) = (c(cam.width as f64), c(cam.height as f64));
-    let tan_x = c(0.5) * w / cam.fx;
-    let tan_y = c(0.5) * h / cam.fy;
-    let lim_xp = (w - cam.cx) / cam.fx + c(0.3) * tan_x;
-    let lim_xn = cam.cx / cam.fx + c(0.3) * tan_x;
-    let lim_yp = (h - cam.cy) / cam.fy + c(0.3) * tan_y;
-    let lim_yn = cam.cy / cam.fy + c(0.3) * tan_y;
+    let [lim_xp, lim_xn, lim_yp, lim_yn] = cam.lims;
     let clamp = |v: T, lo: T, hi: T| -> (T, Option<T>) {
         let r = v / z;
         if r < lo {

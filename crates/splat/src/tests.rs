@@ -3,6 +3,7 @@
 
 use crate::camera::{Camera, RasterizeMode, RenderSettings};
 use crate::covariance::*;
+use crate::project::CamParams;
 use crate::real::*;
 use crate::reference::{render, render_vjp, Scene};
 
@@ -215,4 +216,89 @@ fn polar_rotation_is_a_rotation_and_its_vjp_matches_fd() {
             }
         }
     }
+}
+
+/// A camera cropped to bands of rows starting on tile rows renders the full image's rows (up
+/// to rounding), and the band VJPs add up to the full image's VJP.
+#[test]
+fn row_bands_render_the_full_images_rows_and_their_vjps_add_up() {
+    let mut cam = Camera::look_at(40, 64, 50.0, [0.3, -3.0, 0.8], [0.0; 3], [0.0, 0.0, 1.0]);
+    cam.cy = 29.7;
+    for mode in [RasterizeMode::Classic, RasterizeMode::Antialiased] {
+        let set = RenderSettings {
+            background: [0.2, 0.5, 0.9],
+            mode,
+        };
+        // Large Gaussians too, so that some cross band borders and some lie beyond the
+        // frustum clamp of a band (but not of the full image).
+        let mut s = scene(40, 2, true, 5);
+        for (i, ls) in s.log_scales.iter_mut().enumerate().take(6) {
+            *ls = [-0.9 - 0.1 * i as f64; 3];
+        }
+        let (full, _) = render(&s, &cam, &set);
+        let mut r = Lcg(3);
+        let w: Vec<f64> = (0..cam.width * cam.height * 3)
+            .map(|_| r.range(-1.0, 1.0))
+            .collect();
+        let g_full = render_vjp(&s, &cam, &set, &w);
+        let row = (cam.width * 3) as usize;
+        let mut g_sum: Option<crate::reference::SceneGrad<f64>> = None;
+        for band in [0u32..16, 16..48, 48..64] {
+            let c = cam.crop_rows(band.clone());
+            assert_eq!(
+                CamParams::<f64>::new(&c, mode).lims,
+                CamParams::<f64>::new(&cam, mode).lims
+            );
+            let (img, _) = render(&s, &c, &set);
+            let rows = band.start as usize * row..band.end as usize * row;
+            let worst = img
+                .rgb
+                .iter()
+                .zip(&full.rgb[rows.clone()])
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f64, f64::max);
+            // Equal up to rounding (the principal point moves by the band's first row).
+            assert!(
+                worst < 1e-12,
+                "{mode:?} rows {band:?}: max difference {worst:e}"
+            );
+            let g = render_vjp(&s, &c, &set, &w[rows]);
+            match &mut g_sum {
+                None => g_sum = Some(g),
+                Some(acc) => {
+                    for (a, b) in acc.means.iter_mut().zip(&g.means) {
+                        (0..3).for_each(|k| a[k] += b[k]);
+                    }
+                    for (a, b) in acc.log_scales.iter_mut().zip(&g.log_scales) {
+                        (0..3).for_each(|k| a[k] += b[k]);
+                    }
+                    for (a, b) in acc.opacity_logits.iter_mut().zip(&g.opacity_logits) {
+                        *a += b;
+                    }
+                }
+            }
+        }
+        let g_sum = g_sum.unwrap();
+        let close = |a: &[f64], b: &[f64]| {
+            let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
+            let den: f64 = b.iter().map(|y| y * y).sum();
+            assert!(
+                den > 0.0 && (num / den).sqrt() < 1e-12,
+                "{mode:?}: {}",
+                (num / den).sqrt()
+            );
+        };
+        close(&g_sum.means.concat(), &g_full.means.concat());
+        close(&g_sum.log_scales.concat(), &g_full.log_scales.concat());
+        close(&g_sum.opacity_logits, &g_full.opacity_logits);
+    }
+}
+
+#[test]
+fn a_crop_beyond_the_image_is_refused() {
+    let cam = camera();
+    let mut c = cam.crop_rows(16..30);
+    assert!(c.validate("t").is_ok());
+    c.height = 20;
+    assert!(c.validate("t").unwrap_err().contains("crop rows"));
 }

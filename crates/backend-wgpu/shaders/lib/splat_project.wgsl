@@ -533,14 +533,10 @@ fn splat_forward(cam: CameraConsts, mean: vec3<f32>, ls: vec3<f32>, quat: vec4<f
     let fy = cam.intrinsics.y;
     let cx = cam.intrinsics.z;
     let cy = cam.intrinsics.w;
-    let w = f32(cam.size.x);
-    let h = f32(cam.size.y);
-    let tan_x = 0.5 * w / fx;
-    let tan_y = 0.5 * h / fy;
-    let lim_xp = (w - cx) / fx + 0.3 * tan_x;
-    let lim_xn = cx / fx + 0.3 * tan_x;
-    let lim_yp = (h - cy) / fy + 0.3 * tan_y;
-    let lim_yn = cy / fy + 0.3 * tan_y;
+    let lim_xp = cam.lims.x;
+    let lim_xn = cam.lims.y;
+    let lim_yp = cam.lims.z;
+    let lim_yn = cam.lims.w;
     o.xc = x;
     let rxz = x / z;
     if rxz < -lim_xn {

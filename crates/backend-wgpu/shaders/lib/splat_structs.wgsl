@@ -22,6 +22,9 @@ struct CameraConsts {
     tiles: vec2<u32>,
     antialiased: u32,
     sh_degree: u32,
+    // Frustum clamp of x/z and y/z: (x+, x-, y+, y-), the full image's for a cropped camera
+    // (computed on the host, `CamParams::lims`).
+    lims: vec4<f32>,
 }
 
 struct Projected {
