@@ -1,0 +1,348 @@
+//! MPM adjoint benchmarks: one substep's reverse sweep (`Differentiable::step_vjp`) and, for
+//! the ratio, the same stepper's forward substep (`Differentiable::step`), of a jelly block
+//! (8 particles per cell, E 1e5 Pa, nu 0.3) at 10k and 100k particles, n_grid 64, dt 1e-4,
+//! f32, slip bounding box, on
+//!
+//! * `adjoint_substep/cpu/{forward,backward}/N`: the parallel CPU adjoint
+//!   (`r4d_backend_cpu::adjoint::ParallelHost<f32>`, all cores);
+//! * `adjoint_substep/wgpu/{forward,backward}/N`: the device adjoint
+//!   (`r4d_backend_wgpu::adjoint::WgpuAdjoint`) when a wgpu adapter exists; every call waits
+//!   for the device, so times are execution times.
+//!
+//! The input of every timed call is the same: the state after 20 warm-up substeps (run on
+//! the CPU, uploaded for wgpu) and, for the backward, an adjoint seeded as by a loss on the
+//! final heights and velocities (`x_z` bar = 1, `v_z` bar = 0.01). Copying them back before
+//! each call is not timed (`iter_custom`). The backward re-runs its substep's forward from
+//! the checkpoint (as the checkpointed driver does), so backward / forward >= 1.
+//!
+//! Each case prints, before criterion runs it, the peak host memory of its first call above
+//! what was live before the call (counting allocator; the first call is where the pooled
+//! grids of the CPU stepper grow), next to the host memory held by the simulator and the
+//! states; the wgpu cases also print the device memory peak of their second call (the first
+//! builds the pipelines): `WgpuContext::peak_bytes`, every live buffer of the backend, the
+//! stepper's scratch and grids and the bench's states included.
+//!
+//! Environment:
+//! * `R4D_BENCH_MPM_SIZES=10648,97336` replaces the particle counts (each rounded to a cube
+//!   of 8 particles per cell; on Mesa's lavapipe, a CPU emulation of Vulkan, use small ones:
+//!   `R4D_BENCH_MPM_SIZES=4000`);
+//! * `R4D_BENCH_MPM_BACKENDS=cpu,wgpu` picks the steppers (criterion's name filter skips the
+//!   timing but not a backend's setup, which on lavapipe compiles the pipelines).
+//!
+//! `cargo bench --bench mpm_backward [-- [--quick] [FILTER]]`.
+
+#![expect(
+    missing_docs,
+    reason = "criterion's macros generate undocumented public items"
+)]
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use r4d_backend_cpu::adjoint::ParallelHost;
+use r4d_backend_wgpu::adjoint::{DeviceState, WgpuAdjoint};
+use r4d_backend_wgpu::WgpuContext;
+use r4d_mpm::adjoint::checkpoint::Differentiable;
+use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
+use r4d_mpm::{
+    BoundaryCondition, Domain, PartParams, ParticleSet, Shape, SimConfig, Surface, TimeConfig,
+};
+use resonance4d::alloc::{peak_since, reset_peak, Counting, LIVE};
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Warm-up substeps before the measured one.
+const WARMUP: u64 = 20;
+
+/// A jelly cube of about `target` particles (8 per cell) in a 64^3 grid.
+fn config(target: usize) -> SimConfig {
+    let dx = 1.0 / 64.0;
+    let side = ((target as f64 / 8.0).cbrt()).round().max(1.0) * dx;
+    let lo = 0.5 - side / 2.0;
+    SimConfig {
+        domain: Domain {
+            grid_lim: 1.0,
+            n_grid: 64,
+        },
+        time: TimeConfig {
+            substep_dt: 1e-4,
+            frame_dt: None,
+            substeps_per_frame: Some(1),
+            frames: 1,
+        },
+        solver: Default::default(),
+        parts: vec![PartParams {
+            youngs_modulus_pa: 1e5,
+            poisson_ratio: 0.3,
+            density_kg_m3: 1000.0,
+            ..Default::default()
+        }],
+        shapes: vec![Shape::Box {
+            min: [lo, lo, 0.1],
+            max: [lo + side, lo + side, 0.1 + side],
+            part: 0,
+            per_cell: 2,
+        }],
+        particles: None,
+        boundary: vec![BoundaryCondition::BoundingBox {
+            layers: 3,
+            surface: Surface::Slip,
+        }],
+    }
+}
+
+/// Comma-separated list from the environment, or `default`.
+fn env_list(name: &str, default: &str) -> Vec<String> {
+    std::env::var(name)
+        .unwrap_or_else(|_| default.to_string())
+        .split(',')
+        .map(|s| s.trim().to_string())
+        .filter(|s| !s.is_empty())
+        .collect()
+}
+
+/// The particle counts: `R4D_BENCH_MPM_SIZES` or 10k and 100k.
+fn sizes() -> Vec<usize> {
+    env_list("R4D_BENCH_MPM_SIZES", "10000,100000")
+        .iter()
+        .map(|s| {
+            s.parse().unwrap_or_else(|_| {
+                panic!("R4D_BENCH_MPM_SIZES: '{s}' is not a particle count (e.g. 10648,97336)")
+            })
+        })
+        .collect()
+}
+
+fn mib(b: u64) -> f64 {
+    b as f64 / 1048576.0
+}
+
+fn live() -> u64 {
+    LIVE.load(Ordering::Relaxed) as u64
+}
+
+/// One size: the simulator, its parameters, the warmed-up state and the adjoint seed.
+struct Case {
+    sim: HostSim,
+    params: Vec<PhysParams<f32>>,
+    before: HostState<f32>,
+    adj: HostState<f32>,
+}
+
+impl Case {
+    fn new(target: usize) -> Case {
+        let cfg = config(target);
+        let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
+        let sim = HostSim::new(&cfg, &scene).expect("bench scene");
+        let params = vec![PhysParams::<f32>::of(&cfg.parts[0])];
+        let np = sim.len();
+        let mut before = sim.init(&params, &vec![[0.0f32; 3]; np]);
+        {
+            let warm = ParallelHost::<f32>::new(&sim);
+            for k in 0..WARMUP {
+                warm.step(&mut before, &params, k);
+            }
+        }
+        let mut adj = HostState::<f32>::zeros(np);
+        for p in 0..np {
+            adj.x[p][2] = 1.0;
+            adj.v[p][2] = 0.01;
+        }
+        Case {
+            sim,
+            params,
+            before,
+            adj,
+        }
+    }
+}
+
+/// Times `call` on fresh inputs: `prepare` (untimed) returns them, `call` consumes them and
+/// returns once the work is done.
+fn time_calls<I>(iters: u64, mut prepare: impl FnMut() -> I, mut call: impl FnMut(I)) -> Duration {
+    let mut total = Duration::ZERO;
+    for _ in 0..iters {
+        let input = prepare();
+        let t = Instant::now();
+        call(input);
+        total += t.elapsed();
+    }
+    total
+}
+
+fn bench_cpu(c: &mut Criterion, cases: &[Case]) {
+    let mut group = c.benchmark_group("adjoint_substep/cpu");
+    group.sample_size(10);
+    for case in cases {
+        let np = case.sim.len();
+        let stepper = ParallelHost::<f32>::new(&case.sim);
+        let k = WARMUP;
+        // First calls, measured: peak above what is live before each.
+        let mut s = case.before.clone();
+        let base = reset_peak();
+        stepper.step(&mut s, &case.params, k);
+        let fwd_peak = peak_since(base) as u64;
+        let mut adj = case.adj.clone();
+        let mut grad = vec![PhysParams::<f32>::default(); case.params.len()];
+        let held = live();
+        let base = reset_peak();
+        stepper.step_vjp(&case.before, &case.params, k, &mut adj, &mut grad);
+        let bwd_peak = peak_since(base) as u64;
+        assert!(grad[0].youngs_modulus.is_finite(), "non-finite gradient");
+        drop((s, adj));
+        for (what, peak) in [("forward", fwd_peak), ("backward", bwd_peak)] {
+            println!(
+                "adjoint_substep/cpu/{what}/{np}: peak host memory of one call {:.1} MiB \
+                 ({peak} B, {:.0} B/particle) above {:.1} MiB live before it (simulators, \
+                 states, pooled grids)",
+                mib(peak),
+                peak as f64 / np as f64,
+                mib(held)
+            );
+        }
+        group.throughput(Throughput::Elements(np as u64));
+        group.bench_function(BenchmarkId::new("forward", np), |b| {
+            b.iter_custom(|iters| {
+                time_calls(
+                    iters,
+                    || case.before.clone(),
+                    |mut s| stepper.step(&mut s, &case.params, k),
+                )
+            })
+        });
+        group.bench_function(BenchmarkId::new("backward", np), |b| {
+            b.iter_custom(|iters| {
+                time_calls(
+                    iters,
+                    || case.adj.clone(),
+                    |mut adj| stepper.step_vjp(&case.before, &case.params, k, &mut adj, &mut grad),
+                )
+            })
+        });
+    }
+    group.finish();
+}
+
+fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
+    // Whatever adapter is present (without a GPU: lavapipe, a software rasterizer, whose
+    // figures say nothing about GPU speed).
+    let ctx = match WgpuContext::new() {
+        Ok(ctx) => Arc::new(ctx),
+        Err(e) => {
+            eprintln!("adjoint_substep/wgpu skipped: {e}");
+            return;
+        }
+    };
+    eprintln!(
+        "wgpu adapter: {} ({:?}, {:?})",
+        ctx.info.name, ctx.info.device_type, ctx.info.backend
+    );
+    let wait = || {
+        let _ = ctx.device.poll(wgpu::PollType::Wait {
+            submission_index: None,
+            timeout: None,
+        });
+    };
+    let mut group = c.benchmark_group("adjoint_substep/wgpu");
+    group.sample_size(10);
+    for case in cases {
+        let np = case.sim.len();
+        let stepper = match WgpuAdjoint::new(ctx.clone(), &case.sim) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("adjoint_substep/wgpu/{np} skipped: {e}");
+                continue;
+            }
+        };
+        let before = DeviceState::upload(&ctx, &case.before).expect("uploading the state");
+        let adj0 = DeviceState::upload(&ctx, &case.adj).expect("uploading the adjoint");
+        let mut grad = stepper.zero_grad().expect("device gradient");
+        let k = WARMUP;
+        // First calls build the pipelines; the measured ones are the second.
+        let mut s = before.clone();
+        stepper.step(&mut s, &case.params, k);
+        let mut adj = adj0.clone();
+        stepper.step_vjp(&before, &case.params, k, &mut adj, &mut grad);
+        wait();
+        let mut peaks = Vec::new();
+        for backward in [false, true] {
+            let mut s = before.clone();
+            let mut adj = adj0.clone();
+            wait();
+            ctx.reset_peak();
+            let base = reset_peak();
+            if backward {
+                stepper.step_vjp(&before, &case.params, k, &mut adj, &mut grad);
+            } else {
+                stepper.step(&mut s, &case.params, k);
+            }
+            wait();
+            peaks.push((peak_since(base) as u64, ctx.peak_bytes()));
+        }
+        let g = stepper
+            .grad_to_host(&grad, &case.params)
+            .expect("downloading the gradient");
+        assert!(g[0].youngs_modulus.is_finite(), "non-finite gradient");
+        for (what, (host, dev)) in ["forward", "backward"].into_iter().zip(peaks) {
+            println!(
+                "adjoint_substep/wgpu/{what}/{np}: peak device memory {:.1} MiB ({dev} B, \
+                 {:.0} B/particle: every live buffer of the backend, i.e. the stepper's scratch \
+                 and grids and the bench's checkpoint, adjoint seed and working copies), peak \
+                 host memory of one call {:.2} MiB ({host} B)",
+                mib(dev),
+                dev as f64 / np as f64,
+                mib(host)
+            );
+        }
+        group.throughput(Throughput::Elements(np as u64));
+        group.bench_function(BenchmarkId::new("forward", np), |b| {
+            b.iter_custom(|iters| {
+                time_calls(
+                    iters,
+                    || {
+                        let s = before.clone();
+                        wait();
+                        s
+                    },
+                    |mut s| {
+                        stepper.step(&mut s, &case.params, k);
+                        wait();
+                    },
+                )
+            })
+        });
+        group.bench_function(BenchmarkId::new("backward", np), |b| {
+            b.iter_custom(|iters| {
+                time_calls(
+                    iters,
+                    || {
+                        let a = adj0.clone();
+                        wait();
+                        a
+                    },
+                    |mut adj| {
+                        stepper.step_vjp(&before, &case.params, k, &mut adj, &mut grad);
+                        wait();
+                    },
+                )
+            })
+        });
+    }
+    group.finish();
+}
+
+fn benches(c: &mut Criterion) {
+    let backends = env_list("R4D_BENCH_MPM_BACKENDS", "cpu,wgpu");
+    let cases: Vec<Case> = sizes().into_iter().map(Case::new).collect();
+    if backends.iter().any(|b| b == "cpu") {
+        bench_cpu(c, &cases);
+    }
+    if backends.iter().any(|b| b == "wgpu") {
+        bench_wgpu(c, &cases);
+    }
+}
+
+criterion_group!(mpm_backward, benches);
+criterion_main!(mpm_backward);
