@@ -8,6 +8,7 @@
 //! ([`fit_trajectory`]).
 
 pub mod alloc;
+pub mod bench_scale;
 pub mod demo;
 pub mod fit_diagnostics;
 pub mod fit_trajectory;

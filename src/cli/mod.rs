@@ -1,5 +1,6 @@
 //! Command-line interface: argument parsing and backend selection at runtime.
 
+mod bench_scale;
 mod demo;
 mod fit;
 mod fit_trajectory;
@@ -43,6 +44,8 @@ enum Command {
     MetricsTrajectory(metrics_trajectory::MetricsTrajectoryArgs),
     /// Lift 2D segmentation masks onto the Gaussians: the part labels `r4d fit --parts` reads.
     Segment(segment::SegmentArgs),
+    /// One full fit iteration at the paper's scale: per-stage time and peak memory.
+    BenchScale(bench_scale::BenchScaleArgs),
 }
 
 /// Compute backend.
@@ -62,6 +65,7 @@ pub fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Simulate(a) => simulate::run(a),
         Command::Demo(a) => demo::run(a),
+        Command::BenchScale(a) => bench_scale::run_cmd(a),
         Command::Fit(a) => fit::run(a),
         Command::FitTrajectory(a) => fit_trajectory::run(a),
         Command::Render(a) => render::run(a),

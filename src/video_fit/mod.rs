@@ -25,7 +25,9 @@ pub use config::{FitConfig, InitConfig};
 pub use fit::{run_fit, FitHooks, FitOutcome, FitState, IterRecord};
 pub use params::{Granularity, ParamSpace};
 pub use parts::PartLabels;
-pub use problem::{Evaluation, GpuHandle, Objective, Precision, TimeMap, VideoProblem, View};
+pub use problem::{
+    Evaluation, GpuHandle, Objective, Precision, StageProfile, TimeMap, VideoProblem, View,
+};
 
 /// Errors of video fitting.
 #[derive(Debug, thiserror::Error)]

@@ -1,0 +1,580 @@
+//! One full fit iteration at the paper's scale (`r4d bench-scale`): forward simulation with
+//! checkpointing, rendering, DMS, and the backward pass through both, with per-stage time and
+//! peak memory, next to the paper's figures.
+//!
+//! # The scene
+//! A jelly block of two parts (lower and upper half) standing on a floor in a 64^3 grid:
+//! `cells^3` cells with 8 particles each (23^3 cells: 97 336 particles, the paper's ~100k),
+//! its base clamped and its top pushed sideways by a 0.01-s force so it wobbles; every
+//! particle is a Gaussian (SH degree 3), and static floor and back-wall Gaussians bring the
+//! total to `gaussians` (300 000). One 1920x1080 camera sees the block from the front, the
+//! block covering well over a quarter of the frame ([`BenchScene::coverage`] measures it).
+//! 16 frames of 400 substeps of 1e-4 s.
+//!
+//! The reference video is rendered from the simulation at other parameters (`truth`) or is
+//! the rest frame repeated (`rest`, cheaper: no extra simulation), stored as 8-bit frames,
+//! like a video read from PNG files. The measured iteration is
+//! [`crate::video_fit::Objective::value_and_grad`] itself: nothing is special-cased.
+
+use crate::video_fit::{FitError, GpuHandle, Objective, StageProfile, VideoProblem, View};
+use r4d_loss::bands::{ReferenceVideo, Video8};
+use r4d_loss::{DmsConfig, Video};
+use r4d_mpm::adjoint::checkpoint::{memory_plan, Checkpointing};
+use r4d_mpm::{PartParams, ParticleSet, SimConfig};
+use r4d_splat::{Camera, Gaussians, RenderSettings, Renderer, SimLink, SplatRenderer};
+use serde::Serialize;
+use std::path::Path;
+use std::time::Instant;
+
+/// Size of the benchmark.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchScale {
+    /// Cells per side of the block (8 particles per cell).
+    pub cells: usize,
+    /// Total Gaussians (the block's particles plus static background).
+    pub gaussians: usize,
+    /// Simulated frames (the video has one more: the rest frame).
+    pub frames: usize,
+    /// Substeps per frame.
+    pub substeps: usize,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Checkpointing of the reverse sweep.
+    pub checkpointing: Checkpointing,
+    /// Rows per loss band.
+    pub band_rows: usize,
+    /// Reference from a simulation at other parameters (`true`) or the rest frame.
+    pub reference_from_simulation: bool,
+}
+
+impl Default for BenchScale {
+    /// The paper's scale.
+    fn default() -> Self {
+        BenchScale {
+            cells: 23,
+            gaussians: 300_000,
+            frames: 16,
+            substeps: 400,
+            width: 1920,
+            height: 1080,
+            checkpointing: Checkpointing::Nested(20),
+            band_rows: crate::video_fit::problem::DEFAULT_BAND_ROWS,
+            reference_from_simulation: true,
+        }
+    }
+}
+
+/// The benchmark problem.
+pub struct BenchScene {
+    /// The problem (reference filled in by [`BenchScene::build`]).
+    pub problem: VideoProblem,
+    /// Parameters of the reference simulation.
+    pub truth: Vec<PartParams>,
+    /// Parameters the iteration is evaluated at.
+    pub start: Vec<PartParams>,
+    /// Fraction of the frame the block covers at rest (alpha > 0.5 of the block alone).
+    pub coverage: f64,
+    /// Seconds spent building the reference.
+    pub reference_s: f64,
+}
+
+const N_GRID: usize = 64;
+const DT: f64 = 1e-4;
+
+fn sim_config(s: &BenchScale, parts: Vec<PartParams>) -> SimConfig {
+    let text = format!(
+        r#"
+[domain]
+grid_lim = 1.0
+n_grid = {N_GRID}
+[time]
+substep_dt = {DT:e}
+frame_dt = {frame_dt:e}
+frames = {frames}
+[solver]
+gravity = [0.0, 0.0, -9.8]
+[[parts]]
+material = "jelly"
+[[parts]]
+material = "jelly"
+[[boundary]]
+type = "bounding_box"
+[[boundary]]
+type = "cuboid"
+point = [0.5, 0.5, 0.09375]
+size = [0.5, 0.5, 0.03]
+velocity = [0.0, 0.0, 0.0]
+[[boundary]]
+type = "particle_impulse"
+force = [0.02, 0.008, 0.0]
+point = [0.5, 0.5, {top:e}]
+size = [0.3, 0.3, {top_h:e}]
+num_dt = 100
+"#,
+        frame_dt = s.substeps as f64 * DT,
+        frames = s.frames,
+        top = block_top(s) - 0.03,
+        top_h = 0.03,
+    );
+    let mut c = SimConfig::parse(&text, Path::new("bench-scale.toml"))
+        .expect("the bench-scale config parses");
+    c.parts = parts;
+    c
+}
+
+fn dx() -> f64 {
+    1.0 / N_GRID as f64
+}
+
+/// Lower-left corner of the block (grid-aligned, centred in x and y, its base at 6 cells).
+fn block_min(s: &BenchScale) -> [f64; 3] {
+    let lo = ((N_GRID - s.cells) / 2) as f64 * dx();
+    [lo, lo, 6.0 * dx()]
+}
+
+fn block_top(s: &BenchScale) -> f64 {
+    block_min(s)[2] + s.cells as f64 * dx()
+}
+
+fn particles(s: &BenchScale) -> ParticleSet {
+    let min = block_min(s);
+    let lower = s.cells / 2 + s.cells % 2;
+    let split = min[2] + lower as f64 * dx();
+    let side = s.cells as f64 * dx();
+    let shapes = [
+        r4d_mpm::Shape::Box {
+            min,
+            max: [min[0] + side, min[1] + side, split],
+            part: 0,
+            per_cell: 2,
+        },
+        r4d_mpm::Shape::Box {
+            min: [min[0], min[1], split],
+            max: [min[0] + side, min[1] + side, min[2] + side],
+            part: 1,
+            per_cell: 2,
+        },
+    ];
+    ParticleSet::from_shapes(&shapes, dx())
+}
+
+/// SplitMix64 in [0, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// The block's Gaussians (one per particle) then the static floor and back wall.
+fn scene(s: &BenchScale, p: &ParticleSet) -> Gaussians {
+    let mut g = Gaussians {
+        sh_degree: 3,
+        ..Default::default()
+    };
+    let mut rng = Rng(7);
+    let dc = |c: f32| (c - 0.5) / 0.282_094_8;
+    let mut push = |g: &mut Gaussians, m: [f32; 3], sc: [f32; 3], q: [f32; 4], c: [f32; 3]| {
+        g.means.push(m);
+        g.log_scales.push(sc.map(f32::ln));
+        g.quats.push(q);
+        g.opacity_logits.push(3.0);
+        // DC colour, then small view-dependent terms (bands 1..3), channel-interleaved.
+        g.sh.extend(c.map(dc));
+        for _ in 0..15 * 3 {
+            g.sh.push(0.04 * (rng.next() - 0.5));
+        }
+    };
+    let sigma = (0.3 * dx()) as f32;
+    let palettes = [
+        [[0.20, 0.55, 0.25], [0.80, 0.85, 0.35]],
+        [[0.85, 0.25, 0.35], [0.95, 0.75, 0.25]],
+    ];
+    for (x, &part) in p.x.iter().zip(&p.part) {
+        let cell = x.map(|v| (v / (3.0 * dx() as f32)).floor() as i64);
+        let odd = (cell[0] + cell[1] + cell[2]).rem_euclid(2) as usize;
+        push(
+            &mut g,
+            *x,
+            [sigma; 3],
+            [1.0, 0.0, 0.0, 0.0],
+            palettes[part as usize][odd],
+        );
+    }
+    // Static background: floor (z = base) and back wall (y = 0.95), flat discs on square
+    // lattices sized so the total is `gaussians`.
+    let rest = s.gaussians.saturating_sub(p.x.len());
+    let floor_n = rest / 2;
+    let wall_n = rest - floor_n;
+    let base = block_min(s)[2] as f32;
+    let lattice = |n: usize, w: f32, h: f32| -> (usize, usize) {
+        let cols = ((n as f32 * w / h).sqrt().ceil() as usize).max(1);
+        (cols, n.div_ceil(cols))
+    };
+    let (fc, fr) = lattice(floor_n, 1.6, 1.0);
+    let mut k = 0;
+    'floor: for j in 0..fr {
+        for i in 0..fc {
+            if k == floor_n {
+                break 'floor;
+            }
+            k += 1;
+            let (x, y) = (
+                -0.3 + 1.6 * (i as f32 + 0.5) / fc as f32,
+                0.0 + 0.95 * (j as f32 + 0.5) / fr as f32,
+            );
+            let tile = ((x / 0.1).floor() + (y / 0.1).floor()) as i64 & 1;
+            let c = if tile == 0 { 0.55 } else { 0.72 };
+            let r = 1.2 * 1.6 / fc as f32;
+            push(
+                &mut g,
+                [x, y, base],
+                [r, r, 0.002],
+                [1.0, 0.0, 0.0, 0.0],
+                [c, c, c * 0.95],
+            );
+        }
+    }
+    let (wc, wr) = lattice(wall_n, 1.6, 0.9);
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    let mut k = 0;
+    'wall: for j in 0..wr {
+        for i in 0..wc {
+            if k == wall_n {
+                break 'wall;
+            }
+            k += 1;
+            let (x, z) = (
+                -0.3 + 1.6 * (i as f32 + 0.5) / wc as f32,
+                base + 0.9 * (j as f32 + 0.5) / wr as f32,
+            );
+            let stripe = (((x + z) / 0.08).floor() as i64) & 1;
+            let c = if stripe == 0 {
+                [0.62, 0.72, 0.90]
+            } else {
+                [0.93, 0.80, 0.86]
+            };
+            let r = 1.2 * 1.6 / wc as f32;
+            push(&mut g, [x, 0.95, z], [r, r, 0.002], [h, h, 0.0, 0.0], c);
+        }
+    }
+    g
+}
+
+/// The camera: in front of the block, slightly above, the block filling most of the height.
+fn camera(s: &BenchScale) -> Camera {
+    let top = block_top(s);
+    let mid = 0.5 * (block_min(s)[2] + top);
+    let mut c = Camera::look_at(
+        s.width,
+        s.height,
+        50.0,
+        [0.72, -0.12, top + 0.12],
+        [0.5, 0.5, mid],
+        [0.0, 0.0, 1.0],
+    );
+    c.name = "bench".into();
+    c
+}
+
+impl BenchScene {
+    /// Builds the scene and its reference video (on `gpu` if given).
+    pub fn build(s: &BenchScale, gpu: Option<GpuHandle>) -> Result<BenchScene, FitError> {
+        let truth = vec![
+            PartParams {
+                youngs_modulus_pa: 2e5,
+                poisson_ratio: 0.3,
+                density_kg_m3: 1000.0,
+                ..Default::default()
+            },
+            PartParams {
+                youngs_modulus_pa: 5e4,
+                poisson_ratio: 0.3,
+                density_kg_m3: 1200.0,
+                ..Default::default()
+            },
+        ];
+        let start = vec![
+            PartParams {
+                youngs_modulus_pa: 1e5,
+                density_kg_m3: 800.0,
+                ..truth[0]
+            },
+            PartParams {
+                youngs_modulus_pa: 1e5,
+                density_kg_m3: 800.0,
+                ..truth[1]
+            },
+        ];
+        let config = sim_config(s, truth.clone());
+        let particles = particles(s);
+        let scene = scene(s, &particles);
+        let mut link = SimLink::identity(scene.len());
+        link.simulated = (0..particles.x.len() as u32).collect();
+        let cam = camera(s);
+        let (h, w) = (s.height as usize, s.width as usize);
+        let settings = RenderSettings {
+            background: [0.93, 0.92, 0.86],
+            ..Default::default()
+        };
+        let coverage = {
+            // The block alone at a quarter of the resolution.
+            let mut block = Gaussians {
+                sh_degree: scene.sh_degree,
+                ..Default::default()
+            };
+            let n = particles.x.len();
+            block.means = scene.means[..n].to_vec();
+            block.log_scales = scene.log_scales[..n].to_vec();
+            block.quats = scene.quats[..n].to_vec();
+            block.opacity_logits = scene.opacity_logits[..n].to_vec();
+            block.sh = scene.sh[..n * 48].to_vec();
+            let mut small = cam.clone();
+            small.width = (s.width / 4).max(1);
+            small.height = (s.height / 4).max(1);
+            small.fx /= 4.0;
+            small.fy /= 4.0;
+            small.cx /= 4.0;
+            small.cy /= 4.0;
+            let img = SplatRenderer::new(r4d_backend_cpu::splat::CpuSplat)
+                .render(&block, None, &small, &settings)?;
+            img.alpha.iter().filter(|&&a| a > 0.5).count() as f64 / img.alpha.len() as f64
+        };
+        let t0 = Instant::now();
+        let placeholder = Video8::quantize(&Video::zeros(1, 1, 1));
+        let mut problem = VideoProblem {
+            config,
+            particles,
+            scene,
+            link,
+            settings,
+            views: vec![View {
+                name: "bench reference".into(),
+                camera: cam.clone(),
+                video: ReferenceVideo::U8(placeholder),
+            }],
+            fps: 1.0 / (s.substeps as f64 * DT),
+            gpu,
+        };
+        let reference = if s.reference_from_simulation {
+            // Validation needs a video of the right size: a one-byte-per-value placeholder.
+            problem.views[0].video =
+                ReferenceVideo::U8(Video8::quantize(&Video::zeros(s.frames + 1, h, w)));
+            let mut obj = Objective::new(&problem, None, &DmsConfig::default(), false)?;
+            obj.precision = crate::video_fit::Precision::F32;
+            let mut v = obj.render(&truth)?;
+            Video8::quantize(&v.remove(0))
+        } else {
+            let img = SplatRenderer::new(r4d_backend_cpu::splat::CpuSplat).render(
+                &problem.scene,
+                None,
+                &cam,
+                &problem.settings,
+            )?;
+            let frame = Video::new(1, h, w, img.rgb).map_err(FitError::from)?;
+            let one = Video8::quantize(&frame);
+            let data: Vec<f32> = (0..s.frames + 1)
+                .flat_map(|_| one.data().iter().map(|&k| k as f32 / 255.0))
+                .collect();
+            Video8::from_exact(&Video::new(s.frames + 1, h, w, data).map_err(FitError::from)?)
+                .expect("8-bit values")
+        };
+        problem.views[0].video = ReferenceVideo::U8(reference);
+        problem.config.parts = start.clone();
+        Ok(BenchScene {
+            problem,
+            truth,
+            start,
+            coverage,
+            reference_s: t0.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// The measurement of one iteration.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    /// Simulated particles.
+    pub particles: usize,
+    /// Gaussians.
+    pub gaussians: usize,
+    /// Grid resolution.
+    pub n_grid: usize,
+    /// Frames.
+    pub frames: usize,
+    /// Substeps per frame.
+    pub substeps_per_frame: usize,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// `cpu` or `wgpu`.
+    pub backend: String,
+    /// Checkpointing strategy.
+    pub checkpointing: String,
+    /// Rows per loss band, and bands per frame.
+    pub band_rows: usize,
+    /// Bands per frame.
+    pub bands: usize,
+    /// Fraction of the frame the block covers.
+    pub object_coverage: f64,
+    /// Loss of the iteration.
+    pub loss: f64,
+    /// Stage times and peaks.
+    pub profile: StageProfile,
+    /// Wall time of the iteration (s).
+    pub total_s: f64,
+    /// Peak heap bytes during the iteration (process total: inputs included).
+    pub peak_bytes: usize,
+    /// Heap bytes held before the iteration (scene, particles, reference, plans).
+    pub held_bytes: usize,
+    /// The reference video's bytes (8-bit).
+    pub reference_bytes: usize,
+    /// `memory_plan`'s prediction for the simulation's checkpoints and scratch (f32).
+    pub memory_plan_bytes: u64,
+    /// Seconds spent building the reference before the iteration.
+    pub reference_s: f64,
+    /// Whether the counting allocator measured the heap (false: peaks are 0).
+    pub heap_measured: bool,
+}
+
+/// Runs one iteration (f32 simulation) and measures it.
+pub fn run(s: &BenchScale, gpu: Option<GpuHandle>) -> Result<(BenchScene, BenchReport), FitError> {
+    let backend = if gpu.is_some() { "wgpu" } else { "cpu" };
+    let scene = BenchScene::build(s, gpu)?;
+    let p = &scene.problem;
+    let mut obj = Objective::new(p, None, &crate::video_fit::FitConfig::default().loss, false)?;
+    obj.precision = crate::video_fit::Precision::F32;
+    obj.checkpointing = s.checkpointing;
+    obj.set_band_rows(s.band_rows)?;
+    let held = crate::alloc::LIVE.load(std::sync::atomic::Ordering::Relaxed);
+    let base = crate::alloc::reset_peak();
+    let t = Instant::now();
+    let (ev, _grad) = obj.value_and_grad(&scene.start)?;
+    let total_s = t.elapsed().as_secs_f64();
+    let peak = crate::alloc::peak().max(base);
+    let profile = obj.profile();
+    let n = p.particles.x.len();
+    let plan = memory_plan(
+        n as u64,
+        N_GRID as u64,
+        (s.frames * s.substeps) as u64,
+        s.substeps as u32,
+        s.checkpointing,
+        4,
+    );
+    let report = BenchReport {
+        particles: n,
+        gaussians: p.scene.len(),
+        n_grid: N_GRID,
+        frames: s.frames,
+        substeps_per_frame: s.substeps,
+        width: s.width,
+        height: s.height,
+        backend: backend.into(),
+        checkpointing: checkpointing_name(s.checkpointing),
+        band_rows: s.band_rows,
+        bands: profile.bands,
+        object_coverage: scene.coverage,
+        loss: ev.total,
+        profile,
+        total_s,
+        peak_bytes: peak,
+        held_bytes: held,
+        reference_bytes: p.views[0].video.bytes(),
+        memory_plan_bytes: plan.peak_bytes,
+        reference_s: scene.reference_s,
+        heap_measured: crate::alloc::installed(),
+    };
+    Ok((scene, report))
+}
+
+/// `nested:20` etc.
+pub fn checkpointing_name(c: Checkpointing) -> String {
+    match c {
+        Checkpointing::StoreAll => "store_all".into(),
+        Checkpointing::PerFrame => "per_frame".into(),
+        Checkpointing::EveryN(n) => format!("every_n:{n}"),
+        Checkpointing::Nested(n) => format!("nested:{n}"),
+    }
+}
+
+/// Peak GPU memory the paper reports per method (GB, mean over the four PhysDreamer scenes).
+pub const PAPER_PEAK_GB: [(&str, f64); 4] = [
+    ("Resonance4D (paper, CUDA)", 21.77),
+    ("DreamPhysics", 33.42),
+    ("Physics3D", 33.06),
+    ("PhysFlow", 38.52),
+];
+
+/// The report as a text table.
+pub fn table(r: &BenchReport) -> String {
+    let mib = |b: f64| b / (1024.0 * 1024.0);
+    let p = &r.profile;
+    let mut s = String::new();
+    s += &format!(
+        "one fit iteration: {} particles, {} Gaussians, n_grid {}, {} frames x {} substeps, {}x{}, backend {}, checkpointing {}, loss in {} bands of {} rows; the block covers {:.0}% of the frame\n\n",
+        r.particles, r.gaussians, r.n_grid, r.frames, r.substeps_per_frame, r.width, r.height,
+        r.backend, r.checkpointing, r.bands, r.band_rows, 100.0 * r.object_coverage
+    );
+    s += "stage                               time (s)   peak heap (MiB)\n";
+    let rows = [
+        (
+            "forward simulation (checkpointed)",
+            p.forward_s,
+            Some(p.forward_peak_bytes),
+        ),
+        ("render (band by band)", p.render_s, None),
+        ("DMS value + gradient", p.loss_s, None),
+        ("render VJP", p.render_vjp_s, None),
+        (
+            "  render + DMS + VJP together",
+            p.render_s + p.loss_s + p.render_vjp_s,
+            Some(p.loss_peak_bytes),
+        ),
+        (
+            "reverse sweep (simulation)",
+            p.backward_s,
+            Some(p.backward_peak_bytes),
+        ),
+        ("whole iteration", r.total_s, Some(r.peak_bytes)),
+    ];
+    for (name, t, m) in rows {
+        s += &format!(
+            "{name:<34} {t:>9.1}   {}\n",
+            m.map_or("".into(), |b| format!("{:>10.1}", mib(b as f64)))
+        );
+    }
+    if let Some(d) = p.device_peak_bytes {
+        s += &format!(
+            "peak device memory (backend's own accounting): {:.1} MiB\n",
+            mib(d as f64)
+        );
+    }
+    s += &format!(
+        "\nheld before the iteration: {:.1} MiB (scene, particles, 8-bit reference {:.1} MiB)\nmemory_plan (simulation checkpoints + scratch, f32): {:.1} MiB\n",
+        mib(r.held_bytes as f64),
+        mib(r.reference_bytes as f64),
+        mib(r.memory_plan_bytes as f64)
+    );
+    if !r.heap_measured {
+        s += "(the counting allocator is not installed: heap peaks read 0)\n";
+    }
+    s += "\npeak memory of one fit iteration        GB      vs ours\n";
+    let ours = r.peak_bytes as f64 / 1e9;
+    s += &format!(
+        "{:<36} {:>6.2}\n",
+        format!("resonance4d ({}, this run)", r.backend),
+        ours
+    );
+    for (name, gb) in PAPER_PEAK_GB {
+        s += &format!("{name:<36} {gb:>6.2}   {:>6.1}x\n", gb / ours.max(1e-12));
+    }
+    s
+}

@@ -1,0 +1,97 @@
+//! `r4d bench-scale`: one full fit iteration at the paper's scale, per-stage time and peak
+//! memory (see `resonance4d::bench_scale`).
+
+use anyhow::{bail, Context, Result};
+use resonance4d::bench_scale::{run, table, BenchScale};
+use resonance4d::video_fit::FitConfig;
+use std::path::PathBuf;
+
+/// Arguments of `r4d bench-scale` (defaults: the paper's scale).
+#[derive(clap::Args, Debug)]
+pub struct BenchScaleArgs {
+    /// Where the simulation, rendering and their backward passes run: cpu or wgpu.
+    #[arg(long, default_value = "cpu")]
+    backend: String,
+    /// Cells per side of the simulated block (8 particles per cell; 23: 97 336 particles).
+    #[arg(long, default_value_t = 23)]
+    cells: usize,
+    /// Total Gaussians (the block's particles plus static background).
+    #[arg(long, default_value_t = 300_000)]
+    gaussians: usize,
+    /// Simulated frames (the video has one more, the rest frame).
+    #[arg(long, default_value_t = 16)]
+    frames: usize,
+    /// Substeps per frame (dt 1e-4 s).
+    #[arg(long, default_value_t = 400)]
+    substeps: usize,
+    /// Image size WxH.
+    #[arg(long, default_value = "1920x1080")]
+    resolution: String,
+    /// Checkpointing of the reverse sweep: per_frame, store_all, every_n:K or nested:K.
+    #[arg(long, default_value = "nested:20")]
+    checkpointing: String,
+    /// Rows per loss band (the loss, rendering and render VJP run band by band).
+    #[arg(long, default_value_t = 128)]
+    band_rows: usize,
+    /// Reference video: `truth` (simulated at other parameters and rendered) or `rest` (the
+    /// rest frame repeated; skips one forward simulation).
+    #[arg(long, default_value = "truth")]
+    reference: String,
+    /// Also write the measurement as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+/// Runs the command.
+pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
+    let (w, h) = a
+        .resolution
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+        .filter(|&(w, h)| w >= 16 && h >= 16)
+        .with_context(|| {
+            format!(
+                "--resolution '{}': expected WxH, e.g. 1920x1080",
+                a.resolution
+            )
+        })?;
+    if a.cells < 2 || a.cells > 48 {
+        bail!("--cells {}: between 2 and 48 (the grid is 64^3)", a.cells);
+    }
+    if a.frames < 1 || a.substeps < 1 {
+        bail!("--frames and --substeps must be positive");
+    }
+    let reference_from_simulation = match a.reference.as_str() {
+        "truth" => true,
+        "rest" => false,
+        o => bail!("--reference '{o}': truth or rest"),
+    };
+    let checkpointing = FitConfig {
+        checkpointing: a.checkpointing.clone(),
+        ..Default::default()
+    }
+    .checkpointing()?;
+    let scale = BenchScale {
+        cells: a.cells,
+        gaussians: a.gaussians,
+        frames: a.frames,
+        substeps: a.substeps,
+        width: w,
+        height: h,
+        checkpointing,
+        band_rows: a.band_rows,
+        reference_from_simulation,
+    };
+    let gpu = super::fit::gpu_for(&a.backend)?;
+    eprintln!(
+        "bench-scale: building the scene and the reference video ({}) ...",
+        a.reference
+    );
+    let (_, report) = run(&scale, gpu)?;
+    println!("{}", table(&report));
+    if let Some(path) = &a.json {
+        let text = serde_json::to_string_pretty(&report)?;
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
