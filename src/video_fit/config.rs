@@ -11,6 +11,7 @@
 //! granularity = "part"    # "object" or "particle" (the paper's ablation)
 //! checkpointing = "per_frame"  # "store_all", "every_n:K" or "nested:K"
 //! precision = "f64"       # or "f32"
+//! band_rows = 128         # rows per band of the band-wise loss (memory vs re-projection)
 //! frames = 16             # video frames fitted (default: all)
 //! checkpoint_every = 1    # iterations between checkpoints
 //! free = ["E", "density"] # free parameters of every part (default: by material)
@@ -125,6 +126,10 @@ pub struct FitConfig {
     pub checkpointing: String,
     /// Precision of the simulation.
     pub precision: Precision,
+    /// Rows per band of the band-wise loss evaluation (rounded up to a multiple of 16):
+    /// smaller bands hold less memory, larger ones project the Gaussians fewer times; the
+    /// loss is the same.
+    pub band_rows: usize,
     /// Video frames fitted (default: all).
     pub frames: Option<usize>,
     /// Iterations between checkpoints.
@@ -154,6 +159,7 @@ impl Default for FitConfig {
             granularity: Granularity::Part,
             checkpointing: "per_frame".into(),
             precision: Precision::F64,
+            band_rows: super::problem::DEFAULT_BAND_ROWS,
             frames: None,
             checkpoint_every: 1,
             free: None,
@@ -207,6 +213,9 @@ impl FitConfig {
         }
         if !(self.clip_norm.is_finite() && self.clip_norm >= 0.0) {
             return bad(format!("clip_norm = {} must be >= 0", self.clip_norm));
+        }
+        if self.band_rows == 0 {
+            return bad("band_rows = 0: at least 1 (rounded up to 16)".into());
         }
         if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
             return bad(format!("weight_decay = {} must be >= 0", self.weight_decay));

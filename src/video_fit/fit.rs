@@ -202,6 +202,7 @@ pub fn initialize(
     let space = init_space(cfg, parts)?;
     let mut obj = Objective::new(problem, Some(cfg.init.frames), &cfg.loss, false)?;
     obj.precision = cfg.precision;
+    obj.set_band_rows(cfg.band_rows)?;
     let search = SearchSpace {
         names: space.names(),
         bounds: space.bounds(),
@@ -260,6 +261,7 @@ pub fn run_fit(
     let mut obj = Objective::new(problem, cfg.frames, &cfg.loss, per_particle)?;
     obj.checkpointing = cfg.checkpointing()?;
     obj.precision = cfg.precision;
+    obj.set_band_rows(cfg.band_rows)?;
     let slot_parts = obj.slot_parts();
     let free = cfg.free_kinds(&problem.config.parts)?;
     let space = ParamSpace::new(cfg.granularity, &free, &slot_parts, |p, k| cfg.bounds(p, k));

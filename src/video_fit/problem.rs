@@ -428,12 +428,12 @@ impl<'a> Objective<'a> {
         let add = |adj: &mut HostState<T>, d: &FrameGrad| -> Result<(), FitError> {
             for (a, g) in adj.x.iter_mut().zip(&d.x) {
                 for q in 0..3 {
-                    a[q] += T::c(g[q]);
+                    a[q] += T::c(g[q] as f64);
                 }
             }
             for (a, g) in adj.f.iter_mut().zip(&d.f) {
                 for q in 0..9 {
-                    a[q] += T::c(g[q]);
+                    a[q] += T::c(g[q] as f64);
                 }
             }
             Ok(())
@@ -464,10 +464,8 @@ impl<'a> Objective<'a> {
             Ok(Frame { x: h.x, f: h.f })
         };
         let add = |adj: &mut DeviceState, g: &FrameGrad| -> Result<(), FitError> {
-            let dx: Vec<[f32; 3]> = g.x.iter().map(|v| v.map(|c| c as f32)).collect();
-            let df: Vec<[f32; 9]> = g.f.iter().map(|v| v.map(|c| c as f32)).collect();
-            adj.add_to_x(&dx).map_err(gpu)?;
-            adj.add_to_f(&df).map_err(gpu)
+            adj.add_to_x(&g.x).map_err(gpu)?;
+            adj.add_to_f(&g.f).map_err(gpu)
         };
         let (ev, back, videos) = self.run_with(&d, &init, &phys, grad0, mode, &read, &add)?;
         let g = match back {
@@ -566,7 +564,8 @@ impl<'a> Objective<'a> {
         for (p, &gi) in link.simulated.iter().enumerate() {
             let gm = gr.means[gi as usize];
             for a in 0..3 {
-                out.x[p][a] += (0..3).map(|b| rot[a][b] * gm[b] as f64).sum::<f64>() / link.scale;
+                out.x[p][a] +=
+                    ((0..3).map(|b| rot[a][b] * gm[b] as f64).sum::<f64>() / link.scale) as f32;
             }
             let gf = gr.f[gi as usize];
             for a in 0..3 {
@@ -577,7 +576,7 @@ impl<'a> Objective<'a> {
                             v += rot[a][c] * gf[c][e] as f64 * rot[b][e];
                         }
                     }
-                    out.f[p][a * 3 + b] += v;
+                    out.f[p][a * 3 + b] += v as f32;
                 }
             }
         }
@@ -840,12 +839,36 @@ impl<'a> Objective<'a> {
             self.save_profile(&p);
             return r;
         }
-        // Reverse mode: the forward pass stores the frames; the first reverse call evaluates
-        // the loss band by band, pulling each band's gradient back to dL/dx, dL/dF of every
-        // frame, and the reverse sweep adds them frame by frame.
+        // Reverse mode: the forward pass stores the frames; once the last frame is reached
+        // (before the reverse sweep allocates its inner checkpoints) the loss is evaluated
+        // band by band, each band's gradient pulled back to dL/dx, dL/dF of every frame, and
+        // the reverse sweep adds them frame by frame.
         let frame_grads: RefCell<Option<Vec<Option<FrameGrad>>>> = RefCell::new(None);
         let eval_out: RefCell<Option<Evaluation>> = RefCell::new(None);
         let stage: RefCell<(usize, Instant)> = RefCell::new((saved, t_start));
+        let loss_stage = || {
+            if frame_grads.borrow().is_some() || error.borrow().is_some() {
+                return;
+            }
+            let mut p = prof.borrow_mut();
+            let (saved, t0) = *stage.borrow();
+            p.forward_peak_bytes = stage_end(saved);
+            p.forward_s = t0.elapsed().as_secs_f64() - *read_time.borrow();
+            let saved = stage_begin();
+            let frames = std::mem::take(&mut *stored.borrow_mut());
+            let mut gs: Vec<Option<FrameGrad>> = (0..frames.len()).map(|_| None).collect();
+            let r = self.banded_loss(&frames, None, Some(&mut gs), &mut p);
+            drop(frames);
+            p.loss_peak_bytes = stage_end(saved);
+            *stage.borrow_mut() = (stage_begin(), Instant::now());
+            match r {
+                Ok(ev) => {
+                    *eval_out.borrow_mut() = Some(ev);
+                    *frame_grads.borrow_mut() = Some(gs);
+                }
+                Err(e) => first_err(&error, e),
+            }
+        };
         let (_, adj0, g) = value_and_grad(
             d,
             init,
@@ -856,32 +879,15 @@ impl<'a> Objective<'a> {
             grad0,
             |f, s| {
                 store(f, s);
+                if f == nframes {
+                    loss_stage();
+                }
                 0.0
             },
-            |f, s, adj| {
-                let _ = s;
+            |f, _s, adj| {
+                loss_stage();
                 if error.borrow().is_some() {
                     return;
-                }
-                if frame_grads.borrow().is_none() {
-                    let mut p = prof.borrow_mut();
-                    let (saved, t0) = *stage.borrow();
-                    p.forward_peak_bytes = stage_end(saved);
-                    p.forward_s = t0.elapsed().as_secs_f64() - *read_time.borrow();
-                    let saved = stage_begin();
-                    let frames = std::mem::take(&mut *stored.borrow_mut());
-                    let mut gs: Vec<Option<FrameGrad>> = (0..frames.len()).map(|_| None).collect();
-                    let r = self.banded_loss(&frames, None, Some(&mut gs), &mut p);
-                    drop(frames);
-                    p.loss_peak_bytes = stage_end(saved);
-                    *stage.borrow_mut() = (stage_begin(), Instant::now());
-                    match r {
-                        Ok(ev) => {
-                            *eval_out.borrow_mut() = Some(ev);
-                            *frame_grads.borrow_mut() = Some(gs);
-                        }
-                        Err(e) => return first_err(&error, e),
-                    }
                 }
                 let g = frame_grads
                     .borrow_mut()
@@ -946,8 +952,8 @@ struct Frame {
 
 /// A frame's rendering gradient with respect to positions and deformation gradients.
 struct FrameGrad {
-    x: Vec<[f64; 3]>,
-    f: Vec<[f64; 9]>,
+    x: Vec<[f32; 3]>,
+    f: Vec<[f32; 9]>,
 }
 
 fn to_f64<T: Real>(p: &PhysParams<T>) -> PhysParams<f64> {
