@@ -114,9 +114,9 @@ impl<B: SplatKernels> Renderer for SplatRenderer<B> {
         let out = Image {
             width: cam.width,
             height: cam.height,
-            rgb: b.download(&img.rgb).map_err(be)?,
-            alpha: b.download(&img.alpha).map_err(be)?,
-            depth: b.download(&img.depth).map_err(be)?,
+            rgb: b.into_host(img.rgb).map_err(be)?,
+            alpha: b.into_host(img.alpha).map_err(be)?,
+            depth: b.into_host(img.depth).map_err(be)?,
         };
         self.stats.intersections = bins.intersections;
         self.stats.visible = b
@@ -155,14 +155,16 @@ impl<B: SplatKernels> Renderer for SplatRenderer<B> {
         let d = b.upload(d_rgb).map_err(be)?;
         let d_proj = b.rasterize_vjp(&proj, &bins, &cc, &d).map_err(be)?;
         let g = b.project_vjp(&bufs, &cc, &proj, &d_proj).map_err(be)?;
+        // The scene's buffers and the intermediates are freed before the gradients come back.
+        drop((bufs, proj, bins, d, d_proj));
         Ok(GaussianGrads {
-            means: b.download(&g.means).map_err(be)?,
-            log_scales: b.download(&g.log_scales).map_err(be)?,
-            quats: b.download(&g.quats).map_err(be)?,
-            opacity_logits: b.download(&g.opacity_logits).map_err(be)?,
-            sh: b.download(&g.sh).map_err(be)?,
-            f: match &g.f {
-                Some(f) => b.download(f).map_err(be)?,
+            means: b.into_host(g.means).map_err(be)?,
+            log_scales: b.into_host(g.log_scales).map_err(be)?,
+            quats: b.into_host(g.quats).map_err(be)?,
+            opacity_logits: b.into_host(g.opacity_logits).map_err(be)?,
+            sh: b.into_host(g.sh).map_err(be)?,
+            f: match g.f {
+                Some(f) => b.into_host(f).map_err(be)?,
                 None => Vec::new(),
             },
         })
