@@ -369,7 +369,7 @@ impl<'a> Objective<'a> {
 
     /// Simulates and renders every view (no gradient): the fitted videos.
     pub fn render(&self, slots: &[PartParams]) -> Result<Vec<Video<f32>>, FitError> {
-        self.dispatch(slots, Mode::Render).map(|r| r.2)
+        self.dispatch(slots, Mode::RenderOnly).map(|r| r.2)
     }
 
     /// Simulates and renders every view and evaluates the loss (no gradient).
@@ -823,12 +823,16 @@ impl<'a> Objective<'a> {
             p.forward_s = t_start.elapsed().as_secs_f64() - *read_time.borrow();
             let saved = stage_begin();
             let frames = std::mem::take(&mut *stored.borrow_mut());
-            let r = if mode == Mode::Render {
+            let r = if mode != Mode::Value {
                 let t = Instant::now();
                 let videos = self.render_videos(&frames);
                 p.render_s += t.elapsed().as_secs_f64();
                 videos.and_then(|videos| {
-                    let ev = self.banded_loss(&frames, Some(&videos), None, &mut p)?;
+                    let ev = if mode == Mode::Render {
+                        self.banded_loss(&frames, Some(&videos), None, &mut p)?
+                    } else {
+                        Evaluation::default()
+                    };
                     Ok((ev, None, videos))
                 })
             } else {
@@ -932,6 +936,8 @@ impl<'a> Objective<'a> {
 /// What a run computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Mode {
+    /// Render the videos only.
+    RenderOnly,
     /// Render the videos and evaluate the loss.
     Render,
     /// The loss only.
