@@ -5,6 +5,10 @@
 //! (counting allocator; the two input videos and the gradient buffer are allocated before
 //! and not counted) and the share of the time spent in FFTs.
 //!
+//! `dms_banded` is the same loss evaluated as the video fit does it (`r4d_loss::bands`): 128-row
+//! bands, an 8-bit reference, each band's rows copied out of the rendered video (the fit
+//! renders them) and its gradient computed; the sum of the bands is the whole video's loss.
+//!
 //! The videos: a smooth textured pattern translating by 1.5 px per frame (rendered) and
 //! 2 px per frame (reference), values in [0, 1].
 
@@ -14,7 +18,8 @@
 )]
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use r4d_loss::{Dms, DmsConfig, DmsWeights, Loss, Spectral, SpectralConfig, Video};
+use r4d_loss::bands::{BandedDms, ReferenceVideo, Video8};
+use r4d_loss::{Dms, DmsConfig, DmsTerms, DmsWeights, Loss, Spectral, SpectralConfig, Video};
 use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use std::time::Instant;
 
@@ -37,6 +42,25 @@ fn video(t: usize, h: usize, w: usize, speed: f32) -> Video<f32> {
         }
     }
     Video::new(t, h, w, data).unwrap()
+}
+
+/// The band-wise loss over the whole video: every band's rows copied out, its terms and
+/// gradient evaluated (the gradient of each band is dropped, as the fit hands it on).
+fn banded(loss: &BandedDms, rendered: &Video<f32>) -> DmsTerms {
+    let w = rendered.width();
+    let mut terms = DmsTerms::default();
+    let bands: Vec<_> = loss.bands().cloned().collect();
+    for (b, band) in bands.iter().enumerate() {
+        let r = &band.rows;
+        let mut data = Vec::with_capacity(rendered.frames() * r.len() * w * 3);
+        for t in 0..rendered.frames() {
+            data.extend_from_slice(&rendered.frame(t)[r.start * w * 3..r.end * w * 3]);
+        }
+        let x = Video::new(rendered.frames(), r.len(), w, data).unwrap();
+        let mut g = vec![0.0f32; x.data().len()];
+        terms.add(&loss.band_terms_and_grad_into(b, &x, &mut g).unwrap());
+    }
+    terms
 }
 
 fn mean_seconds(mut f: impl FnMut(), n: usize) -> f64 {
@@ -110,6 +134,31 @@ fn bench_dms(c: &mut Criterion) {
             terms
         );
 
+        let reference8 = ReferenceVideo::U8(Video8::quantize(&reference));
+        let bands = BandedDms::new(reference8, frames, DmsConfig::default(), 128).unwrap();
+        let base = reset_peak();
+        let terms_b = banded(&bands, &rendered);
+        let peak_b = peak_since(base);
+        let t_banded = mean_seconds(
+            || {
+                banded(&bands, &rendered);
+            },
+            2,
+        );
+        println!(
+            "dms {label} in {} bands of 128 rows, 8-bit reference ({:.1} MiB): {:.3} s, peak \
+             memory of one call {:.1} MiB; total {:.6} (whole video, f32 reference: {:.6})",
+            bands.len(),
+            bands.reference().bytes() as f64 / (1 << 20) as f64,
+            t_banded,
+            peak_b as f64 / (1 << 20) as f64,
+            terms_b.total,
+            terms.total
+        );
+
+        group.bench_with_input(BenchmarkId::new("dms_banded", &label), &(), |b, _| {
+            b.iter(|| banded(&bands, &rendered))
+        });
         group.bench_with_input(BenchmarkId::new("dms", &label), &(), |b, _| {
             b.iter(|| full.value_and_grad_into(&rendered, &mut grad).unwrap())
         });
