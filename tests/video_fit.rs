@@ -452,9 +452,10 @@ fn row_bands_give_the_whole_frame_loss_and_gradient() {
     assert!(rel(v.total, ev.total) < 1e-5);
 }
 
-/// The video fit with the simulation and its reverse sweep on the GPU (`WgpuAdjoint`, f32):
-/// loss and every parameter gradient agree with the CPU's f32 run, and a few fit iterations
-/// reach the same parameters within 1% (issue 9's bound).
+/// The video fit on the GPU: simulation and reverse sweep (`WgpuAdjoint`, f32), rendering and
+/// render VJP (`WgpuSplat`), the loss on the CPU. Loss and every parameter gradient agree with
+/// the CPU's f32 run, and a few fit iterations reach the same parameters within 1% (issue 9's
+/// bound).
 #[test]
 fn gpu_simulation_matches_the_cpu_in_the_video_fit() {
     let Some(ctx) = r4d_backend_wgpu::testing::gpu_or_skip("gpu_video_fit") else {
@@ -469,7 +470,10 @@ fn gpu_simulation_matches_the_cpu_in_the_video_fit() {
     let (ev, g) = cpu.value_and_grad(&start).unwrap();
     p.gpu = Some(resonance4d::video_fit::GpuHandle(std::sync::Arc::new(ctx)));
     let gpu = Objective::new(&p, None, &loss, false).unwrap();
+    assert!(gpu.render_on_gpu, "a GPU problem renders on the GPU");
     let (ev2, g2) = gpu.value_and_grad(&start).unwrap();
+    let prof = gpu.profile();
+    assert!(prof.device_peak_bytes.unwrap_or(0) > 0, "{prof:?}");
     eprintln!("loss cpu {} gpu {}", ev.total, ev2.total);
     assert!((ev.total - ev2.total).abs() <= 1e-3 * ev.total);
     for part in 0..2 {
