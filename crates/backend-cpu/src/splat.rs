@@ -48,7 +48,10 @@ impl SplatKernels for CpuSplat {
         Ok(b.clone())
     }
 
-    fn into_host<T: bytemuck::Pod + Send + Sync>(&self, b: Vec<T>) -> Result<Vec<T>, Infallible> {
+    fn download_owned<T: bytemuck::Pod + Send + Sync>(
+        &self,
+        b: Vec<T>,
+    ) -> Result<Vec<T>, Infallible> {
         Ok(b)
     }
 

@@ -116,12 +116,14 @@ fn bands_add_up_to_the_whole_video_in_f64() {
     for band_rows in [16, 20, 32] {
         check::<f64>(DmsConfig::default(), 5, 75, 40, band_rows, 1e-11);
     }
-    let mut cfg = DmsConfig::default();
-    cfg.weights = DmsWeights {
-        l1: 0.7,
-        spatial: 0.5,
-        mag: 2.0,
-        phase: 0.3,
+    let mut cfg = DmsConfig {
+        weights: DmsWeights {
+            l1: 0.7,
+            spatial: 0.5,
+            mag: 2.0,
+            phase: 0.3,
+        },
+        ..Default::default()
     };
     cfg.spectral.phase_mask = Some(1e-3);
     cfg.spectral.mag_reduction = Reduction::Sum;

@@ -154,7 +154,10 @@ pub trait SplatKernels: Sized + Send + Sync + 'static {
     fn download<T: Pod + Send + Sync>(&self, buf: &Self::Buf<T>) -> Result<Vec<T>, Self::Error>;
     /// Brings a buffer back to the host, consuming it (the CPU backend hands its `Vec` over
     /// without a copy; the default downloads).
-    fn into_host<T: Pod + Send + Sync>(&self, buf: Self::Buf<T>) -> Result<Vec<T>, Self::Error> {
+    fn download_owned<T: Pod + Send + Sync>(
+        &self,
+        buf: Self::Buf<T>,
+    ) -> Result<Vec<T>, Self::Error> {
         self.download(&buf)
     }
     /// Projects every Gaussian (culled ones get radii (0, 0)).

@@ -114,9 +114,9 @@ impl<B: SplatKernels> Renderer for SplatRenderer<B> {
         let out = Image {
             width: cam.width,
             height: cam.height,
-            rgb: b.into_host(img.rgb).map_err(be)?,
-            alpha: b.into_host(img.alpha).map_err(be)?,
-            depth: b.into_host(img.depth).map_err(be)?,
+            rgb: b.download_owned(img.rgb).map_err(be)?,
+            alpha: b.download_owned(img.alpha).map_err(be)?,
+            depth: b.download_owned(img.depth).map_err(be)?,
         };
         self.stats.intersections = bins.intersections;
         self.stats.visible = b
@@ -158,13 +158,13 @@ impl<B: SplatKernels> Renderer for SplatRenderer<B> {
         // The scene's buffers and the intermediates are freed before the gradients come back.
         drop((bufs, proj, bins, d, d_proj));
         Ok(GaussianGrads {
-            means: b.into_host(g.means).map_err(be)?,
-            log_scales: b.into_host(g.log_scales).map_err(be)?,
-            quats: b.into_host(g.quats).map_err(be)?,
-            opacity_logits: b.into_host(g.opacity_logits).map_err(be)?,
-            sh: b.into_host(g.sh).map_err(be)?,
+            means: b.download_owned(g.means).map_err(be)?,
+            log_scales: b.download_owned(g.log_scales).map_err(be)?,
+            quats: b.download_owned(g.quats).map_err(be)?,
+            opacity_logits: b.download_owned(g.opacity_logits).map_err(be)?,
+            sh: b.download_owned(g.sh).map_err(be)?,
             f: match g.f {
-                Some(f) => b.into_host(f).map_err(be)?,
+                Some(f) => b.download_owned(f).map_err(be)?,
                 None => Vec::new(),
             },
         })
