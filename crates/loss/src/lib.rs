@@ -60,6 +60,7 @@ pub mod bands;
 pub mod dms;
 mod error;
 pub mod io;
+pub mod lpips;
 pub mod metrics;
 mod par;
 mod real;

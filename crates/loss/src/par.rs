@@ -45,3 +45,15 @@ where
         r
     })
 }
+
+/// Worker threads that [`map`] spreads items over (1 without the `parallel` feature).
+pub(crate) fn threads() -> usize {
+    #[cfg(feature = "parallel")]
+    {
+        rayon::current_num_threads()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        1
+    }
+}
