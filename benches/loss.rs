@@ -9,6 +9,12 @@
 //! bands, an 8-bit reference, each band's rows copied out of the rendered video (the fit
 //! renders them) and its gradient computed; the sum of the bands is the whole video's loss.
 //!
+//! `lpips` is LPIPS-Alex (and, with `R4D_BENCH_LPIPS_VGG=1`, LPIPS-VGG) of 16 frames at
+//! 1920x1080, 8-bit frames generated one pair at a time as they are needed (`Lpips::stream`), so the
+//! printed peak is the metric's own working memory plus the frames in flight. It needs the
+//! converted weights (`scripts/lpips_weights.sh`; `$R4D_LPIPS_DIR` or `target/lpips`) and says
+//! it skipped otherwise. `R4D_BENCH_LOSS=dms` or `=lpips` runs one group only.
+//!
 //! The videos: a smooth textured pattern translating by 1.5 px per frame (rendered) and
 //! 2 px per frame (reference), values in [0, 1].
 
@@ -19,6 +25,7 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use r4d_loss::bands::{BandedDms, ReferenceVideo, Video8};
+use r4d_loss::lpips::{Lpips, LpipsNet, WEIGHTS_DIR_ENV};
 use r4d_loss::{Dms, DmsConfig, DmsTerms, DmsWeights, Loss, Spectral, SpectralConfig, Video};
 use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use std::time::Instant;
@@ -72,7 +79,82 @@ fn mean_seconds(mut f: impl FnMut(), n: usize) -> f64 {
     t0.elapsed().as_secs_f64() / n as f64
 }
 
+fn only(group: &str) -> bool {
+    std::env::var("R4D_BENCH_LOSS").map_or(true, |g| g == group)
+}
+
+/// One `(H, W, 3)` 8-bit frame of [`video`]'s pattern (videos to evaluate are 8-bit).
+fn frame(t: usize, h: usize, w: usize, speed: f32) -> Vec<u8> {
+    let mut data = Vec::with_capacity(h * w * 3);
+    for y in 0..h {
+        for x in 0..w {
+            let u = x as f32 - speed * t as f32;
+            for c in 0..3 {
+                let v = 0.5
+                    + 0.25 * (u * 0.05 + c as f32).sin() * (y as f32 * 0.04).cos()
+                    + 0.15 * ((u + y as f32) * 0.13).sin();
+                data.push((v.clamp(0.0, 1.0) * 255.0).round() as u8);
+            }
+        }
+    }
+    data
+}
+
+fn bench_lpips(c: &mut Criterion) {
+    if !only("lpips") {
+        return;
+    }
+    let dir = std::env::var_os(WEIGHTS_DIR_ENV)
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target/lpips"));
+    let mut nets = vec![LpipsNet::Alex];
+    if std::env::var("R4D_BENCH_LPIPS_VGG").is_ok_and(|v| v == "1") {
+        nets.push(LpipsNet::Vgg);
+    }
+    let mut group = c.benchmark_group("lpips");
+    group.sample_size(10);
+    for net in nets {
+        let path = dir.join(format!("{}.safetensors", net.name()));
+        let m = match Lpips::from_file(&path, Some(net)) {
+            Ok(m) => m,
+            Err(e) => {
+                println!("lpips-{net}: skipped ({e}; run scripts/lpips_weights.sh)");
+                continue;
+            }
+        };
+        let (frames, w, h) = (16, 1920, 1080);
+        let run = || {
+            m.stream(frames, h, w, |t| {
+                Ok((frame(t, h, w, 1.5), frame(t, h, w, 2.0)))
+            })
+            .unwrap()
+        };
+        let base = reset_peak();
+        let t0 = Instant::now();
+        let v = run();
+        let secs = t0.elapsed().as_secs_f64();
+        let peak = peak_since(base);
+        println!(
+            "lpips-{net} {frames}x{w}x{h}: {secs:.2} s ({:.3} s per frame pair, {} band(s) per \
+             frame, {} threads), peak memory {:.1} MiB (frames generated on demand, {:.1} MiB \
+             per pair); mean {:.6}",
+            secs / frames as f64,
+            m.bands_for(h, w).unwrap(),
+            rayon::current_num_threads(),
+            peak as f64 / (1 << 20) as f64,
+            (2 * h * w * 3) as f64 / (1 << 20) as f64,
+            v.mean
+        );
+        let label = format!("{net}_{frames}x{w}x{h}");
+        group.bench_with_input(BenchmarkId::new("stream", &label), &(), |b, _| b.iter(run));
+    }
+    group.finish();
+}
+
 fn bench_dms(c: &mut Criterion) {
+    if !only("dms") {
+        return;
+    }
     let mut group = c.benchmark_group("dms_value_and_grad");
     group.sample_size(10);
     for (w, h) in [(1280, 720), (1920, 1080)] {
@@ -175,5 +257,5 @@ fn bench_dms(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_dms);
+criterion_group!(benches, bench_dms, bench_lpips);
 criterion_main!(benches);

@@ -6,16 +6,16 @@
 //! of their level; zero padding is applied only at the level's true borders, so a band's
 //! rows equal the whole frame's.
 //!
-//! Convolutions with stride 1 are `k x k` accumulated products `W[:, :, ky, kx] (Cout x
-//! Cin)` times the zero-padded input shifted by `(ky, kx)`: with the input padded to width
-//! `Wp = W + 2p`, that shifted input is a plain strided matrix (`Cin x n`), so no im2col
-//! copy is made; the output has `Wp - Wout` spare columns per row, dropped when bias and
-//! ReLU are applied. Other convolutions (AlexNet's first, stride 4, three input channels)
-//! build im2col columns in chunks of output rows.
+//! Every convolution runs as Winograd `F(m x m, k x k)` (see [`super::winograd`]): tiles of
+//! the zero-padded input are transformed, multiplied by the transformed weights in
+//! `alpha^2` GEMMs, and transformed back, chunk by chunk of tiles. AlexNet's first layer
+//! (11x11, stride 4) is first rewritten as a stride-1 3x3 convolution over the
+//! space-to-depth image (`super::input`).
 
 use std::ops::Range;
 
 use super::arch::ConvSpec;
+use super::winograd::Transform;
 
 /// A feature map band: rows `row0..row0 + rows` of a level, `c x rows x w`, f32.
 #[derive(Clone, Debug)]
@@ -30,18 +30,6 @@ pub(crate) struct Band {
 impl Band {
     fn plane(&self) -> usize {
         self.rows * self.w
-    }
-
-    /// The value at channel `c`, level row `y`, column `x`; zero outside the level (padding),
-    /// which must not be outside the band.
-    #[inline]
-    fn get(&self, c: usize, y: isize, x: isize, level_rows: usize) -> f32 {
-        if y < 0 || x < 0 || y as usize >= level_rows || x as usize >= self.w {
-            return 0.0;
-        }
-        let r = y as usize - self.row0;
-        debug_assert!(r < self.rows, "row {y} outside the band");
-        self.data[c * self.plane() + r * self.w + x as usize]
     }
 }
 
@@ -97,82 +85,204 @@ fn gemm(
     }
 }
 
-/// Adds the bias and applies ReLU to `cout x rows x wp` values, keeping the first `w` of
-/// each row: the result is `cout x rows x w`, compacted in place.
-fn bias_relu_compact(data: &mut Vec<f32>, bias: &[f32], rows: usize, wp: usize, w: usize) {
-    let cout = bias.len();
-    let mut dst = 0;
-    for (co, &b) in bias.iter().enumerate() {
-        for r in 0..rows {
-            let src = (co * rows + r) * wp;
-            for x in 0..w {
-                let v = data[src + x] + b;
-                data[dst] = if v > 0.0 { v } else { 0.0 };
-                dst += 1;
+impl Band {
+    /// Writes channel `c`, level row `y` (of a level `h` rows high), zero-padded by `pad`
+    /// columns on both sides, into `dst`; zeros for rows outside the level or the band
+    /// (the latter only feed outputs that are discarded).
+    pub(crate) fn padded_row(&self, c: usize, y: isize, h: usize, pad: usize, dst: &mut [f32]) {
+        dst.fill(0.0);
+        if y < 0
+            || y as usize >= h
+            || (y as usize) < self.row0
+            || y as usize >= self.row0 + self.rows
+        {
+            return;
+        }
+        let r = y as usize - self.row0;
+        dst[pad..pad + self.w]
+            .copy_from_slice(&self.data[c * self.plane() + r * self.w..][..self.w]);
+    }
+}
+
+/// Target size of the Winograd chunk buffers, in f32 values (4 MiB each).
+pub(crate) const WINOGRAD_CHUNK: usize = 1 << 20;
+
+/// Stride-1 convolution + bias + ReLU of a band by Winograd `F(m x m, k x k)`: output rows
+/// `out` (the input band holds every level row they need; `h_in` rows in the level).
+/// The Winograd-domain weights `U[xi][co][ci] = (G w G^T)[xi]` of a stride-1 convolution
+/// (`alpha^2 x Cout x Cin`), made once per band and used for both images.
+pub(crate) fn winograd_weights(spec: &ConvSpec, weight: &[f32], tf: &Transform) -> Vec<f32> {
+    let (k, a) = (spec.k, tf.alpha);
+    let (cin, cout) = (spec.cin, spec.cout);
+    let a2 = a * a;
+    let g: Vec<f32> = tf.g.iter().map(|&x| x as f32).collect();
+    let mut u = vec![0.0f32; a2 * cout * cin];
+    let mut tmp = [0.0f32; 64];
+    for co in 0..cout {
+        for ci in 0..cin {
+            let w = &weight[(co * cin + ci) * k * k..][..k * k];
+            super::winograd::sandwich(&g, a, w, k, &mut tmp);
+            for (xi, &v) in tmp[..a2].iter().enumerate() {
+                u[(xi * cout + co) * cin + ci] = v;
             }
         }
     }
-    debug_assert_eq!(dst, cout * rows * w);
-    data.truncate(dst);
-    data.shrink_to_fit();
+    u
 }
 
-/// Target size of one im2col chunk, in f32 values (8 MiB).
-const IM2COL_CHUNK: usize = 2 << 20;
-
-/// Convolution + bias + ReLU by im2col, for any stride: output rows `out` (of a level
-/// `w_out` wide) from the input level of `h_in x w_in` read through `src(c, y, x)` (zero
-/// outside the level is the caller's job).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn conv_im2col(
+/// Stride-1 convolution + bias + ReLU of a band by Winograd `F(m x m, k x k)`, with the
+/// weights `u` from [`winograd_weights`]: output rows `out` (the input band holds every
+/// level row they need; `h_in` rows in the level).
+pub(crate) fn conv_winograd(
     spec: &ConvSpec,
-    weight: &[f32],
+    u: &[f32],
     bias: &[f32],
+    x: &Band,
+    h_in: usize,
     out: Range<usize>,
-    w_out: usize,
-    src: impl Fn(usize, isize, isize) -> f32,
+    tf: &Transform,
 ) -> Band {
-    let (k, s, p) = (spec.k, spec.stride, spec.pad as isize);
-    let kk = spec.cin * k * k;
+    assert!(spec.stride == 1 && tf.r == spec.k && x.c == spec.cin && tf.alpha <= 8);
+    let (m, k, p, a) = (tf.m, spec.k, spec.pad, tf.alpha);
+    let (cin, cout) = (spec.cin, spec.cout);
+    let a2 = a * a;
+    assert_eq!(u.len(), a2 * cout * cin);
     let rows = out.len();
-    let mut data = vec![0.0f32; spec.cout * rows * w_out];
-    let chunk_rows = (IM2COL_CHUNK / (kk * w_out).max(1)).clamp(1, rows.max(1));
-    let mut cols = vec![0.0f32; kk * chunk_rows * w_out];
-    let mut r = 0;
-    while r < rows {
-        let nr = chunk_rows.min(rows - r);
-        let n = nr * w_out;
-        for ci in 0..spec.cin {
-            for ky in 0..k {
-                for kx in 0..k {
-                    let row = (ci * k + ky) * k + kx;
-                    let dst = &mut cols[row * n..(row + 1) * n];
-                    for rr in 0..nr {
-                        let y = ((out.start + r + rr) * s) as isize - p + ky as isize;
-                        for x in 0..w_out {
-                            dst[rr * w_out + x] = src(ci, y, (x * s) as isize - p + kx as isize);
+    let w_out = x.w + 2 * p - k + 1;
+    let (n_ty, n_tx) = (rows.div_ceil(m), w_out.div_ceil(m));
+    let tiles = n_ty * n_tx;
+    let f = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
+    let (at, bt) = (f(&tf.at), f(&tf.bt));
+    // Zero-padded input: row i = level row out.start - p + i, column j = level column j - p;
+    // whole tiles (outputs past the band's end read zeros and are dropped).
+    let prow = n_ty * m + k - 1;
+    let wp = (n_tx * m + k - 1).max(x.w + 2 * p);
+    let mut padded = vec![0.0f32; cin * prow * wp];
+    for c in 0..cin {
+        for i in 0..prow {
+            let y = out.start as isize - p as isize + i as isize;
+            x.padded_row(
+                c,
+                y,
+                h_in,
+                p,
+                &mut padded[(c * prow + i) * wp..][..x.w + 2 * p],
+            );
+        }
+    }
+    let mut data = vec![0.0f32; cout * rows * w_out];
+    let chunk = (WINOGRAD_CHUNK / (a2 * cin.max(cout))).clamp(16, tiles.max(16));
+    let cap = chunk.min(tiles);
+    let mut v = vec![0.0f32; a2 * cin * cap];
+    let mut mm = vec![0.0f32; a2 * cout * cap];
+    // Per-channel scratch: gathered tiles and the half-transformed ones (alpha^2 x tiles).
+    let mut d = vec![0.0f32; a2 * cap];
+    let mut e = vec![0.0f32; a2 * cap];
+    let mut t0 = 0;
+    while t0 < tiles {
+        let nt = chunk.min(tiles - t0);
+        // Runs of consecutive tiles in one tile row: (first tile in the chunk, count, row
+        // and column of the first tile's origin).
+        let mut runs = Vec::new();
+        let mut t = t0;
+        while t < t0 + nt {
+            let (ty, tx) = (t / n_tx, t % n_tx);
+            let len = (n_tx - tx).min(t0 + nt - t);
+            runs.push((t - t0, len, ty * m, tx * m));
+            t += len;
+        }
+        // Input transform, vectorised over tiles: V = B^T d B per channel.
+        for c in 0..cin {
+            let plane = &padded[c * prow * wp..][..prow * wp];
+            for i in 0..a {
+                for j in 0..a {
+                    let dst = &mut d[(i * a + j) * nt..][..nt];
+                    for &(ts, len, y0, x0) in &runs {
+                        let src = plane[(y0 + i) * wp + x0 + j..].iter().step_by(m);
+                        for (val, &x) in dst[ts..ts + len].iter_mut().zip(src) {
+                            *val = x;
+                        }
+                    }
+                }
+            }
+            // e[i][xc] = sum_j B^T[xc][j] d[i][j]
+            for i in 0..a {
+                for xc in 0..a {
+                    let dst = &mut e[(i * a + xc) * nt..][..nt];
+                    lincomb(
+                        dst,
+                        (0..a).map(|j| (bt[xc * a + j], &d[(i * a + j) * nt..][..nt])),
+                    );
+                }
+            }
+            // V[xr][xc] = sum_i B^T[xr][i] e[i][xc]
+            for xr in 0..a {
+                for xc in 0..a {
+                    let dst = &mut v[((xr * a + xc) * cin + c) * nt..][..nt];
+                    lincomb(
+                        dst,
+                        (0..a).map(|i| (bt[xr * a + i], &e[(i * a + xc) * nt..][..nt])),
+                    );
+                }
+            }
+        }
+        for xi in 0..a2 {
+            gemm(
+                cout,
+                cin,
+                nt,
+                &u[xi * cout * cin..],
+                (cin, 1),
+                &v[xi * cin * nt..],
+                (nt, 1),
+                0.0,
+                &mut mm[xi * cout * nt..],
+                nt,
+            );
+        }
+        // Output transform, vectorised over tiles: Y = A^T M A, + bias, ReLU, scattered.
+        for (co, &b) in bias.iter().enumerate() {
+            // e[i][xc] = sum_xr A^T[i][xr] M[xr][xc]
+            for i in 0..m {
+                for xc in 0..a {
+                    let dst = &mut e[(i * a + xc) * nt..][..nt];
+                    lincomb(
+                        dst,
+                        (0..a).map(|xr| {
+                            (
+                                at[i * a + xr],
+                                &mm[((xr * a + xc) * cout + co) * nt..][..nt],
+                            )
+                        }),
+                    );
+                }
+            }
+            let out_plane = &mut data[co * rows * w_out..][..rows * w_out];
+            for i in 0..m {
+                for j in 0..m {
+                    // y[i][j] = sum_xc A^T[j][xc] e[i][xc]
+                    let y = &mut d[..nt];
+                    y.fill(b);
+                    for xc in 0..a {
+                        axpy(y, at[j * a + xc], &e[(i * a + xc) * nt..][..nt]);
+                    }
+                    for &(ts, len, y0, x0) in &runs {
+                        if y0 + i >= rows || x0 + j >= w_out {
+                            continue;
+                        }
+                        let n = (w_out - x0 - j).div_ceil(m).min(len);
+                        let row = &mut out_plane[(y0 + i) * w_out + x0 + j..];
+                        for (o, &val) in row.iter_mut().step_by(m).zip(&y[ts..ts + n]) {
+                            *o = val.max(0.0);
                         }
                     }
                 }
             }
         }
-        gemm(
-            spec.cout,
-            kk,
-            n,
-            weight,
-            (kk, 1),
-            &cols[..kk * n],
-            (n, 1),
-            0.0,
-            &mut data[r * w_out..],
-            rows * w_out,
-        );
-        r += nr;
+        t0 += nt;
     }
-    bias_relu_compact(&mut data, bias, rows, w_out, w_out);
     Band {
-        c: spec.cout,
+        c: cout,
         row0: out.start,
         rows,
         w: w_out,
@@ -180,95 +290,30 @@ pub(crate) fn conv_im2col(
     }
 }
 
-/// Convolution + bias + ReLU of a band (`h_in` rows in its level): output rows `out`.
-/// Stride-1 convolutions use shifted products over a zero-padded copy; others im2col.
-pub(crate) fn conv(
-    spec: &ConvSpec,
-    weight: &[f32],
-    bias: &[f32],
-    x: &Band,
-    h_in: usize,
-    out: Range<usize>,
-) -> Band {
-    debug_assert_eq!(x.c, spec.cin);
-    let (k, p) = (spec.k, spec.pad);
-    if spec.stride != 1 {
-        let w_out = (x.w + 2 * p - k) / spec.stride + 1;
-        return conv_im2col(spec, weight, bias, out, w_out, |c, y, xx| {
-            x.get(c, y, xx, h_in)
-        });
-    }
-    let rows = out.len();
-    let wp = x.w + 2 * p;
-    let w_out = wp - k + 1;
-    let prow = rows + k - 1;
-    // Zero-padded input: row i is level row out.start - p + i.
-    let mut padded = vec![0.0f32; spec.cin * prow * wp];
-    for c in 0..spec.cin {
-        for i in 0..prow {
-            let y = (out.start + i) as isize - p as isize;
-            if y < 0 || y as usize >= h_in {
-                continue;
-            }
-            let r = y as usize - x.row0;
-            assert!(r < x.rows, "conv: level row {y} is not in the band");
-            let s = &x.data[c * x.plane() + r * x.w..][..x.w];
-            padded[(c * prow + i) * wp + p..][..x.w].copy_from_slice(s);
-        }
-    }
-    let mut data = vec![0.0f32; spec.cout * rows * wp];
-    let n = (rows - 1) * wp + w_out;
-    let kk = k * k;
-    for ky in 0..k {
-        for kx in 0..k {
-            let tap = ky * k + kx;
-            gemm(
-                spec.cout,
-                spec.cin,
-                n,
-                &weight[tap..],
-                (spec.cin * kk, kk),
-                &padded[ky * wp + kx..],
-                (prow * wp, 1),
-                if tap == 0 { 0.0 } else { 1.0 },
-                &mut data,
-                rows * wp,
-            );
-        }
-    }
-    drop(padded);
-    bias_relu_compact(&mut data, bias, rows, wp, w_out);
-    Band {
-        c: spec.cout,
-        row0: out.start,
-        rows,
-        w: w_out,
-        data,
-    }
-}
-
-/// Max-pool (`k x k`, stride `s`, no padding) of a band: output rows `out`.
+/// Max-pool (`k x k`, stride `s`, no padding) of a band: output rows `out`. (Inputs are
+/// ReLU outputs, never NaN.)
 pub(crate) fn max_pool(x: &Band, k: usize, s: usize, out: Range<usize>) -> Band {
     let w_out = (x.w - k) / s + 1;
     let rows = out.len();
     let mut data = vec![0.0f32; x.c * rows * w_out];
+    let mut colmax = vec![0.0f32; x.w];
     for c in 0..x.c {
         let plane = &x.data[c * x.plane()..(c + 1) * x.plane()];
         for (r, y) in out.clone().enumerate() {
             let r0 = y * s - x.row0;
             assert!(r0 + k <= x.rows, "max_pool: rows outside the band");
+            // Maximum over the window's rows, then over its columns.
+            colmax.copy_from_slice(&plane[r0 * x.w..][..x.w]);
+            for dy in 1..k {
+                for (m, &v) in colmax.iter_mut().zip(&plane[(r0 + dy) * x.w..][..x.w]) {
+                    *m = m.max(v);
+                }
+            }
             let dst = &mut data[(c * rows + r) * w_out..][..w_out];
             for (xo, d) in dst.iter_mut().enumerate() {
-                let mut m = f32::NEG_INFINITY;
-                for dy in 0..k {
-                    let row = &plane[(r0 + dy) * x.w + xo * s..][..k];
-                    for &v in row {
-                        if v > m || v.is_nan() {
-                            m = v;
-                        }
-                    }
-                }
-                *d = m;
+                *d = colmax[xo * s..xo * s + k]
+                    .iter()
+                    .fold(f32::NEG_INFINITY, |m, &v| m.max(v));
             }
         }
     }
@@ -317,4 +362,38 @@ pub(crate) fn tap_distance(a: &Band, b: &Band, head: &[f32], owned: Range<usize>
         }
     }
     acc.iter().map(|&v| v as f64).sum()
+}
+
+/// `dst = sum coef * src` over the terms with a non-zero coefficient (the transforms are
+/// sparse).
+#[inline]
+fn lincomb<'a>(dst: &mut [f32], terms: impl Iterator<Item = (f32, &'a [f32])>) {
+    let mut first = true;
+    for (coef, src) in terms {
+        if coef == 0.0 {
+            continue;
+        }
+        if first {
+            for (d, &s) in dst.iter_mut().zip(src) {
+                *d = coef * s;
+            }
+            first = false;
+        } else {
+            axpy(dst, coef, src);
+        }
+    }
+    if first {
+        dst.fill(0.0);
+    }
+}
+
+/// `dst += coef * src` (skipped for a zero coefficient: the transforms are sparse).
+#[inline]
+fn axpy(dst: &mut [f32], coef: f32, src: &[f32]) {
+    if coef == 0.0 {
+        return;
+    }
+    for (d, &s) in dst.iter_mut().zip(src) {
+        *d += coef * s;
+    }
 }

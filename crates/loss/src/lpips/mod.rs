@@ -37,8 +37,10 @@
 //! ```
 
 mod arch;
+mod input;
 mod layers;
 mod weights;
+mod winograd;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -238,9 +240,12 @@ pub struct LpipsValue {
     pub mean: f64,
 }
 
-/// The lpips package's scaling layer.
-const SHIFT: [f32; 3] = [-0.030, -0.088, -0.188];
-const SCALE: [f32; 3] = [0.458, 0.448, 0.450];
+/// Winograd-domain weights up to this size are kept between frames.
+const MAX_CACHED_WEIGHTS: usize = 64 << 20;
+
+/// Rows of the first layer's output made at a time (bounds its input copies): about this
+/// many f32 values of input per strip.
+const FIRST_STRIP_VALUES: usize = 1 << 20;
 
 /// Default band budget: feature maps of one band (both images) stay under this many bytes.
 pub const DEFAULT_BAND_BUDGET: usize = 128 << 20;
@@ -250,15 +255,48 @@ pub const DEFAULT_BAND_BUDGET: usize = 128 << 20;
 pub struct Lpips {
     weights: LpipsWeights,
     arch: Arch,
+    /// The first convolution as it runs (stride 1; AlexNet's rewritten).
+    first: input::FirstLayer,
+    /// The Winograd transform of each convolution (of the first as it runs).
+    transforms: Vec<winograd::Transform>,
+    /// The Winograd-domain weights, kept once made when all of them together are small
+    /// (AlexNet: 36 MB; VGG16's 235 MB are made per band instead).
+    cached: Option<Vec<std::sync::OnceLock<Vec<f32>>>>,
     band_budget: usize,
 }
 
 impl Lpips {
     /// The metric with these weights.
     pub fn new(weights: LpipsWeights) -> Self {
+        let arch = Arch::of(weights.net);
+        let first = input::FirstLayer::new(&arch.convs[0], &weights.convs[0].0);
+        // The convolutions as they run (the first one rewritten to stride 1).
+        let specs: Vec<&arch::ConvSpec> = std::iter::once(&first.spec)
+            .chain(arch.convs.iter().skip(1))
+            .collect();
+        // F(4x4, 3x3) (36 products per 16 outputs instead of 144), F(4x4, 5x5) (64 instead
+        // of 400).
+        let transforms: Vec<winograd::Transform> = specs
+            .iter()
+            .map(|c| winograd::Transform::new(4, c.k))
+            .collect();
+        let u_bytes: usize = specs
+            .iter()
+            .zip(&transforms)
+            .map(|(c, t)| 4 * t.alpha * t.alpha * c.cout * c.cin)
+            .sum();
+        let cached = (u_bytes <= MAX_CACHED_WEIGHTS).then(|| {
+            arch.convs
+                .iter()
+                .map(|_| std::sync::OnceLock::new())
+                .collect()
+        });
         Lpips {
-            arch: Arch::of(weights.net),
+            arch,
             weights,
+            first,
+            transforms,
+            cached,
             band_budget: DEFAULT_BAND_BUDGET,
         }
     }
@@ -310,19 +348,31 @@ impl Lpips {
         let mut peak = 0;
         for (i, op) in self.arch.ops.iter().enumerate() {
             let (rin, rout) = (plan.rows[i].len(), plan.rows[i + 1].len());
-            let input = if i == 0 { 0 } else { 2 * ch[i] * rin * cols[i] };
-            let (pad, wp) = match *op {
-                Op::Conv { conv, .. } if i > 0 => {
-                    let c = &self.arch.convs[conv];
-                    (
-                        c.cin * (rout + c.k - 1) * (cols[i] + 2 * c.pad),
-                        cols[i] + 2 * c.pad,
-                    )
+            // Both images' outputs, and the layer's own scratch.
+            let out = 2 * ch[i + 1] * rout * cols[i + 1];
+            let scratch = match *op {
+                Op::Conv { conv, .. } => {
+                    let c = if i == 0 {
+                        &self.first.spec
+                    } else {
+                        &self.arch.convs[conv]
+                    };
+                    let a = self.transforms[conv].alpha;
+                    let input = if i == 0 {
+                        2 * FIRST_STRIP_VALUES
+                    } else {
+                        2 * ch[i] * rin * cols[i] + c.cin * (rout + a) * (cols[i] + a)
+                    };
+                    let u = if self.cached.is_some() {
+                        0
+                    } else {
+                        a * a * c.cout * c.cin
+                    };
+                    input + u + 2 * layers::WINOGRAD_CHUNK
                 }
-                _ => (0, cols[i + 1]),
+                Op::Pool { .. } => 2 * ch[i] * rin * cols[i],
             };
-            let out = 2 * ch[i + 1] * rout * wp.max(cols[i + 1]);
-            peak = peak.max(4 * (input + pad + out));
+            peak = peak.max(4 * (out + scratch));
         }
         peak
     }
@@ -462,6 +512,44 @@ impl Lpips {
         })
     }
 
+    /// The first convolution's output rows `out` (`w_out` wide) of one frame, made strip by
+    /// strip of rows so that its input copies stay small.
+    #[allow(clippy::too_many_arguments)]
+    fn first_layer<P: Pixel>(
+        &self,
+        img: &[P],
+        height: usize,
+        width: usize,
+        out: &Range<usize>,
+        w_out: usize,
+        u: &[f32],
+    ) -> Band {
+        let spec = &self.first.spec;
+        let (tf, bias) = (&self.transforms[0], &self.weights.convs[0].1);
+        let per_row = spec.cin * (w_out + spec.k + 2 * spec.pad);
+        let strip = (FIRST_STRIP_VALUES / per_row.max(1) / tf.m).max(1) * tf.m;
+        let mut full = Band {
+            c: spec.cout,
+            row0: out.start,
+            rows: out.len(),
+            w: w_out,
+            data: vec![0.0; spec.cout * out.len() * w_out],
+        };
+        let mut r = out.start;
+        while r < out.end {
+            let sub = r..(r + strip).min(out.end);
+            let in_rows = self.arch.input_rows(&self.arch.ops[0], &sub, height);
+            let (x, h) = self.first.input(img, height, width, &sub, w_out, &in_rows);
+            let y = layers::conv_winograd(spec, u, bias, &x, h, sub.clone(), tf);
+            for c in 0..spec.cout {
+                full.data[(c * out.len() + sub.start - out.start) * w_out..][..sub.len() * w_out]
+                    .copy_from_slice(&y.data[c * sub.len() * w_out..][..sub.len() * w_out]);
+            }
+            r = sub.end;
+        }
+        full
+    }
+
     /// The five taps' summed distances over the rows one band owns.
     #[allow(clippy::too_many_arguments)]
     fn band<P: Pixel>(
@@ -483,38 +571,34 @@ impl Lpips {
             }
             let next = match *op {
                 Op::Conv { conv, tap } => {
-                    let spec = &self.arch.convs[conv];
-                    let (w, bias) = &self.weights.convs[conv];
+                    let bias = &self.weights.convs[conv].1;
+                    let tf = &self.transforms[conv];
+                    let weights = |spec: &arch::ConvSpec,
+                                   w: &[f32]|
+                     -> std::borrow::Cow<'_, [f32]> {
+                        match &self.cached {
+                            Some(c) => std::borrow::Cow::Borrowed(
+                                c[conv].get_or_init(|| layers::winograd_weights(spec, w, tf)),
+                            ),
+                            None => std::borrow::Cow::Owned(layers::winograd_weights(spec, w, tf)),
+                        }
+                    };
                     let pair = match &cur {
                         None => {
-                            let first = |img: &[P]| {
-                                layers::conv_im2col(
-                                    spec,
-                                    w,
-                                    bias,
-                                    out.clone(),
-                                    cols[1],
-                                    |c, y, x| {
-                                        if y < 0
-                                            || x < 0
-                                            || y as usize >= height
-                                            || x as usize >= width
-                                        {
-                                            0.0
-                                        } else {
-                                            let v = img[(y as usize * width + x as usize) * 3 + c]
-                                                .unit();
-                                            (2.0 * v - 1.0 - SHIFT[c]) / SCALE[c]
-                                        }
-                                    },
-                                )
-                            };
-                            (first(a), first(b))
+                            let spec = &self.first.spec;
+                            let u = weights(spec, &self.first.weight);
+                            let run =
+                                |img: &[P]| self.first_layer(img, height, width, &out, cols[1], &u);
+                            (run(a), run(b))
                         }
-                        Some((xa, xb)) => (
-                            layers::conv(spec, w, bias, xa, rows[i], out.clone()),
-                            layers::conv(spec, w, bias, xb, rows[i], out.clone()),
-                        ),
+                        Some((xa, xb)) => {
+                            let spec = &self.arch.convs[conv];
+                            let u = weights(spec, &self.weights.convs[conv].0);
+                            (
+                                layers::conv_winograd(spec, &u, bias, xa, rows[i], out.clone(), tf),
+                                layers::conv_winograd(spec, &u, bias, xb, rows[i], out.clone(), tf),
+                            )
+                        }
                     };
                     if let Some(t) = tap {
                         sums[t] = layers::tap_distance(
