@@ -414,6 +414,10 @@ pub struct DemoSummary {
     /// Loss terms of the fitted parameters over the whole video (filled in by the caller
     /// that renders the results, see `video_fit::report::write_results`).
     pub final_loss: Option<Terms>,
+    /// The evaluation metrics of the fitted video (PSNR, SSIM, MS-SSIM, LPIPS; `metrics.json`
+    /// of the run folder), filled in like `final_loss`.
+    #[serde(default)]
+    pub metrics: Option<serde_json::Value>,
     /// Wall time of the whole demo (s).
     pub wall_time_s: f64,
     /// Wall time per phase (s): reference, profiles, fit (initialisation included).
@@ -488,6 +492,7 @@ pub fn run_demo(
         recovery,
         profiles,
         final_loss: None,
+        metrics: None,
         wall_time_s: t0.elapsed().as_secs_f64(),
         phase_times_s: times,
         options: opts.clone(),

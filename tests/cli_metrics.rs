@@ -13,6 +13,7 @@ use std::process::Command;
 fn r4d(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_r4d"))
         .args(args)
+        .env_remove("R4D_LPIPS_DIR")
         .output()
         .unwrap()
 }

@@ -81,3 +81,175 @@ fn every_case_matches_the_official_lpips_package() {
         eprintln!("LPIPS-{net}: largest per-frame difference from the goldens {worst:.2e}");
     }
 }
+
+fn r4d(args: &[&str], lpips_dir: Option<&str>) -> std::process::Output {
+    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_r4d"));
+    c.args(args).env_remove("R4D_LPIPS_DIR");
+    if let Some(d) = lpips_dir {
+        c.env("R4D_LPIPS_DIR", d);
+    }
+    c.output().unwrap()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("r4d_lpips_{}_{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Writes a case's videos as float32 .npy `(T, H, W, 3)`: (rendered, reference).
+fn case_npy(file: &str, dir: &std::path::Path) -> (String, String) {
+    let (x, y) = (video(file, "rendered"), video(file, "reference"));
+    let (a, b) = (dir.join("rendered.npy"), dir.join("reference.npy"));
+    r4d_loss::io::write_npy(&a, &x).unwrap();
+    r4d_loss::io::write_npy(&b, &y).unwrap();
+    (a.display().to_string(), b.display().to_string())
+}
+
+#[test]
+#[cfg_attr(
+    not(r4d_lpips_weights),
+    ignore = "no LPIPS weights in target/lpips or $R4D_LPIPS_DIR: run scripts/lpips_weights.sh"
+)]
+fn r4d_metrics_prints_the_golden_lpips() {
+    let d = tmp("cli");
+    let case = &goldens()[1]; // blobs 2 Hz vs 3 Hz, 16 x 64 x 64, 8-bit
+    let (rendered, reference) = case_npy(case["file"].as_str().unwrap(), &d);
+    let alex = weights(LpipsNet::Alex).display().to_string();
+    let vgg = weights(LpipsNet::Vgg).display().to_string();
+    let args = |extra: &[&str]| {
+        let mut v = vec![
+            "metrics",
+            "--reference",
+            &reference,
+            "--rendered",
+            &rendered,
+            "--json",
+        ];
+        v.extend_from_slice(extra);
+        v.iter().map(|s| s.to_string()).collect::<Vec<String>>()
+    };
+    let json = |o: std::process::Output| -> Value {
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let a = args(&["--lpips-weights", &alex, "--lpips-weights", &vgg]);
+    let a: Vec<&str> = a.iter().map(|s| s.as_str()).collect();
+    let via_files = json(r4d(&a, None));
+    // The folder given as --lpips-weights, and the folder from R4D_LPIPS_DIR.
+    let folder = weights(LpipsNet::Alex)
+        .parent()
+        .unwrap()
+        .display()
+        .to_string();
+    let b = args(&["--lpips-weights", &folder]);
+    let b: Vec<&str> = b.iter().map(|s| s.as_str()).collect();
+    let via_folder = json(r4d(&b, None));
+    let c = args(&[]);
+    let c: Vec<&str> = c.iter().map(|s| s.as_str()).collect();
+    let via_env = json(r4d(&c, Some(&folder)));
+    for out in [&via_files, &via_folder, &via_env] {
+        for net in ["alex", "vgg"] {
+            let key = format!("lpips_{net}");
+            check(
+                out[&key].as_f64().unwrap(),
+                case[format!("{key}_mean")].as_f64().unwrap(),
+                &key,
+            );
+            let per = out[format!("{key}_per_frame")].as_array().unwrap();
+            let want = case[format!("{key}_per_frame")].as_array().unwrap();
+            assert_eq!(per.len(), want.len());
+            for (g, w) in per.iter().zip(want) {
+                check(g.as_f64().unwrap(), w.as_f64().unwrap(), &key);
+            }
+        }
+        assert_eq!(out["lpips"], out["lpips_alex"]);
+    }
+    // Frames smaller than AlexNet needs (31 px), weights given: an error with the minimum.
+    let small = d.join("small.npy");
+    r4d_loss::io::write_npy(&small, &Video::<f32>::zeros(2, 24, 40)).unwrap();
+    let s = small.display().to_string();
+    let o = r4d(
+        &[
+            "metrics",
+            "--reference",
+            &s,
+            "--rendered",
+            &s,
+            "--lpips-weights",
+            &alex,
+        ],
+        None,
+    );
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("at least 31x31"), "{err}");
+    // From the default folder instead: a note, null, and the other metrics.
+    let out = json(r4d(
+        &["metrics", "--reference", &s, "--rendered", &s, "--json"],
+        Some(&folder),
+    ));
+    assert!(out["lpips_alex"].is_null());
+    assert!(
+        out["lpips_vgg"].as_f64().is_some(),
+        "VGG16 takes 16 px frames"
+    );
+    assert!(out["notes"].to_string().contains("at least 31x31"));
+}
+
+#[test]
+fn without_weights_lpips_is_null_with_a_note_and_bad_files_are_named() {
+    let d = tmp("noweights");
+    let (rendered, reference) = case_npy("case7_small_perturbed.npz", &d);
+    let o = r4d(
+        &[
+            "metrics",
+            "--reference",
+            &reference,
+            "--rendered",
+            &rendered,
+            "--json",
+        ],
+        None,
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    for key in [
+        "lpips",
+        "lpips_alex",
+        "lpips_vgg",
+        "lpips_alex_per_frame",
+        "lpips_vgg_per_frame",
+    ] {
+        assert!(v[key].is_null(), "{key}: {}", v[key]);
+    }
+    assert!(
+        v["notes"].to_string().contains("scripts/lpips_weights.sh"),
+        "{}",
+        v["notes"]
+    );
+    // A missing, a truncated and a non-safetensors weights file: errors naming the file.
+    let junk = d.join("junk.safetensors");
+    std::fs::write(&junk, b"\x10\x00\x00\x00\x00\x00\x00\x00{\"a\":").unwrap();
+    let not_st = d.join("alex.pth");
+    std::fs::write(&not_st, b"\x80\x02\x8a\x0alegacy torch pickle").unwrap();
+    for bad in [d.join("missing.safetensors"), junk, not_st] {
+        let b = bad.display().to_string();
+        let o = r4d(
+            &[
+                "metrics",
+                "--reference",
+                &reference,
+                "--rendered",
+                &rendered,
+                "--lpips-weights",
+                &b,
+            ],
+            None,
+        );
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(&b), "{err}");
+    }
+}

@@ -29,6 +29,10 @@ pub struct DemoArgs {
     /// reference video is always simulated on the CPU).
     #[arg(long, default_value = "cpu")]
     backend: String,
+    /// LPIPS weights for the final report's metrics (as `r4d metrics --lpips-weights`).
+    /// Repeatable. Default: $R4D_LPIPS_DIR.
+    #[arg(long = "lpips-weights", value_name = "FILE")]
+    lpips_weights: Vec<PathBuf>,
 }
 
 /// Runs the command.
@@ -46,6 +50,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
         opts.candidates = c;
     }
     opts.seed = a.seed;
+    let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
     let out = a.out.clone();
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     eprintln!(
@@ -64,8 +69,10 @@ pub fn run(a: DemoArgs) -> Result<()> {
         &run.outcome,
         &hooks.log,
         None,
+        &lpips,
     )?;
     run.summary.final_loss = Some(files.final_terms.clone());
+    run.summary.metrics = Some(files.metrics.clone());
     run.summary.wall_time_s = t_start.elapsed().as_secs_f64();
     // The inputs, so `r4d fit` can be run on them.
     let p = &run.problem;
@@ -125,6 +132,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
             }
         );
     }
+    println!("{}", super::fit::metrics_line(&files.metrics));
     let t = &files.final_terms;
     println!(
         "final loss {:.4e} (1-SSIM {:.4e}, mag {:.4e}, phase {:.4e}); wall time {:.1} s",

@@ -57,6 +57,11 @@ pub struct FitArgs {
     /// Image row of the w-t slice diagnostics (default: the reference's busiest row).
     #[arg(long)]
     row: Option<usize>,
+    /// LPIPS weights for the final report's metrics (metrics.json): a safetensors file or a
+    /// folder, as `r4d metrics --lpips-weights`. Repeatable. Default: $R4D_LPIPS_DIR.
+    #[arg(long = "lpips-weights", value_name = "FILE")]
+    #[serde(default)]
+    lpips_weights: Vec<PathBuf>,
     /// Continue the killed run in this folder (its saved arguments are used; other inputs
     /// are ignored).
     #[arg(long)]
@@ -209,6 +214,8 @@ pub fn run(a: FitArgs) -> Result<()> {
         }
     };
     let gpu = gpu_for(&a.backend)?;
+    // Loaded (and checked) before the fit, used by its final report.
+    let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
     let cfg = match &a.config {
         Some(p) => FitConfig::load(p)?,
         None => FitConfig::default(),
@@ -228,11 +235,12 @@ pub fn run(a: FitArgs) -> Result<()> {
     let mut hooks = RunHooks::new(&out, &cfg, resume.as_ref())?;
     let outcome = run_fit(&problem, &cfg, resume, &mut hooks)?;
     hooks.finish()?;
-    let files = write_results(&out, &problem, &cfg, &outcome, &hooks.log, a.row)?;
+    let files = write_results(&out, &problem, &cfg, &outcome, &hooks.log, a.row, &lpips)?;
     println!(
         "{}",
         super::run_hooks::param_table(&outcome.init_parts, &outcome.parts, None)
     );
+    println!("{}", metrics_line(&files.metrics));
     println!(
         "final loss {:.4e}; parameters: {}; run folder: {}",
         files.final_terms.total,
@@ -240,4 +248,42 @@ pub fn run(a: FitArgs) -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+/// One line per view of the final report's metrics (`metrics.json`).
+pub(crate) fn metrics_line(metrics: &serde_json::Value) -> String {
+    let f = |v: &serde_json::Value, digits: usize| match v.as_f64() {
+        Some(x) => format!("{x:.digits$}"),
+        None => "n/a".into(),
+    };
+    let mut lines = Vec::new();
+    for m in metrics["views"].as_array().into_iter().flatten() {
+        let ms = if m["ms_ssim"].is_null() {
+            format!(
+                "{} ({}-tap window)",
+                f(&m["ms_ssim_small_window"]["value"], 4),
+                m["ms_ssim_small_window"]["window"]
+            )
+        } else {
+            f(&m["ms_ssim"], 4)
+        };
+        let psnr = if m["psnr"].is_null() {
+            format!(
+                "{} (whole video; a frame is identical)",
+                f(&m["psnr_video"], 2)
+            )
+        } else {
+            f(&m["psnr"], 2)
+        };
+        lines.push(format!(
+            "view {}: PSNR {} dB, SSIM {}, MS-SSIM {}, LPIPS-alex {}, LPIPS-vgg {}",
+            m["view"],
+            psnr,
+            f(&m["ssim"], 4),
+            ms,
+            f(&m["lpips_alex"], 4),
+            f(&m["lpips_vgg"], 4)
+        ));
+    }
+    lines.join("\n")
 }

@@ -3,7 +3,9 @@
 
 use anyhow::{Context, Result};
 use r4d_loss::io::read_video;
+use r4d_loss::lpips;
 use r4d_loss::metrics::{report, Report};
+use resonance4d::video_fit::report::{lpips_json, lpips_of, LpipsValues};
 use serde_json::{json, Value};
 use std::path::PathBuf;
 
@@ -20,6 +22,12 @@ pub struct MetricsArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
+    /// LPIPS weights: a safetensors file (AlexNet or VGG16, recognised from its contents;
+    /// made by scripts/lpips_weights.sh) or a folder holding alex.safetensors and/or
+    /// vgg.safetensors. Repeatable. Default: the folder named by $R4D_LPIPS_DIR, if set.
+    /// Without weights the LPIPS values are null, with a note saying how to get them.
+    #[arg(long = "lpips-weights", value_name = "FILE")]
+    lpips_weights: Vec<PathBuf>,
 }
 
 /// Runs `r4d metrics`.
@@ -33,19 +41,26 @@ pub fn run(a: MetricsArgs) -> Result<()> {
             a.reference.display()
         )
     })?;
+    // Weights given explicitly: frames too small for a backbone are an error; from the
+    // default folder ($R4D_LPIPS_DIR) a note.
+    let metrics = lpips::load_all(&a.lpips_weights).context("loading LPIPS weights")?;
+    let lp =
+        lpips_of(&metrics, &rendered, &reference, !a.lpips_weights.is_empty()).context("LPIPS")?;
+    let mut r = r;
+    r.notes.extend(lp.notes.iter().cloned());
     for n in &r.notes {
         eprintln!("note: {n}");
     }
     if a.json {
-        println!("{}", to_json(&r));
+        println!("{}", to_json(&r, &lp));
     } else {
-        print_table(&a, &r);
+        print_table(&a, &r, &lp);
     }
     Ok(())
 }
 
-fn to_json(r: &Report) -> Value {
-    json!({
+fn to_json(r: &Report, lp: &LpipsValues) -> Value {
+    let mut v = json!({
         "frames": r.frames,
         "height": r.height,
         "width": r.width,
@@ -66,12 +81,17 @@ fn to_json(r: &Report) -> Value {
         "dms_mag": r.dms_mag,
         "dms_phase": r.dms_phase,
         "dms": r.dms(),
-        "lpips": Value::Null,
         "notes": r.notes,
-    })
+    });
+    lpips_json(
+        lp.alex.as_ref(),
+        lp.vgg.as_ref(),
+        v.as_object_mut().expect("an object"),
+    );
+    v
 }
 
-fn print_table(a: &MetricsArgs, r: &Report) {
+fn print_table(a: &MetricsArgs, r: &Report, lp: &LpipsValues) {
     let opt = |v: Option<f64>, digits: usize| match v {
         Some(v) => format!("{v:.digits$}"),
         None => "undefined".to_string(),
@@ -119,5 +139,10 @@ fn print_table(a: &MetricsArgs, r: &Report) {
         opt(r.dms_mag, 6),
         opt(r.dms_phase, 6)
     );
-    println!("LPIPS      not computed (needs pretrained AlexNet/VGG weights, not available)");
+    for (net, v) in [("alex", &lp.alex), ("vgg", &lp.vgg)] {
+        match v {
+            Some(v) => println!("LPIPS-{net:<5}{:.6} (mean over frames)", v.mean),
+            None => println!("LPIPS-{net:<5}not computed (see the note)"),
+        }
+    }
 }

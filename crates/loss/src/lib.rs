@@ -17,9 +17,8 @@
 //!   video's, with a compact 8-bit reference: for paper-scale videos that do not fit in memory.
 //! * [`io`]: videos as directories of PNG frames or float32 `.npy` `(T, H, W, 3)`.
 //! * [`trajectory`]: point-trajectory metrics.
-//!
-//! LPIPS is not included: it needs pretrained AlexNet/VGG backbone weights, which cannot be
-//! fetched here (the `lpips` package downloads them from torchvision at run time).
+//! * [`lpips`]: LPIPS v0.1 with AlexNet or VGG16 backbones, as the official `lpips` package
+//!   computes it, from weights files (safetensors; `scripts/lpips_weights.sh` makes them).
 //!
 //! A [`Video`] is `(T, H, W, 3)` values (row 0 at the top, RGB interleaved) in `f32` or
 //! `f64` ([`Real`]); gradients come back in the same layout. Every quantity is computed in
