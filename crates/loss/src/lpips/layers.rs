@@ -105,7 +105,7 @@ impl Band {
 }
 
 /// Target size of the Winograd chunk buffers, in f32 values (4 MiB each).
-pub(crate) const WINOGRAD_CHUNK: usize = 1 << 20;
+pub(crate) const WINOGRAD_CHUNK: usize = 4 << 20;
 
 /// Stride-1 convolution + bias + ReLU of a band by Winograd `F(m x m, k x k)`: output rows
 /// `out` (the input band holds every level row they need; `h_in` rows in the level).
@@ -134,6 +134,43 @@ pub(crate) fn winograd_weights(spec: &ConvSpec, weight: &[f32], tf: &Transform) 
 /// weights `u` from [`winograd_weights`]: output rows `out` (the input band holds every
 /// level row they need; `h_in` rows in the level).
 pub(crate) fn conv_winograd(
+    spec: &ConvSpec,
+    u: &[f32],
+    bias: &[f32],
+    x: &Band,
+    h_in: usize,
+    out: Range<usize>,
+    tf: &Transform,
+) -> Band {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, checked just above.
+        return unsafe { conv_winograd_avx2(spec, u, bias, x, h_in, out, tf) };
+    }
+    conv_winograd_body(spec, u, bias, x, h_in, out, tf)
+}
+
+/// [`conv_winograd`] compiled for AVX2 (8-lane transforms; the same arithmetic, so the same
+/// values, as the baseline build).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn conv_winograd_avx2(
+    spec: &ConvSpec,
+    u: &[f32],
+    bias: &[f32],
+    x: &Band,
+    h_in: usize,
+    out: Range<usize>,
+    tf: &Transform,
+) -> Band {
+    conv_winograd_body(spec, u, bias, x, h_in, out, tf)
+}
+
+#[inline(always)]
+fn conv_winograd_body(
     spec: &ConvSpec,
     u: &[f32],
     bias: &[f32],
@@ -366,7 +403,7 @@ pub(crate) fn tap_distance(a: &Band, b: &Band, head: &[f32], owned: Range<usize>
 
 /// `dst = sum coef * src` over the terms with a non-zero coefficient (the transforms are
 /// sparse).
-#[inline]
+#[inline(always)]
 fn lincomb<'a>(dst: &mut [f32], terms: impl Iterator<Item = (f32, &'a [f32])>) {
     let mut first = true;
     for (coef, src) in terms {
@@ -388,7 +425,7 @@ fn lincomb<'a>(dst: &mut [f32], terms: impl Iterator<Item = (f32, &'a [f32])>) {
 }
 
 /// `dst += coef * src` (skipped for a zero coefficient: the transforms are sparse).
-#[inline]
+#[inline(always)]
 fn axpy(dst: &mut [f32], coef: f32, src: &[f32]) {
     if coef == 0.0 {
         return;
