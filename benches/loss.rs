@@ -33,17 +33,22 @@ use std::time::Instant;
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
+/// The pattern's value at frame `t`, pixel `(y, x)`, channel `c`, in [0, 1].
+fn pattern(t: usize, y: usize, x: usize, c: usize, speed: f32) -> f32 {
+    let u = x as f32 - speed * t as f32;
+    let v = 0.5
+        + 0.25 * (u * 0.05 + c as f32).sin() * (y as f32 * 0.04).cos()
+        + 0.15 * ((u + y as f32) * 0.13).sin();
+    v.clamp(0.0, 1.0)
+}
+
 fn video(t: usize, h: usize, w: usize, speed: f32) -> Video<f32> {
     let mut data = Vec::with_capacity(t * h * w * 3);
     for f in 0..t {
         for y in 0..h {
             for x in 0..w {
-                let u = x as f32 - speed * f as f32;
                 for c in 0..3 {
-                    let v = 0.5
-                        + 0.25 * (u * 0.05 + c as f32).sin() * (y as f32 * 0.04).cos()
-                        + 0.15 * ((u + y as f32) * 0.13).sin();
-                    data.push(v.clamp(0.0, 1.0));
+                    data.push(pattern(f, y, x, c, speed));
                 }
             }
         }
@@ -88,12 +93,8 @@ fn frame(t: usize, h: usize, w: usize, speed: f32) -> Vec<u8> {
     let mut data = Vec::with_capacity(h * w * 3);
     for y in 0..h {
         for x in 0..w {
-            let u = x as f32 - speed * t as f32;
             for c in 0..3 {
-                let v = 0.5
-                    + 0.25 * (u * 0.05 + c as f32).sin() * (y as f32 * 0.04).cos()
-                    + 0.15 * ((u + y as f32) * 0.13).sin();
-                data.push((v.clamp(0.0, 1.0) * 255.0).round() as u8);
+                data.push((pattern(t, y, x, c, speed) * 255.0).round() as u8);
             }
         }
     }

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{fixture, read_npz};
+use common::fixture;
 use r4d_loss::io::{write_npy, write_png_dir};
 use r4d_loss::Video;
 use serde_json::Value;
@@ -42,18 +42,7 @@ fn golden(name: &str) -> Value {
         .clone()
 }
 
-/// A stored `(T, 3, H, W)` video as f32 (uint8 k as k / 255).
-fn video(file: &str, key: &str) -> Video<f32> {
-    let a = &read_npz(&fixture(&format!("loss/{file}")))[key];
-    let [t, _, h, w] = a.shape[..] else { panic!() };
-    let uint8 = a.data.iter().all(|v| v.fract() == 0.0 && *v <= 255.0) && key != "grad";
-    let vals: Vec<f32> = a
-        .data
-        .iter()
-        .map(|&v| if uint8 { v as f32 / 255.0 } else { v as f32 })
-        .collect();
-    Video::from_tchw(t, h, w, &vals).unwrap()
-}
+use common::loss_case_video as video;
 
 fn metrics_json(reference: &Path, rendered: &Path) -> Value {
     let o = r4d(&[

@@ -10,7 +10,7 @@
 
 mod common;
 
-use common::{fixture, read_npz};
+use common::fixture;
 use r4d_loss::lpips::{Lpips, LpipsNet};
 use r4d_loss::Video;
 use serde_json::Value;
@@ -22,18 +22,7 @@ fn weights(net: LpipsNet) -> PathBuf {
         .join(format!("{}.safetensors", net.name()))
 }
 
-/// A stored `(T, 3, H, W)` video as f32 (all-integer data in 0..=255 as k / 255).
-fn video(file: &str, key: &str) -> Video<f32> {
-    let a = &read_npz(&fixture(&format!("loss/{file}")))[key];
-    let [t, _, h, w] = a.shape[..] else { panic!() };
-    let uint8 = a.data.iter().all(|v| v.fract() == 0.0 && *v <= 255.0);
-    let vals: Vec<f32> = a
-        .data
-        .iter()
-        .map(|&v| if uint8 { v as f32 / 255.0 } else { v as f32 })
-        .collect();
-    Video::from_tchw(t, h, w, &vals).unwrap()
-}
+use common::loss_case_video as video;
 
 fn goldens() -> Vec<Value> {
     let g: Value =
@@ -170,21 +159,7 @@ fn r4d_metrics_prints_the_golden_lpips() {
     let small = d.join("small.npy");
     r4d_loss::io::write_npy(&small, &Video::<f32>::zeros(2, 24, 40)).unwrap();
     let s = small.display().to_string();
-    let o = r4d(
-        &[
-            "metrics",
-            "--reference",
-            &s,
-            "--rendered",
-            &s,
-            "--lpips-weights",
-            &alex,
-        ],
-        None,
-    );
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("at least 31x31"), "{err}");
+    metrics_fails(&s, &s, &alex, "at least 31x31");
     // From the default folder instead: a note, null, and the other metrics.
     let out = json(r4d(
         &["metrics", "--reference", &s, "--rendered", &s, "--json"],
@@ -236,20 +211,23 @@ fn without_weights_lpips_is_null_with_a_note_and_bad_files_are_named() {
     std::fs::write(&not_st, b"\x80\x02\x8a\x0alegacy torch pickle").unwrap();
     for bad in [d.join("missing.safetensors"), junk, not_st] {
         let b = bad.display().to_string();
-        let o = r4d(
-            &[
-                "metrics",
-                "--reference",
-                &reference,
-                "--rendered",
-                &rendered,
-                "--lpips-weights",
-                &b,
-            ],
-            None,
-        );
-        assert!(!o.status.success());
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(err.contains(&b), "{err}");
+        metrics_fails(&reference, &rendered, &b, &b);
     }
+}
+
+/// `r4d metrics` with these weights fails, its error containing `needle`.
+fn metrics_fails(reference: &str, rendered: &str, weights: &str, needle: &str) {
+    let args = [
+        "metrics",
+        "--reference",
+        reference,
+        "--rendered",
+        rendered,
+        "--lpips-weights",
+        weights,
+    ];
+    let o = r4d(&args, None);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains(needle), "{err}");
 }

@@ -111,3 +111,19 @@ pub fn read_npy(path: &Path) -> Array {
     let b = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     parse_npy(&b)
 }
+
+/// A `(T, 3, H, W)` video of a loss fixture (`tests/fixtures/loss/FILE`, array `key`) as f32;
+/// all-integer data in 0..=255 (the 8-bit cases) as k / 255 (a gradient array never is).
+pub fn loss_case_video(file: &str, key: &str) -> r4d_loss::Video<f32> {
+    let a = &read_npz(&fixture(&format!("loss/{file}")))[key];
+    let [t, _, h, w] = a.shape[..] else {
+        panic!("{file}:{key}: not (T, 3, H, W)")
+    };
+    let uint8 = key != "grad" && a.data.iter().all(|v| v.fract() == 0.0 && *v <= 255.0);
+    let vals: Vec<f32> = a
+        .data
+        .iter()
+        .map(|&v| if uint8 { v as f32 / 255.0 } else { v as f32 })
+        .collect();
+    r4d_loss::Video::from_tchw(t, h, w, &vals).unwrap()
+}

@@ -7,21 +7,19 @@ use super::*;
 use std::collections::HashMap;
 
 /// SplitMix64 in [-1, 1).
-struct Rng(u64);
+struct Rng(crate::tests::Rng);
 impl Rng {
+    fn new(seed: u64) -> Rng {
+        Rng(crate::tests::Rng(seed))
+    }
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        2.0 * self.0.next() - 1.0
     }
 }
 
 /// He-scaled random weights (so activations neither vanish nor explode), positive heads.
 fn random_tensors(net: LpipsNet, seed: u64) -> HashMap<String, (Vec<usize>, Vec<f32>)> {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     net.tensors()
         .into_iter()
         .map(|(key, shape)| {
@@ -49,7 +47,7 @@ fn random_metric(net: LpipsNet, seed: u64) -> Lpips {
 }
 
 fn image(h: usize, w: usize, seed: u64) -> Vec<f32> {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     (0..h * w * 3)
         .map(|i| {
             let (y, x) = ((i / 3) / w, (i / 3) % w);
