@@ -383,21 +383,33 @@ impl Lpips {
     pub fn bands_for(&self, height: usize, width: usize) -> Result<usize, LpipsError> {
         let (rows, cols) = self.levels(height, width)?;
         let max = rows[rows.len() - 1].max(1) * 4;
-        let mut n = 1;
-        while n < max {
-            let worst = self
-                .arch
+        let fits = |n: usize| {
+            self.arch
                 .plan(&rows, n)
                 .iter()
                 .map(|p| self.band_bytes(p, &cols))
                 .max()
-                .unwrap_or(0);
-            if worst <= self.band_budget {
-                break;
-            }
-            n += 1;
+                .unwrap_or(0)
+                <= self.band_budget
+        };
+        // Doubling, then bisection: O(log n) plans, so huge frames are planned at once.
+        let mut hi = 1;
+        while hi < max && !fits(hi) {
+            hi = (hi * 2).min(max);
         }
-        Ok(n)
+        if hi == 1 || !fits(hi) {
+            return Ok(hi);
+        }
+        let mut lo = hi / 2; // does not fit
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if fits(mid) {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        Ok(hi)
     }
 
     /// LPIPS of one pair of `(height, width, 3)` frames (row-major, RGB), values in `[0, 1]`
@@ -464,7 +476,7 @@ impl Lpips {
         let load = |t: usize| -> Result<(B, B), LpipsError> {
             let (a, b) = frame(t)?;
             for (what, v) in [("rendered", a.as_ref()), ("reference", b.as_ref())] {
-                if v.len() != height * width * 3 {
+                if height.checked_mul(width).and_then(|n| n.checked_mul(3)) != Some(v.len()) {
                     return Err(LpipsError::DataLength {
                         what,
                         frame: t,
