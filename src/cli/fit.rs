@@ -25,13 +25,29 @@ pub struct FitArgs {
     /// text).
     #[arg(long)]
     cameras: Option<PathBuf>,
-    /// Reference video: a .npy (T, H, W, 3) float array or a folder of PNG frames (the format
-    /// of `r4d metrics`). Frame 0 shows the rest state.
+    /// A dataset folder (PhysFlow's release, PhysDreamer, PAC-NeRF; see `r4d dataset
+    /// inspect`): scene, particles, parts, physics, cameras and videos come from it.
     #[arg(long)]
-    video: Option<PathBuf>,
-    /// Index of the video's camera in --cameras.
-    #[arg(long, default_value_t = 0)]
-    video_camera: usize,
+    #[serde(default)]
+    dataset: Option<PathBuf>,
+    /// With --dataset: fit only the views of these cameras (name or index; repeatable).
+    #[arg(long = "camera", value_name = "NAME|INDEX")]
+    #[serde(default)]
+    camera: Vec<String>,
+    #[command(flatten)]
+    #[serde(default)]
+    dataset_opts: super::dataset::DatasetOptions,
+    /// Reference video: a .npy (T, H, W, 3) float array or a folder of PNG frames (the format
+    /// of `r4d metrics`). Frame 0 shows the rest state. Repeatable: one per view, each with
+    /// its --video-camera; the loss is summed over the views.
+    #[arg(long)]
+    #[serde(default, deserialize_with = "one_or_many")]
+    video: Vec<PathBuf>,
+    /// Index of each --video's camera in --cameras (default 0; one per --video, or one for
+    /// all).
+    #[arg(long)]
+    #[serde(default, deserialize_with = "one_or_many")]
+    video_camera: Vec<usize>,
     /// Frame rate of the video (default: the simulation's, 1 / frame_dt). Rendered frames are
     /// resampled linearly in time when it differs.
     #[arg(long)]
@@ -69,6 +85,26 @@ pub struct FitArgs {
     resume: Option<PathBuf>,
 }
 
+/// Reads a value or a list of values (invocation.json of runs made before a flag became
+/// repeatable held a single value).
+fn one_or_many<'de, D, T>(d: D) -> std::result::Result<Vec<T>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: serde::Deserialize<'de>,
+{
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum OneOrMany<T> {
+        Many(Vec<T>),
+        One(T),
+    }
+    Ok(match Option::<OneOrMany<T>>::deserialize(d)? {
+        Some(OneOrMany::Many(v)) => v,
+        Some(OneOrMany::One(x)) => vec![x],
+        None => Vec::new(),
+    })
+}
+
 fn need<'a>(v: &'a Option<PathBuf>, flag: &str) -> Result<&'a PathBuf> {
     v.as_ref()
         .with_context(|| format!("{flag} is required (or --resume DIR)"))
@@ -97,13 +133,122 @@ pub fn gpu_for(backend: &str) -> Result<Option<resonance4d::video_fit::GpuHandle
     }
 }
 
+/// The views of `--video` / `--video-camera` pairs over the cameras of `cams_path`.
+fn video_views(a: &FitArgs, cams_path: &Path) -> Result<(Vec<View>, r4d_splat::CameraSet)> {
+    let set = r4d_splat::load_cameras(cams_path)?;
+    if a.video_camera.len() > 1 && a.video_camera.len() != a.video.len() {
+        bail!(
+            "--video-camera is given {} times for {} --video: give one per video (or one for all)",
+            a.video_camera.len(),
+            a.video.len()
+        );
+    }
+    let mut views = Vec::new();
+    for (i, path) in a.video.iter().enumerate() {
+        let k = a
+            .video_camera
+            .get(i)
+            .or(a.video_camera.first())
+            .copied()
+            .unwrap_or(0);
+        let camera = set
+            .cameras
+            .get(k)
+            .with_context(|| {
+                format!(
+                    "--video-camera {k}: {} has {} camera(s)",
+                    cams_path.display(),
+                    set.cameras.len()
+                )
+            })?
+            .clone();
+        let video = r4d_loss::io::read_video::<f32>(path)?;
+        views.push(View {
+            name: path.display().to_string(),
+            camera,
+            // 8-bit frames are kept as bytes (a quarter of f32, exact).
+            video: video.into(),
+        });
+    }
+    Ok((views, set))
+}
+
+/// Loads a fit straight from a dataset folder (`--dataset`); --sim, --fps, --parts,
+/// --cameras with --video override the dataset's.
+fn load_dataset_problem(a: &FitArgs, dir: &Path) -> Result<VideoProblem> {
+    for (flag, given) in [
+        ("--scene", a.scene.is_some()),
+        ("--particles", a.particles.is_some()),
+        ("--link", a.link.is_some()),
+    ] {
+        if given {
+            bail!("{flag} cannot be combined with --dataset (the dataset defines the scene, its particles and their link)");
+        }
+    }
+    let opts = a.dataset_opts.load_options(a.sim.as_ref(), a.fps)?;
+    let mut ds = r4d_datasets::load(dir, &opts)?;
+    for w in &ds.warnings {
+        eprintln!("note: {w}");
+    }
+    ds.select_views(&a.camera)?;
+    let mut problem = resonance4d::video_fit::problem_from_dataset(&ds)?;
+    if !a.video.is_empty() {
+        let cams = need(&a.cameras, "--cameras (with --video)")?;
+        problem.views = video_views(a, cams)?.0;
+        problem.fps = a.fps.unwrap_or(problem.fps);
+    }
+    if let Some(p) = &a.parts {
+        let labels = PartLabels::load(p)?;
+        if labels.labels.len() != problem.scene.len() {
+            bail!(
+                "{}: {} labels but the dataset's scene has {} Gaussians (after its opacity filter)",
+                p.display(),
+                labels.labels.len(),
+                problem.scene.len()
+            );
+        }
+        problem.particles.part = labels
+            .particle_parts(&problem.link, &problem.particles.x)
+            .with_context(|| format!("assigning parts from {}", p.display()))?;
+        if problem.config.parts.len() < labels.num_parts {
+            let last = *problem.config.parts.last().context("the config has no part")?;
+            problem.config.parts.resize(labels.num_parts, last);
+        }
+    }
+    problem.validate()?;
+    note_small_frames(&problem);
+    Ok(problem)
+}
+
+fn note_small_frames(problem: &VideoProblem) {
+    let side = problem
+        .views
+        .iter()
+        .map(|v| v.camera.width.min(v.camera.height) as usize)
+        .min()
+        .unwrap_or(0);
+    if side <= 160 {
+        if let Some(c) = r4d_loss::MsSsimConfig::largest_window(side) {
+            eprintln!(
+                "note: frames of {side} px on their short side are too small for the standard MS-SSIM (11-tap window, > 160 px); the initialisation scores candidates with a {}-tap window (r4d_loss::MsSsimConfig::largest_window)",
+                c.window
+            );
+        }
+    }
+}
+
 /// Loads every input into a problem.
 pub fn load_problem(a: &FitArgs) -> Result<VideoProblem> {
+    if let Some(dir) = &a.dataset {
+        return load_dataset_problem(a, dir);
+    }
     let scene_path = need(&a.scene, "--scene")?;
     let sim_path = need(&a.sim, "--sim")?;
     let parts_path = need(&a.parts, "--parts")?;
     let cams_path = need(&a.cameras, "--cameras")?;
-    let video_path = need(&a.video, "--video")?;
+    if a.video.is_empty() {
+        bail!("--video is required (or --dataset DIR, or --resume DIR)");
+    }
     let scene = r4d_splat::ply::read_gaussians(scene_path)?;
     let loaded = super::scene::load(sim_path, is_physgaussian(sim_path), a.particles.as_ref())?;
     let mut config = loaded.config;
@@ -138,20 +283,7 @@ pub fn load_problem(a: &FitArgs) -> Result<VideoProblem> {
         );
         config.parts.resize(labels.num_parts, last);
     }
-    let set = r4d_splat::load_cameras(cams_path)?;
-    let camera = set
-        .cameras
-        .get(a.video_camera)
-        .with_context(|| {
-            format!(
-                "--video-camera {}: {} has {} camera(s)",
-                a.video_camera,
-                cams_path.display(),
-                set.cameras.len()
-            )
-        })?
-        .clone();
-    let video = r4d_loss::io::read_video::<f32>(video_path)?;
+    let (views, set) = video_views(a, cams_path)?;
     let t = &config.time;
     let frame_dt = t.substeps() as f64 * t.substep_dt;
     let fps = a.fps.unwrap_or(1.0 / frame_dt);
@@ -164,28 +296,12 @@ pub fn load_problem(a: &FitArgs) -> Result<VideoProblem> {
             background: set.background.unwrap_or([0.0; 3]),
             mode: set.mode.unwrap_or_default(),
         },
-        views: vec![View {
-            name: video_path.display().to_string(),
-            camera,
-            // 8-bit frames are kept as bytes (a quarter of f32, exact).
-            video: video.into(),
-        }],
+        views,
         fps,
         gpu: None,
     };
     problem.validate()?;
-    let side = problem.views[0]
-        .camera
-        .width
-        .min(problem.views[0].camera.height) as usize;
-    if side <= 160 {
-        if let Some(c) = r4d_loss::MsSsimConfig::largest_window(side) {
-            eprintln!(
-                "note: frames of {side} px on their short side are too small for the standard MS-SSIM (11-tap window, > 160 px); the initialisation scores candidates with a {}-tap window (r4d_loss::MsSsimConfig::largest_window)",
-                c.window
-            );
-        }
-    }
+    note_small_frames(&problem);
     Ok(problem)
 }
 

@@ -1,6 +1,7 @@
 //! Command-line interface: argument parsing and backend selection at runtime.
 
 mod bench_scale;
+mod dataset;
 mod demo;
 mod fit;
 mod fit_trajectory;
@@ -46,6 +47,8 @@ enum Command {
     Segment(segment::SegmentArgs),
     /// One full fit iteration at the paper's scale: per-stage time and peak memory.
     BenchScale(bench_scale::BenchScaleArgs),
+    /// Dataset folders (PhysFlow's release, PhysDreamer, PAC-NeRF): `dataset inspect DIR`.
+    Dataset(dataset::DatasetArgs),
 }
 
 /// Compute backend.
@@ -73,6 +76,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Metrics(a) => metrics::run(a),
         Command::MetricsTrajectory(a) => metrics_trajectory::run(a),
         Command::Segment(a) => segment::run(a),
+        Command::Dataset(a) => dataset::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -31,7 +31,7 @@ pub struct FitState {
     pub best: Option<(f64, Vec<f64>)>,
 }
 
-/// Mean loss terms over the views (absent terms were not evaluated).
+/// Loss terms summed over the views (absent terms were not evaluated).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Terms {
     /// Weighted total.
@@ -47,12 +47,11 @@ pub struct Terms {
 }
 
 impl Terms {
-    /// Mean terms of an evaluation.
+    /// The terms of an evaluation, summed over its views.
     pub fn of(ev: &Evaluation) -> Terms {
-        let n = ev.views.len().max(1) as f64;
         let mean = |f: &dyn Fn(&r4d_loss::DmsTerms) -> Option<f64>| {
             let v: Vec<f64> = ev.views.iter().filter_map(f).collect();
-            (!v.is_empty()).then(|| v.iter().sum::<f64>() / n)
+            (!v.is_empty()).then(|| v.iter().sum::<f64>())
         };
         Terms {
             total: ev.total,
@@ -69,7 +68,7 @@ impl Terms {
 pub struct IterRecord {
     /// Iteration (0-based); the parameters are those evaluated at it.
     pub iter: usize,
-    /// Loss terms (mean over views).
+    /// Loss terms (summed over views).
     pub loss: Terms,
     /// Free parameters evaluated, by name.
     pub theta: BTreeMap<String, f64>,

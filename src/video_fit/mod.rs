@@ -15,6 +15,7 @@
 //! not used by the fit yet).
 
 pub mod config;
+pub mod dataset;
 pub mod fit;
 pub mod params;
 pub mod parts;
@@ -22,6 +23,7 @@ pub mod problem;
 pub mod report;
 
 pub use config::{FitConfig, InitConfig};
+pub use dataset::problem_from_dataset;
 pub use fit::{run_fit, FitHooks, FitOutcome, FitState, IterRecord};
 pub use params::{Granularity, ParamSpace};
 pub use parts::PartLabels;

@@ -187,7 +187,7 @@ impl VideoProblem {
 /// One evaluation of the objective.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Evaluation {
-    /// Mean over views of the DMS total.
+    /// Sum over views of the DMS total (one view: its DMS).
     pub total: f64,
     /// Terms per view.
     pub views: Vec<DmsTerms>,
@@ -676,7 +676,7 @@ impl<'a> Objective<'a> {
     /// The DMS of every view, band by band: each band of every needed frame is rendered with
     /// a cropped camera (or cut out of `videos` when given), its terms evaluated and, with
     /// `grads`, its gradient pulled back through the time map and the renderer into the
-    /// per-frame gradients. Returns the mean over views.
+    /// per-frame gradients. Returns the sum over views.
     fn banded_loss(
         &self,
         frames: &[Option<Frame>],
@@ -685,7 +685,6 @@ impl<'a> Objective<'a> {
         prof: &mut StageProfile,
     ) -> Result<Evaluation, FitError> {
         let mut ev = Evaluation::default();
-        let nv = self.dms.len() as f64;
         let nt = self.time.taps.len();
         let n = self.sim.len();
         prof.bands = self.dms.iter().map(|d| d.len()).max().unwrap_or(0);
@@ -736,7 +735,6 @@ impl<'a> Objective<'a> {
                         let mut g = vec![0.0f32; video.data().len()];
                         let t = dms.band_terms_and_grad_into(b, &video, &mut g)?;
                         drop(video);
-                        g.iter_mut().for_each(|x| *x /= nv as f32);
                         terms.add(&t);
                         let t2 = Instant::now();
                         prof.loss_s += (t2 - t1).as_secs_f64();
@@ -756,7 +754,7 @@ impl<'a> Objective<'a> {
                     }
                 }
             }
-            ev.total += terms.total / nv;
+            ev.total += terms.total;
             ev.views.push(terms);
         }
         if !ev.total.is_finite() {

@@ -101,9 +101,19 @@ fn read_png_dir<T: Real>(dir: &Path) -> Result<Video<T>, VideoIoError> {
     if files.is_empty() {
         return Err(VideoIoError::NoFrames(dir.to_path_buf()));
     }
+    read_frames(&files, dir)
+}
+
+/// Reads the given image files (PNG, or JPEG) as the frames of one video, in the order given;
+/// `what` names the video in errors. Every frame must have the first frame's size.
+pub fn read_frames<T: Real>(files: &[PathBuf], what: &Path) -> Result<Video<T>, VideoIoError> {
+    let dir = what;
+    if files.is_empty() {
+        return Err(VideoIoError::NoFrames(dir.to_path_buf()));
+    }
     let mut data = Vec::new();
     let mut size = None;
-    for f in &files {
+    for f in files {
         let img = image::ImageReader::open(f)
             .map_err(io_err(f))?
             .with_guessed_format()

@@ -64,7 +64,7 @@ pub use error::{Error, Result};
 pub use gaussians::{Deformation, GaussianGrads, Gaussians};
 pub use kernels::{CameraConsts, SplatKernels};
 pub use link::SimLink;
-pub use prepare::{prepare, PrepareConfig, Prepared};
+pub use prepare::{prepare, prepare_with, PrepareConfig, Prepared};
 pub use renderer::{Image, RenderStats, Renderer, SplatRenderer};
 
 #[cfg(test)]

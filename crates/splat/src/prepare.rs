@@ -151,7 +151,40 @@ fn mul3(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 
 /// Runs the preprocessing; `what` names the config in errors.
 pub fn prepare(input: &Gaussians, cfg: &PrepareConfig, what: &str) -> Result<Prepared> {
+    prepare_with(input, cfg, None, what)
+}
+
+/// The world-to-simulation rotation of `rotation_degree` / `rotation_axis`: the rotations
+/// applied in list order (`R = R_k ... R_1`), as PhysGaussian's and PhysFlow's
+/// `apply_rotations` do.
+pub fn rotation_of(degrees: &[f64], axes: &[usize]) -> [[f64; 3]; 3] {
+    let mut rot = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for (&d, &a) in degrees.iter().zip(axes) {
+        rot = mul3(&axis_rotation(a, d), &rot);
+    }
+    rot
+}
+
+/// [`prepare`] with an extra selection of the simulated Gaussians: `movable[i]` (one flag per
+/// *input* Gaussian) must be true for Gaussian `i` to be simulated (PhysFlow's moving-part
+/// rule); the others that pass the opacity threshold stay in the scene as static background.
+/// The normalisation is computed over the simulated Gaussians only, as PhysFlow does.
+pub fn prepare_with(
+    input: &Gaussians,
+    cfg: &PrepareConfig,
+    movable: Option<&[bool]>,
+    what: &str,
+) -> Result<Prepared> {
     input.validate(what)?;
+    if let Some(m) = movable {
+        if m.len() != input.len() {
+            return Err(Error::Mismatch(format!(
+                "{what}: {} movable flags for {} Gaussians",
+                m.len(),
+                input.len()
+            )));
+        }
+    }
     let bad = |m: String| Error::Mismatch(format!("{what}: {m}"));
     if cfg.rotation_degree.len() != cfg.rotation_axis.len() {
         return Err(bad(format!(
@@ -166,10 +199,7 @@ pub fn prepare(input: &Gaussians, cfg: &PrepareConfig, what: &str) -> Result<Pre
     if !(cfg.scale.is_finite() && cfg.scale > 0.0) {
         return Err(bad(format!("scale = {} must be positive", cfg.scale)));
     }
-    let mut rot = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    for (&d, &a) in cfg.rotation_degree.iter().zip(&cfg.rotation_axis) {
-        rot = mul3(&axis_rotation(a, d), &rot);
-    }
+    let rot = rotation_of(&cfg.rotation_degree, &cfg.rotation_axis);
     let kept: Vec<u32> = (0..input.len() as u32)
         .filter(|&i| {
             let o = 1.0 / (1.0 + (-(input.opacity_logits[i as usize] as f64)).exp());
@@ -186,6 +216,7 @@ pub fn prepare(input: &Gaussians, cfg: &PrepareConfig, what: &str) -> Result<Pre
         })
         .collect();
     let simulated: Vec<u32> = (0..scene.len() as u32)
+        .filter(|&i| movable.is_none_or(|m| m[kept[i as usize] as usize]))
         .filter(|&i| match &cfg.sim_area {
             None => true,
             Some(b) => (0..3).all(|a| {
@@ -196,7 +227,7 @@ pub fn prepare(input: &Gaussians, cfg: &PrepareConfig, what: &str) -> Result<Pre
         .collect();
     if simulated.is_empty() {
         return Err(bad(
-            "no Gaussian passes the opacity threshold and lies inside sim_area".into(),
+            "no Gaussian passes the opacity threshold, lies inside sim_area and is movable".into(),
         ));
     }
     let mut lo = [f64::INFINITY; 3];

@@ -1,0 +1,97 @@
+//! Reference videos of a dataset: where the frames are, how many, their size and frame rate.
+//! Frames are read only when the fit asks ([`VideoSource::read`]).
+
+use crate::error::{DatasetError, Result};
+use r4d_loss::Video;
+use std::path::{Path, PathBuf};
+
+/// One reference video.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VideoSource {
+    /// The video file or frame folder.
+    pub path: PathBuf,
+    /// Its frames (image files, in order); empty for a container file.
+    pub files: Vec<PathBuf>,
+    /// Number of frames.
+    pub frames: usize,
+    /// Frames per second.
+    pub fps: f64,
+    /// Frame width (pixels).
+    pub width: u32,
+    /// Frame height (pixels).
+    pub height: u32,
+}
+
+/// Whether a file name has one of the image extensions frames may have.
+pub fn is_frame_file(p: &Path) -> bool {
+    p.extension().is_some_and(|e| {
+        let e = e.to_ascii_lowercase();
+        e == "png" || e == "jpg" || e == "jpeg"
+    })
+}
+
+/// The image files of a folder (PNG or JPEG), sorted by file name.
+pub fn frame_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let rd = std::fs::read_dir(dir).map_err(|source| DatasetError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut files: Vec<PathBuf> = rd
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file() && is_frame_file(p))
+        .collect();
+    files.sort_by(|a, b| a.file_name().cmp(&b.file_name()));
+    Ok(files)
+}
+
+/// PhysFlow's key-frame rule (`CogVideoGuidance`): of `n` sorted files keep those whose index
+/// `i` has `i % (n / key_frames) == 0` (so possibly one more than `key_frames`).
+pub fn key_frame_indices(n: usize, key_frames: usize) -> Vec<usize> {
+    let per = (n / key_frames.max(1)).max(1);
+    (0..n).filter(|i| i % per == 0).collect()
+}
+
+impl VideoSource {
+    /// A video made of image files at `fps`; reads the first frame's header for the size.
+    pub fn from_frames(path: &Path, files: Vec<PathBuf>, fps: f64) -> Result<Self> {
+        let first = files
+            .first()
+            .ok_or_else(|| DatasetError::missing(path, "image frames (.png or .jpg)"))?;
+        let (width, height) = image::image_dimensions(first)
+            .map_err(|e| DatasetError::invalid(first, format!("not a readable image: {e}")))?;
+        if !(fps.is_finite() && fps > 0.0) {
+            return Err(DatasetError::invalid(path, format!("frame rate {fps} must be > 0")));
+        }
+        Ok(VideoSource {
+            path: path.to_path_buf(),
+            frames: files.len(),
+            files,
+            fps,
+            width,
+            height,
+        })
+    }
+
+    /// Decodes every frame (values `k / 255`, RGB).
+    pub fn read(&self) -> Result<Video<f32>> {
+        if self.files.is_empty() {
+            return Err(DatasetError::invalid(
+                &self.path,
+                "reading MP4 video is not available in this build; give the frames as a folder of PNG files",
+            ));
+        }
+        Ok(r4d_loss::io::read_frames(&self.files, &self.path)?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn physflow_key_frames() {
+        assert_eq!(key_frame_indices(49, 8), vec![0, 6, 12, 18, 24, 30, 36, 42, 48]);
+        assert_eq!(key_frame_indices(16, 8), vec![0, 2, 4, 6, 8, 10, 12, 14]);
+        assert_eq!(key_frame_indices(5, 8), vec![0, 1, 2, 3, 4]);
+    }
+}

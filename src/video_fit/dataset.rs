@@ -1,0 +1,62 @@
+//! A video-fitting problem straight from a dataset folder ([`r4d_datasets`]).
+
+use super::{FitError, VideoProblem, View};
+use r4d_datasets::Dataset;
+
+/// Builds the problem of a loaded dataset: its scene, particles, link and config, one view per
+/// reference video (frames decoded here). Every video must have the same frame rate.
+pub fn problem_from_dataset(ds: &Dataset) -> Result<VideoProblem, FitError> {
+    let first = ds
+        .views
+        .first()
+        .ok_or_else(|| FitError::Input(format!("{}: no reference video", ds.dir.display())))?;
+    let fps = first.video.fps;
+    let mut views = Vec::with_capacity(ds.views.len());
+    for v in &ds.views {
+        if (v.video.fps - fps).abs() > 1e-9 * fps {
+            return Err(FitError::Input(format!(
+                "{}: {} fps, {}: {} fps: every view's video must have the same frame rate",
+                first.video.path.display(),
+                fps,
+                v.video.path.display(),
+                v.video.fps
+            )));
+        }
+        let video = v
+            .video
+            .read()
+            .map_err(|e| FitError::Input(e.to_string()))?;
+        if (video.width(), video.height()) != (v.camera.width as usize, v.camera.height as usize)
+        {
+            return Err(FitError::Input(format!(
+                "{}: frames are {}x{}, camera '{}' is {}x{}",
+                v.video.path.display(),
+                video.width(),
+                video.height(),
+                v.camera.name,
+                v.camera.width,
+                v.camera.height
+            )));
+        }
+        views.push(View {
+            name: format!("{} ({})", v.video.path.display(), v.camera.name),
+            camera: v.camera.clone(),
+            video: video.into(),
+        });
+    }
+    let problem = VideoProblem {
+        config: ds.config.clone(),
+        particles: ds.particles.clone(),
+        scene: ds.scene.clone(),
+        link: ds.link.clone(),
+        settings: r4d_splat::RenderSettings {
+            background: ds.background,
+            mode: Default::default(),
+        },
+        views,
+        fps,
+        gpu: None,
+    };
+    problem.validate()?;
+    Ok(problem)
+}
