@@ -127,19 +127,32 @@ fn inspect(a: InspectArgs) -> Result<()> {
         println!("boundary condition {i}: {}", serde_json::to_string(b)?);
     }
     if ds.config.boundary.len() > 12 {
-        println!("... {} boundary conditions in all", ds.config.boundary.len());
+        println!(
+            "... {} boundary conditions in all",
+            ds.config.boundary.len()
+        );
     }
     for c in s["cameras"].as_array().into_iter().flatten().take(16) {
         println!(
             "camera {}: {}x{}, fx {:.2}, fy {:.2}, fov {:.1} x {:.1} deg",
-            c["name"], c["width"], c["height"], c["fx"].as_f64().unwrap_or(0.0), c["fy"].as_f64().unwrap_or(0.0),
-            c["fov_x_deg"].as_f64().unwrap_or(0.0), c["fov_y_deg"].as_f64().unwrap_or(0.0)
+            c["name"],
+            c["width"],
+            c["height"],
+            c["fx"].as_f64().unwrap_or(0.0),
+            c["fy"].as_f64().unwrap_or(0.0),
+            c["fov_x_deg"].as_f64().unwrap_or(0.0),
+            c["fov_y_deg"].as_f64().unwrap_or(0.0)
         );
     }
     for v in s["videos"].as_array().into_iter().flatten() {
         println!(
             "video {}: {} frames at {} fps, {}x{}, camera {}",
-            v["path"].as_str().unwrap_or(""), v["frames"], v["fps"], v["width"], v["height"], v["camera"]
+            v["path"].as_str().unwrap_or(""),
+            v["frames"],
+            v["fps"],
+            v["width"],
+            v["height"],
+            v["camera"]
         );
     }
     println!(

@@ -211,7 +211,11 @@ fn load_dataset_problem(a: &FitArgs, dir: &Path) -> Result<VideoProblem> {
             .particle_parts(&problem.link, &problem.particles.x)
             .with_context(|| format!("assigning parts from {}", p.display()))?;
         if problem.config.parts.len() < labels.num_parts {
-            let last = *problem.config.parts.last().context("the config has no part")?;
+            let last = *problem
+                .config
+                .parts
+                .last()
+                .context("the config has no part")?;
             problem.config.parts.resize(labels.num_parts, last);
         }
     }
@@ -352,6 +356,9 @@ pub fn run(a: FitArgs) -> Result<()> {
     let outcome = run_fit(&problem, &cfg, resume, &mut hooks)?;
     hooks.finish()?;
     let files = write_results(&out, &problem, &cfg, &outcome, &hooks.log, a.row, &lpips)?;
+    if physflow_units(&a)? {
+        add_physflow_units(&files.params, &outcome.parts)?;
+    }
     println!(
         "{}",
         super::run_hooks::param_table(&outcome.init_parts, &outcome.parts, None)
@@ -363,6 +370,46 @@ pub fn run(a: FitArgs) -> Result<()> {
         files.params.display(),
         out.display()
     );
+    Ok(())
+}
+
+/// Whether the run's parameters are also written in PhysFlow's config units (a dataset whose
+/// physics config is in PhysFlow's dialect).
+fn physflow_units(a: &FitArgs) -> Result<bool> {
+    Ok(match &a.dataset {
+        None => false,
+        Some(dir) => {
+            let opts = a.dataset_opts.load_options(a.sim.as_ref(), a.fps)?;
+            let layout = match opts.format {
+                Some(l) => l,
+                None => r4d_datasets::detect(dir)?,
+            };
+            layout != r4d_datasets::Layout::PhysDreamer
+                || a.sim.is_some()
+                || dir
+                    .join(format!(
+                        "{}_config.json",
+                        dir.file_name()
+                            .map(|n| n.to_string_lossy())
+                            .unwrap_or_default()
+                    ))
+                    .is_file()
+        }
+    })
+}
+
+/// Adds `physflow: {E, nu, density, yield_stress, plastic_viscosity}` (PhysFlow's config
+/// units) to every part of `params.json`.
+fn add_physflow_units(path: &Path, parts: &[r4d_mpm::PartParams]) -> Result<()> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut v: serde_json::Value = serde_json::from_str(&text)?;
+    if let Some(list) = v["parts"].as_array_mut() {
+        for (rec, p) in list.iter_mut().zip(parts) {
+            rec["physflow"] = serde_json::to_value(r4d_datasets::PhysFlowUnits::from_si(p))?;
+        }
+    }
+    write_json(path, &v)?;
     Ok(())
 }
 

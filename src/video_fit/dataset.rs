@@ -22,12 +22,8 @@ pub fn problem_from_dataset(ds: &Dataset) -> Result<VideoProblem, FitError> {
                 v.video.fps
             )));
         }
-        let video = v
-            .video
-            .read()
-            .map_err(|e| FitError::Input(e.to_string()))?;
-        if (video.width(), video.height()) != (v.camera.width as usize, v.camera.height as usize)
-        {
+        let video = v.video.read().map_err(|e| FitError::Input(e.to_string()))?;
+        if (video.width(), video.height()) != (v.camera.width as usize, v.camera.height as usize) {
             return Err(FitError::Input(format!(
                 "{}: frames are {}x{}, camera '{}' is {}x{}",
                 v.video.path.display(),

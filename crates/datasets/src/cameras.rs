@@ -42,7 +42,7 @@ pub fn check_rotation(c2w: &[[f64; 4]], path: &Path, ctx: &str) -> Result<()> {
         for j in 0..3 {
             let d: f64 = (0..3).map(|k| c2w[k][i] * c2w[k][j]).sum();
             let want = if i == j { 1.0 } else { 0.0 };
-            if !((d - want).abs() < 1e-3) {
+            if (d - want).abs() >= 1e-3 || d.is_nan() {
                 return Err(DatasetError::invalid(
                     path,
                     format!("{ctx}: the rotation block is not orthonormal (column {i} . column {j} = {d})"),
@@ -125,13 +125,19 @@ impl Bin<'_> {
         Ok(s)
     }
     fn u64(&mut self) -> Result<u64> {
-        Ok(u64::from_le_bytes(self.take(8)?.try_into().expect("8 bytes")))
+        Ok(u64::from_le_bytes(
+            self.take(8)?.try_into().expect("8 bytes"),
+        ))
     }
     fn i32(&mut self) -> Result<i32> {
-        Ok(i32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes")))
+        Ok(i32::from_le_bytes(
+            self.take(4)?.try_into().expect("4 bytes"),
+        ))
     }
     fn f64(&mut self) -> Result<f64> {
-        Ok(f64::from_le_bytes(self.take(8)?.try_into().expect("8 bytes")))
+        Ok(f64::from_le_bytes(
+            self.take(8)?.try_into().expect("8 bytes"),
+        ))
     }
     /// A count that the rest of the file can hold with `min_bytes` per item.
     fn count(&mut self, min_bytes: usize, what: &str) -> Result<usize> {
@@ -217,7 +223,10 @@ pub fn colmap_bin_to_text(cameras: &Path, images: &Path) -> Result<(String, Stri
             .map_err(|_| DatasetError::invalid(images, format!("image {id}: name is not UTF-8")))?;
         r.take(1)?;
         if name.trim().is_empty() || name.contains('\n') {
-            return Err(DatasetError::invalid(images, format!("image {id}: bad name {name:?}")));
+            return Err(DatasetError::invalid(
+                images,
+                format!("image {id}: bad name {name:?}"),
+            ));
         }
         let np = r.count(24, "number of 2D points")?;
         r.take(np * 24)?;
@@ -245,8 +254,13 @@ mod tests {
         let project = |p: [f64; 3]| {
             let r = cam.rotation();
             let t = cam.translation();
-            let q: [f64; 3] = [0, 1, 2].map(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + t[i]);
-            (cam.fx * q[0] / q[2] + cam.cx, cam.fy * q[1] / q[2] + cam.cy, q[2])
+            let q: [f64; 3] =
+                [0, 1, 2].map(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + t[i]);
+            (
+                cam.fx * q[0] / q[2] + cam.cx,
+                cam.fy * q[1] / q[2] + cam.cy,
+                q[2],
+            )
         };
         let (u, v, z) = project([0.0, 0.0, 0.0]);
         assert!((u - 50.0).abs() < 1e-12 && (v - 40.0).abs() < 1e-12 && (z - 4.0).abs() < 1e-12);
@@ -262,14 +276,20 @@ mod tests {
             2000,
             1000,
             [1000.0, 1000.0, 1000.0, 500.0],
-            &[[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 4.0]],
+            &[
+                [1.0, 0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0, 4.0],
+            ],
         );
         let c = cap_size(&cam, 1920);
         assert_eq!((c.width, c.height, c.fx), (1920, 1000, 1000.0));
         assert_eq!(c.cx, 960.0);
         let v = fit_to_video(&cam, 1000, 500, Path::new("v")).unwrap();
         assert_eq!((v.fx, v.cx, v.fy, v.cy), (500.0, 500.0, 500.0, 250.0));
-        let e = fit_to_video(&cam, 1000, 1000, Path::new("v.mp4")).unwrap_err().to_string();
+        let e = fit_to_video(&cam, 1000, 1000, Path::new("v.mp4"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("v.mp4") && e.contains("aspect"), "{e}");
     }
 }

@@ -16,8 +16,8 @@
 //! * [`Layout::PacNerf`]: PAC-NeRF's `all_data.json` (11 OpenGL cameras, `r_<cam>_<frame>.png`
 //!   videos); see [`pacnerf`].
 //!
-//! What each layout contains and how the original projects interpret it is recorded in the
-//! project's `docs/DATASETS.md` (from `../shared/ref/datasets/README.md` and the original code).
+//! What each layout contains and how the original projects interpret it (read from their
+//! public code) is documented on each module, with every place where we decide differently.
 //! Every missing or inconsistent file is a [`DatasetError`] naming the file and the rule.
 //!
 //! ```no_run
@@ -167,7 +167,12 @@ impl Dataset {
                 _ => self
                     .cameras
                     .iter()
-                    .position(|c| c.name == *s || Path::new(&c.name).file_stem().is_some_and(|n| n == s.as_str()))
+                    .position(|c| {
+                        c.name == *s
+                            || Path::new(&c.name)
+                                .file_stem()
+                                .is_some_and(|n| n == s.as_str())
+                    })
                     .ok_or_else(|| {
                         DatasetError::invalid(
                             &self.dir,
@@ -191,7 +196,10 @@ impl Dataset {
                 .ok_or_else(|| {
                     DatasetError::invalid(
                         &self.dir,
-                        format!("--camera {s}: camera '{}' has no reference video", self.cameras[idx].name),
+                        format!(
+                            "--camera {s}: camera '{}' has no reference video",
+                            self.cameras[idx].name
+                        ),
                     )
                 })?;
             if !keep.iter().any(|k: &ViewSource| k.camera_index == idx) {
@@ -257,8 +265,12 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
         Layout::PhysDreamer => physdreamer::load(dir, opts)?,
         Layout::PacNerf => pacnerf::load(dir, opts)?,
     };
-    ds.particles
-        .validate(&ds.dir.display().to_string(), ds.config.domain.dx(), ds.config.domain.n_grid, ds.config.parts.len())?;
+    ds.particles.validate(
+        &ds.dir.display().to_string(),
+        ds.config.domain.dx(),
+        ds.config.domain.n_grid,
+        ds.config.parts.len(),
+    )?;
     Ok(ds)
 }
 
@@ -299,7 +311,10 @@ pub(crate) fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
         .map(|i| [x[i] as f64, y[i] as f64, z[i] as f64])
         .collect();
     if let Some(i) = pts.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
-        return Err(DatasetError::invalid(path, format!("point {i} is not finite")));
+        return Err(DatasetError::invalid(
+            path,
+            format!("point {i} is not finite"),
+        ));
     }
     Ok(pts)
 }

@@ -20,9 +20,17 @@ pub fn within(queries: &[[f64; 3]], refs: &[[f64; 3]], threshold: f64) -> Vec<bo
     }
     let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(refs);
     let t2 = threshold * threshold;
+    // A radius-bounded search prunes far queries at once (an unbounded nearest-neighbour
+    // search from a point far from the moving part visits much of the tree); the radius is
+    // padded so the `<=` test below decides ties.
+    let one = std::num::NonZero::new(1).expect("1 > 0");
     queries
         .iter()
-        .map(|q| tree.nearest_one::<SquaredEuclidean>(q).distance <= t2)
+        .map(|q| {
+            tree.nearest_n_within::<SquaredEuclidean>(q, t2 * (1.0 + 1e-9), one, true)
+                .first()
+                .is_some_and(|n| n.distance <= t2)
+        })
         .collect()
 }
 
@@ -57,7 +65,10 @@ pub fn freeze_boxes(nodes: &[[u32; 3]], n: usize) -> Vec<([u32; 3], [u32; 3])> {
             let row = runs.get(&(i, j)).cloned().unwrap_or_default();
             let mut next_open = Vec::new();
             for &(k0, k1) in &row {
-                match open.iter().position(|r| r.1 + 1 == j && r.2 == k0 && r.3 == k1) {
+                match open
+                    .iter()
+                    .position(|r| r.1 + 1 == j && r.2 == k0 && r.3 == k1)
+                {
                     Some(p) => {
                         let r = open.swap_remove(p);
                         next_open.push((r.0, j, k0, k1));
@@ -65,7 +76,7 @@ pub fn freeze_boxes(nodes: &[[u32; 3]], n: usize) -> Vec<([u32; 3], [u32; 3])> {
                     None => next_open.push((j, j, k0, k1)),
                 }
             }
-            rects.entry(i).or_default().extend(open.drain(..));
+            rects.entry(i).or_default().append(&mut open);
             open = next_open;
         }
         rects.entry(i).or_default().extend(open);
@@ -109,7 +120,9 @@ mod tests {
     fn boxes_cover_exactly_the_nodes() {
         let mut rng = 0x1234_5678u64;
         let mut next = || {
-            rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (rng >> 33) as u32
         };
         let n = 9usize;
@@ -132,12 +145,21 @@ mod tests {
             for i in lo[0]..=hi[0] {
                 for j in lo[1]..=hi[1] {
                     for k in lo[2]..=hi[2] {
-                        assert!(covered.insert([i, j, k]), "boxes overlap at {:?}", [i, j, k]);
+                        assert!(
+                            covered.insert([i, j, k]),
+                            "boxes overlap at {:?}",
+                            [i, j, k]
+                        );
                     }
                 }
             }
         }
         assert_eq!(covered, set);
-        assert!(boxes.len() < set.len() / 2, "{} boxes for {} nodes", boxes.len(), set.len());
+        assert!(
+            boxes.len() < set.len() / 2,
+            "{} boxes for {} nodes",
+            boxes.len(),
+            set.len()
+        );
     }
 }

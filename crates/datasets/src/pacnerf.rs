@@ -42,7 +42,12 @@ pub struct PacCamera {
 }
 
 fn matrix(v: &Value, key: &str, rows: usize, path: &Path, ctx: &str) -> Result<Vec<[f64; 4]>> {
-    let bad = || DatasetError::invalid(path, format!("{ctx}: '{key}' must be a {rows}x3 or {rows}x4 array of numbers"));
+    let bad = || {
+        DatasetError::invalid(
+            path,
+            format!("{ctx}: '{key}' must be a {rows}x3 or {rows}x4 array of numbers"),
+        )
+    };
     let a = v.get(key).and_then(Value::as_array).ok_or_else(bad)?;
     if a.len() < rows {
         return Err(bad());
@@ -83,9 +88,9 @@ pub fn read_all_data(dir: &Path) -> Result<BTreeMap<usize, PacCamera>> {
     let path = dir.join("all_data.json");
     let v: Value = serde_json::from_str(&crate::error::read_text(&path)?)
         .map_err(|e| DatasetError::invalid(&path, format!("not JSON: {e}")))?;
-    let list = v
-        .as_array()
-        .ok_or_else(|| DatasetError::invalid(&path, "expected a list of {file_path, c2w, intrinsic}"))?;
+    let list = v.as_array().ok_or_else(|| {
+        DatasetError::invalid(&path, "expected a list of {file_path, c2w, intrinsic}")
+    })?;
     let mut cams: BTreeMap<usize, PacCamera> = BTreeMap::new();
     let mut frames: BTreeMap<usize, BTreeMap<i64, PathBuf>> = BTreeMap::new();
     for (i, e) in list.iter().enumerate() {
@@ -95,13 +100,22 @@ pub fn read_all_data(dir: &Path) -> Result<BTreeMap<usize, PacCamera>> {
             .and_then(Value::as_str)
             .ok_or_else(|| DatasetError::invalid(&path, format!("{ctx}: no 'file_path'")))?;
         let (cam, frame) = cam_frame(fp).ok_or_else(|| {
-            DatasetError::invalid(&path, format!("{ctx}: file_path '{fp}' is not r_<cam>_<frame>.png"))
+            DatasetError::invalid(
+                &path,
+                format!("{ctx}: file_path '{fp}' is not r_<cam>_<frame>.png"),
+            )
         })?;
         if frame < -2 {
-            return Err(DatasetError::invalid(&path, format!("{ctx}: frame {frame} (frames are -2, -1, 0, 1, ...)")));
+            return Err(DatasetError::invalid(
+                &path,
+                format!("{ctx}: frame {frame} (frames are -2, -1, 0, 1, ...)"),
+            ));
         }
         let file = resolve(dir, fp).ok_or_else(|| {
-            DatasetError::missing(dir.join(fp), format!("the image of {ctx} of {}", path.display()))
+            DatasetError::missing(
+                dir.join(fp),
+                format!("the image of {ctx} of {}", path.display()),
+            )
         })?;
         let c2w = matrix(e, "c2w", 3, &path, &ctx)?;
         cameras::check_rotation(&c2w, &path, &ctx)?;
@@ -114,7 +128,9 @@ pub fn read_all_data(dir: &Path) -> Result<BTreeMap<usize, PacCamera>> {
         if frame >= 0 && entry.c2w != c2w {
             return Err(DatasetError::invalid(
                 &path,
-                format!("{ctx}: camera {cam} moves between frames (c2w differs); cameras must be fixed"),
+                format!(
+                    "{ctx}: camera {cam} moves between frames (c2w differs); cameras must be fixed"
+                ),
             ));
         }
         match frame {
@@ -122,7 +138,10 @@ pub fn read_all_data(dir: &Path) -> Result<BTreeMap<usize, PacCamera>> {
             -2 => entry.ignore = Some(file),
             f => {
                 if frames.entry(cam).or_default().insert(f, file).is_some() {
-                    return Err(DatasetError::invalid(&path, format!("{ctx}: camera {cam} frame {f} listed twice")));
+                    return Err(DatasetError::invalid(
+                        &path,
+                        format!("{ctx}: camera {cam} frame {f} listed twice"),
+                    ));
                 }
             }
         }
@@ -163,8 +182,11 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let pcams = read_all_data(dir)?;
     let config_file = find_config(dir, &name, opts.sim.as_deref())?;
     let cfg = physflow_config::load(&config_file)?;
-    let mut warnings: Vec<String> =
-        cfg.warnings.iter().map(|w| format!("{}: {w}", config_file.display())).collect();
+    let mut warnings: Vec<String> = cfg
+        .warnings
+        .iter()
+        .map(|w| format!("{}: {w}", config_file.display()))
+        .collect();
     let gaussian_file = crate::latest_point_cloud(dir)
         .or_else(|| Some(dir.join("point_cloud.ply")).filter(|p| p.is_file()))
         .ok_or_else(|| {
@@ -174,25 +196,50 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
             )
         })?;
     let gaussians = r4d_splat::ply::read_gaussians(&gaussian_file)?;
-    let setup = sim_setup(&gaussians, &gaussian_file, &cfg, None, crate::physflow::scene_scaling(&name))?;
+    let setup = sim_setup(
+        &gaussians,
+        &gaussian_file,
+        &cfg,
+        None,
+        crate::physflow::scene_scaling(&name),
+    )?;
     warnings.extend(setup.warnings.iter().cloned());
     let fps = opts.fps.unwrap_or(1.0 / cfg.extras.frame_dt);
     let mut cams = Vec::new();
     let mut views = Vec::new();
     for (i, (idx, pc)) in pcams.iter().enumerate() {
-        let video_dir = pc.frames.first().and_then(|f| f.parent()).unwrap_or(dir).to_path_buf();
-        let first = pc.frames.first().or(pc.background.as_ref()).ok_or_else(|| {
-            DatasetError::invalid(dir.join("all_data.json"), format!("camera {idx} has no image"))
-        })?;
+        let video_dir = pc
+            .frames
+            .first()
+            .and_then(|f| f.parent())
+            .unwrap_or(dir)
+            .to_path_buf();
+        let first = pc
+            .frames
+            .first()
+            .or(pc.background.as_ref())
+            .ok_or_else(|| {
+                DatasetError::invalid(
+                    dir.join("all_data.json"),
+                    format!("camera {idx} has no image"),
+                )
+            })?;
         let (w, h) = image::image_dimensions(first)
             .map_err(|e| DatasetError::invalid(first, format!("not a readable image: {e}")))?;
         let cam = cameras::from_gl_c2w(format!("r_{idx}"), w, h, pc.k, &pc.c2w);
         cam.validate(&dir.join("all_data.json").display().to_string())
             .map_err(|m| DatasetError::invalid(dir.join("all_data.json"), m))?;
         if !pc.frames.is_empty() {
-            let video = VideoSource::from_frames(&video_dir.join(format!("r_{idx}_*.png")), pc.frames.clone(), fps)?;
+            let video = VideoSource::from_frames(
+                &video_dir.join(format!("r_{idx}_*.png")),
+                pc.frames.clone(),
+                fps,
+            )?;
             if (video.width, video.height) != (w, h) {
-                return Err(DatasetError::invalid(first, "frame size differs from the camera's"));
+                return Err(DatasetError::invalid(
+                    first,
+                    "frame size differs from the camera's",
+                ));
             }
             views.push(ViewSource {
                 camera_index: i,

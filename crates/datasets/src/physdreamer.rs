@@ -31,7 +31,9 @@
 
 use crate::error::{DatasetError, Result};
 use crate::video::{self, VideoSource};
-use crate::{cameras, moving, physflow_config, Dataset, GroundTruth, Layout, LoadOptions, ViewSource};
+use crate::{
+    cameras, moving, physflow_config, Dataset, GroundTruth, Layout, LoadOptions, ViewSource,
+};
 use r4d_mpm::{BoundaryCondition, ParticleSet};
 use r4d_splat::{Camera, SimLink};
 use serde_json::Value;
@@ -65,10 +67,16 @@ pub fn read_transforms(dir: &Path) -> Result<Vec<Camera>> {
             .and_then(Value::as_str)
             .ok_or_else(|| DatasetError::invalid(&path, format!("{ctx}: no 'file_path'")))?;
         let base = dir.join(fp);
-        let img = [base.clone(), base.with_extension("png"), base.with_extension("jpg")]
-            .into_iter()
-            .find(|p| p.is_file())
-            .ok_or_else(|| DatasetError::missing(&base, format!("the image of {ctx} of {}", path.display())))?;
+        let img = [
+            base.clone(),
+            base.with_extension("png"),
+            base.with_extension("jpg"),
+        ]
+        .into_iter()
+        .find(|p| p.is_file())
+        .ok_or_else(|| {
+            DatasetError::missing(&base, format!("the image of {ctx} of {}", path.display()))
+        })?;
         let (w, h) = image_size(&img)?;
         let m = f
             .get("transform_matrix")
@@ -87,17 +95,33 @@ pub fn read_transforms(dir: &Path) -> Result<Vec<Camera>> {
                     })
                     .collect::<Option<Vec<[f64; 4]>>>()
             })
-            .ok_or_else(|| DatasetError::invalid(&path, format!("{ctx}: 'transform_matrix' must be 4x4 numbers")))?;
+            .ok_or_else(|| {
+                DatasetError::invalid(
+                    &path,
+                    format!("{ctx}: 'transform_matrix' must be 4x4 numbers"),
+                )
+            })?;
         cameras::check_rotation(&m, &path, &ctx)?;
-        let fl = match (f.get("fl_x").or(v.get("fl_x")).and_then(Value::as_f64), f.get("camera_angle_x").and_then(Value::as_f64).or(angle)) {
+        let fl = match (
+            f.get("fl_x").or(v.get("fl_x")).and_then(Value::as_f64),
+            f.get("camera_angle_x").and_then(Value::as_f64).or(angle),
+        ) {
             (Some(fl), _) => fl,
-            (None, Some(a)) if a > 0.0 && a < std::f64::consts::PI => 0.5 * w as f64 / (0.5 * a).tan(),
+            (None, Some(a)) if a > 0.0 && a < std::f64::consts::PI => {
+                0.5 * w as f64 / (0.5 * a).tan()
+            }
             (None, Some(a)) => {
-                return Err(DatasetError::invalid(&path, format!("camera_angle_x = {a} (radians, in (0, pi))")))
+                return Err(DatasetError::invalid(
+                    &path,
+                    format!("camera_angle_x = {a} (radians, in (0, pi))"),
+                ))
             }
             (None, None) => return Err(DatasetError::invalid(&path, "no 'camera_angle_x'")),
         };
-        let name = img.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let name = img
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
         let cam = cameras::from_gl_c2w(name, w, h, [fl, fl, 0.5 * w as f64, 0.5 * h as f64], &m);
         cam.validate(&path.display().to_string())
             .map_err(|e| DatasetError::invalid(&path, e))?;
@@ -120,7 +144,10 @@ pub fn read_colmap(dir: &Path) -> Result<Vec<Camera>> {
     } else if sp.join("cameras.bin").is_file() && sp.join("images.bin").is_file() {
         cameras::colmap_bin_to_text(&sp.join("cameras.bin"), &sp.join("images.bin"))?
     } else {
-        return Err(DatasetError::missing(&sp, "cameras.txt + images.txt or cameras.bin + images.bin"));
+        return Err(DatasetError::missing(
+            &sp,
+            "cameras.txt + images.txt or cameras.bin + images.bin",
+        ));
     };
     let set = r4d_splat::camera_io::parse_colmap(&c, &i, &sp.display().to_string())?;
     if set.cameras.is_empty() {
@@ -134,17 +161,31 @@ pub fn read_colmap(dir: &Path) -> Result<Vec<Camera>> {
 }
 
 fn stem(name: &str) -> &str {
-    Path::new(name).file_stem().and_then(|s| s.to_str()).unwrap_or(name)
+    Path::new(name)
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or(name)
 }
 
 /// The videos of `videos/` with their camera indices (see the module docs).
-fn find_videos(dir: &Path, cams: &[Camera], fps: f64, warnings: &mut Vec<String>) -> Result<Vec<(usize, VideoSource)>> {
+fn find_videos(
+    dir: &Path,
+    cams: &[Camera],
+    fps: f64,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<(usize, VideoSource)>> {
     let vdir = dir.join("videos");
     if !vdir.is_dir() {
-        return Err(DatasetError::missing(&vdir, "the captured videos (videos/*.mp4 or PNG frames)"));
+        return Err(DatasetError::missing(
+            &vdir,
+            "the captured videos (videos/*.mp4 or PNG frames)",
+        ));
     }
     let mut entries: Vec<PathBuf> = std::fs::read_dir(&vdir)
-        .map_err(|source| DatasetError::Io { path: vdir.clone(), source })?
+        .map_err(|source| DatasetError::Io {
+            path: vdir.clone(),
+            source,
+        })?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .collect();
     entries.sort();
@@ -165,7 +206,10 @@ fn find_videos(dir: &Path, cams: &[Camera], fps: f64, warnings: &mut Vec<String>
                 out.push((c, VideoSource::from_frames(e, files, fps)?));
             }
         } else if e.extension().is_some_and(|x| x.eq_ignore_ascii_case("mp4")) {
-            warnings.push(format!("{}: MP4 decoding is not available in this build yet; skipped", e.display()));
+            warnings.push(format!(
+                "{}: MP4 decoding is not available in this build yet; skipped",
+                e.display()
+            ));
         }
     }
     if out.is_empty() {
@@ -186,7 +230,10 @@ fn find_videos(dir: &Path, cams: &[Camera], fps: f64, warnings: &mut Vec<String>
         }
     }
     if out.is_empty() {
-        return Err(DatasetError::missing(&vdir, "a video whose name starts with a camera's image name"));
+        return Err(DatasetError::missing(
+            &vdir,
+            "a video whose name starts with a camera's image name",
+        ));
     }
     Ok(out)
 }
@@ -205,12 +252,17 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
             warnings.push(
                 "no physics config (--sim or <scene>_config.json): PhysDreamer's set-up is used (jelly, E 1e5 Pa, nu 0.3, density 2000, grid 64, 256 substeps per 1/30 s, bounding box; no driving force)".into(),
             );
-            let mut c = physflow_config::decode(DEFAULT_CONFIG, Path::new("<PhysDreamer defaults>"))?;
+            let mut c =
+                physflow_config::decode(DEFAULT_CONFIG, Path::new("<PhysDreamer defaults>"))?;
             c.config.time.substeps_per_frame = Some(256);
             c
         }
     };
-    warnings.extend(cfg.warnings.iter().map(|w| format!("{}: {w}", cfg.path.display())));
+    warnings.extend(
+        cfg.warnings
+            .iter()
+            .map(|w| format!("{}: {w}", cfg.path.display())),
+    );
     let gaussian_file = dir.join("point_cloud.ply");
     let all = r4d_splat::ply::read_gaussians(&gaussian_file)?;
     let thr = cfg.prepare.opacity_threshold;
@@ -223,15 +275,24 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let simulated: Vec<u32> = if clean.is_file() {
         let pts = crate::read_points(&clean)?;
         let near = moving::within(&means, &pts, 0.01);
-        (0..scene.len() as u32).filter(|&i| near[i as usize]).collect()
+        (0..scene.len() as u32)
+            .filter(|&i| near[i as usize])
+            .collect()
     } else {
         (0..scene.len() as u32).collect()
     };
     if simulated.is_empty() {
-        return Err(DatasetError::invalid(&clean, "no Gaussian lies within 0.01 of a clean-object point"));
+        return Err(DatasetError::invalid(
+            &clean,
+            "no Gaussian lies within 0.01 of a clean-object point",
+        ));
     }
     let filled_file = dir.join("internal_filled_points.ply");
-    let filled: Vec<[f64; 3]> = if filled_file.is_file() { crate::read_points(&filled_file)? } else { Vec::new() };
+    let filled: Vec<[f64; 3]> = if filled_file.is_file() {
+        crate::read_points(&filled_file)?
+    } else {
+        Vec::new()
+    };
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for p in simulated.iter().map(|&i| &means[i as usize]).chain(&filled) {
         for &v in p {
@@ -260,7 +321,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let n = config.domain.n_grid;
     let moving_file = dir.join("moving_part_points.ply");
     if moving_file.is_file() {
-        let pts: Vec<[f64; 3]> = crate::read_points(&moving_file)?.into_iter().map(|p| link.to_sim(p)).collect();
+        let pts: Vec<[f64; 3]> = crate::read_points(&moving_file)?
+            .into_iter()
+            .map(|p| link.to_sim(p))
+            .collect();
         let xs: Vec<[f64; 3]> = x.iter().map(|p| p.map(|v| v as f64)).collect();
         let near = moving::within(&xs, &pts, 0.5 / n as f64);
         let mut nodes = Vec::new();
@@ -276,7 +340,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
         if boxes.len() > 4096 {
             return Err(DatasetError::invalid(
                 &moving_file,
-                format!("the frozen grid nodes form {} boxes (limit 4096)", boxes.len()),
+                format!(
+                    "the frozen grid nodes form {} boxes (limit 4096)",
+                    boxes.len()
+                ),
             ));
         }
         for (blo, bhi) in boxes {
@@ -312,7 +379,11 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let mut views = Vec::new();
     for (ci, video) in find_videos(dir, &cams, fps, &mut warnings)? {
         let camera = cameras::fit_to_video(&cams[ci], video.width, video.height, &video.path)?;
-        views.push(ViewSource { camera_index: ci, camera, video });
+        views.push(ViewSource {
+            camera_index: ci,
+            camera,
+            video,
+        });
     }
     let has_config = cfg_file.is_some();
     Ok(Dataset {

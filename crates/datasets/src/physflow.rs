@@ -70,13 +70,18 @@ pub fn find_config(dir: &Path, name: &str, sim: Option<&Path>) -> Result<PathBuf
         return if s.is_file() {
             Ok(s.to_path_buf())
         } else {
-            Err(DatasetError::missing(s, "the physics config given with --sim"))
+            Err(DatasetError::missing(
+                s,
+                "the physics config given with --sim",
+            ))
         };
     }
     let file = format!("{name}_config.json");
     let mut tried = Vec::new();
     if let Ok(abs) = dir.canonicalize() {
-        if let (Some(dataset_dir), Some(dataset)) = (abs.parent(), abs.parent().and_then(|p| p.file_name())) {
+        if let (Some(dataset_dir), Some(dataset)) =
+            (abs.parent(), abs.parent().and_then(|p| p.file_name()))
+        {
             if let Some(model) = dataset_dir.parent() {
                 if model.file_name().is_some_and(|m| m == "model") {
                     if let Some(root) = model.parent() {
@@ -99,7 +104,11 @@ pub fn find_config(dir: &Path, name: &str, sim: Option<&Path>) -> Result<PathBuf
         dir,
         format!(
             "the physics config: looked for {} (or pass --sim FILE)",
-            tried.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" and ")
+            tried
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(" and ")
         ),
     ))
 }
@@ -127,7 +136,11 @@ pub(crate) fn sim_setup(
             if pts.is_empty() {
                 return Err(DatasetError::invalid(path, "no moving-part points"));
             }
-            let means: Vec<[f64; 3]> = gaussians.means.iter().map(|m| m.map(|v| v as f64)).collect();
+            let means: Vec<[f64; 3]> = gaussians
+                .means
+                .iter()
+                .map(|m| m.map(|v| v as f64))
+                .collect();
             Some(moving::within(&means, &pts, thres))
         }
         None => None,
@@ -159,7 +172,12 @@ pub(crate) fn sim_setup(
 }
 
 /// Appends static Gaussians (e.g. `inpaint_points.ply`) to the scene.
-pub(crate) fn append_static(scene: &mut Gaussians, link: &mut SimLink, extra: &Gaussians, path: &Path) -> Result<()> {
+pub(crate) fn append_static(
+    scene: &mut Gaussians,
+    link: &mut SimLink,
+    extra: &Gaussians,
+    path: &Path,
+) -> Result<()> {
     if extra.sh_degree != scene.sh_degree {
         return Err(DatasetError::invalid(
             path,
@@ -172,7 +190,9 @@ pub(crate) fn append_static(scene: &mut Gaussians, link: &mut SimLink, extra: &G
     scene.means.extend_from_slice(&extra.means);
     scene.log_scales.extend_from_slice(&extra.log_scales);
     scene.quats.extend_from_slice(&extra.quats);
-    scene.opacity_logits.extend_from_slice(&extra.opacity_logits);
+    scene
+        .opacity_logits
+        .extend_from_slice(&extra.opacity_logits);
     scene.sh.extend_from_slice(&extra.sh);
     link.scene_gaussians = scene.len();
     Ok(())
@@ -183,7 +203,11 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let name = crate::scene_name(dir);
     let config_file = find_config(dir, &name, opts.sim.as_deref())?;
     let cfg = physflow_config::load(&config_file)?;
-    let mut warnings = cfg.warnings.iter().map(|w| format!("{}: {w}", config_file.display())).collect::<Vec<_>>();
+    let mut warnings = cfg
+        .warnings
+        .iter()
+        .map(|w| format!("{}: {w}", config_file.display()))
+        .collect::<Vec<_>>();
     let gaussian_file = crate::latest_point_cloud(dir).ok_or_else(|| {
         DatasetError::missing(
             dir.join("point_cloud"),
@@ -194,8 +218,16 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let n_grid = cfg.config.domain.n_grid as f64;
     let thres = if name.contains("playdoh") { 1.0 } else { 0.5 } / n_grid;
     let moving_file = dir.join("moving_part_points.ply");
-    let moving = moving_file.is_file().then_some((moving_file.as_path(), thres));
-    let setup = sim_setup(&gaussians, &gaussian_file, &cfg, moving, scene_scaling(&name))?;
+    let moving = moving_file
+        .is_file()
+        .then_some((moving_file.as_path(), thres));
+    let setup = sim_setup(
+        &gaussians,
+        &gaussian_file,
+        &cfg,
+        moving,
+        scene_scaling(&name),
+    )?;
     warnings.extend(setup.warnings.iter().cloned());
     let (mut scene, mut link) = (setup.scene, setup.link);
     let inpaint = dir.join("inpaint_points.ply");
@@ -205,7 +237,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
     }
     let cam_file = dir.join("cameras.json");
     if !cam_file.is_file() {
-        return Err(DatasetError::missing(&cam_file, "the INRIA 3DGS camera list"));
+        return Err(DatasetError::missing(
+            &cam_file,
+            "the INRIA 3DGS camera list",
+        ));
     }
     let cams: Vec<_> = r4d_splat::load_cameras(&cam_file)?
         .cameras

@@ -163,7 +163,13 @@ fn vec3(map: &Map<String, Value>, key: &str, default: [f64; 3], path: &Path) -> 
 }
 
 /// Scales a unit-scaled key of an object in place (`E`, `yield_stress`, `plastic_viscosity`).
-fn scale_key(map: &mut Map<String, Value>, key: &str, s: f64, ctx: &str, path: &Path) -> Result<()> {
+fn scale_key(
+    map: &mut Map<String, Value>,
+    key: &str,
+    s: f64,
+    ctx: &str,
+    path: &Path,
+) -> Result<()> {
     if let Some(v) = map.get(key) {
         if v.is_null() {
             return Ok(());
@@ -282,7 +288,7 @@ pub fn decode(text: &str, path: &Path) -> Result<PhysFlowConfig> {
         },
         lr: map.get("lr").filter(|v| !v.is_null()).cloned(),
     };
-    if !(extras.opt_frame_dt > 0.0) {
+    if extras.opt_frame_dt.is_nan() || extras.opt_frame_dt <= 0.0 {
         return Err(DatasetError::invalid(
             path,
             format!("opt_frame_dt = {} must be > 0", extras.opt_frame_dt),
@@ -310,9 +316,8 @@ pub fn decode(text: &str, path: &Path) -> Result<PhysFlowConfig> {
             pre.insert(key.into(), v.clone());
         }
     }
-    let prepare: PrepareConfig = serde_json::from_value(Value::Object(pre)).map_err(|e| {
-        DatasetError::invalid(path, format!("preprocessing keys: {e}"))
-    })?;
+    let prepare: PrepareConfig = serde_json::from_value(Value::Object(pre))
+        .map_err(|e| DatasetError::invalid(path, format!("preprocessing keys: {e}")))?;
     for key in PHYSFLOW_ONLY {
         map.remove(*key);
     }
@@ -325,7 +330,11 @@ pub fn decode(text: &str, path: &Path) -> Result<PhysFlowConfig> {
             warnings.push(w);
         }
     }
-    debug_assert!(imp.config.parts.iter().all(|p| p.material != Material::Snow));
+    debug_assert!(imp
+        .config
+        .parts
+        .iter()
+        .all(|p| p.material != Material::Snow));
     Ok(PhysFlowConfig {
         path: path.to_path_buf(),
         config: imp.config,
@@ -367,7 +376,11 @@ mod tests {
         assert_eq!(p.density_kg_m3, 1350.0);
         assert_eq!(c.config.domain.n_grid, 50, "PhysFlow's default n_grid");
         assert_eq!(c.config.domain.grid_lim, 2.0);
-        assert_eq!(c.config.time.substeps(), 400, "int(0.04 / 1e-4) = 400 in Python");
+        assert_eq!(
+            c.config.time.substeps(),
+            400,
+            "int(0.04 / 1e-4) = 400 in Python"
+        );
         assert_eq!(c.config.time.frames, 50);
         assert_eq!(c.extras.opt_frame_dt, 0.04);
         assert!(c.extras.move_camera);
@@ -414,18 +427,29 @@ mod tests {
         .unwrap();
         assert_eq!(nn.config.parts[0].material, Material::Foam);
         assert_eq!(nn.extras.material_id, 6);
-        let pl = decode(r#"{"material": "plasticine", "g": [0,-9.8,0]}"#, Path::new("c.json"))
-            .unwrap();
+        let pl = decode(
+            r#"{"material": "plasticine", "g": [0,-9.8,0]}"#,
+            Path::new("c.json"),
+        )
+        .unwrap();
         assert_eq!(pl.extras.material_id, 4);
-        let e = decode(r#"{"material": "newtonian", "g": [0,0,0]}"#, Path::new("drop.json"))
-            .unwrap_err()
-            .to_string();
+        let e = decode(
+            r#"{"material": "newtonian", "g": [0,0,0]}"#,
+            Path::new("drop.json"),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("drop.json") && e.contains("newtonian"), "{e}");
-        let e = decode(r#"{"material": "honey", "g": [0,0,0]}"#, Path::new("h.json"))
+        let e = decode(
+            r#"{"material": "honey", "g": [0,0,0]}"#,
+            Path::new("h.json"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("h.json") && e.contains("honey"), "{e}");
+        let e = decode(r#"{"E": 0.1}"#, Path::new("g.json"))
             .unwrap_err()
             .to_string();
-        assert!(e.contains("h.json") && e.contains("honey"), "{e}");
-        let e = decode(r#"{"E": 0.1}"#, Path::new("g.json")).unwrap_err().to_string();
         assert!(e.contains("g.json") && e.contains("g: missing"), "{e}");
         let e = decode(
             r#"{"g": [0,0,0], "boundary_conditions": [{"type": "cuboid", "point": [1,1,1]}]}"#,
@@ -433,10 +457,16 @@ mod tests {
         )
         .unwrap_err()
         .to_string();
-        assert!(e.contains("b.json") && e.contains("boundary_conditions[0]"), "{e}");
-        let e = decode(r#"{"g": [0,0,0], "opt_frame_dt": "x"}"#, Path::new("o.json"))
-            .unwrap_err()
-            .to_string();
+        assert!(
+            e.contains("b.json") && e.contains("boundary_conditions[0]"),
+            "{e}"
+        );
+        let e = decode(
+            r#"{"g": [0,0,0], "opt_frame_dt": "x"}"#,
+            Path::new("o.json"),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("o.json") && e.contains("opt_frame_dt"), "{e}");
     }
 }

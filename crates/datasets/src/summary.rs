@@ -47,7 +47,8 @@ pub(crate) fn summary(d: &Dataset) -> Value {
                 "friction_angle_deg": p.friction_angle_deg,
             });
             if d.physflow.is_some() {
-                v["physflow"] = serde_json::to_value(crate::PhysFlowUnits::from_si(p)).unwrap_or(Value::Null);
+                v["physflow"] =
+                    serde_json::to_value(crate::PhysFlowUnits::from_si(p)).unwrap_or(Value::Null);
             }
             v
         })

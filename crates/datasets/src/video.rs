@@ -60,7 +60,10 @@ impl VideoSource {
         let (width, height) = image::image_dimensions(first)
             .map_err(|e| DatasetError::invalid(first, format!("not a readable image: {e}")))?;
         if !(fps.is_finite() && fps > 0.0) {
-            return Err(DatasetError::invalid(path, format!("frame rate {fps} must be > 0")));
+            return Err(DatasetError::invalid(
+                path,
+                format!("frame rate {fps} must be > 0"),
+            ));
         }
         Ok(VideoSource {
             path: path.to_path_buf(),
@@ -90,7 +93,10 @@ mod tests {
 
     #[test]
     fn physflow_key_frames() {
-        assert_eq!(key_frame_indices(49, 8), vec![0, 6, 12, 18, 24, 30, 36, 42, 48]);
+        assert_eq!(
+            key_frame_indices(49, 8),
+            vec![0, 6, 12, 18, 24, 30, 36, 42, 48]
+        );
         assert_eq!(key_frame_indices(16, 8), vec![0, 2, 4, 6, 8, 10, 12, 14]);
         assert_eq!(key_frame_indices(5, 8), vec![0, 1, 2, 3, 4]);
     }
