@@ -175,7 +175,9 @@ fn video_views(a: &FitArgs, cams_path: &Path) -> Result<(Vec<View>, r4d_splat::C
 
 /// Loads a fit straight from a dataset folder (`--dataset`); --sim, --fps, --parts,
 /// --cameras with --video override the dataset's.
-fn load_dataset_problem(a: &FitArgs, dir: &Path) -> Result<VideoProblem> {
+/// Returns the problem and whether its config is in PhysFlow's dialect (then `params.json`
+/// also carries PhysFlow's units).
+fn load_dataset_problem(a: &FitArgs, dir: &Path) -> Result<(VideoProblem, bool)> {
     for (flag, given) in [
         ("--scene", a.scene.is_some()),
         ("--particles", a.particles.is_some()),
@@ -191,37 +193,68 @@ fn load_dataset_problem(a: &FitArgs, dir: &Path) -> Result<VideoProblem> {
         eprintln!("note: {w}");
     }
     ds.select_views(&a.camera)?;
-    let mut problem = resonance4d::video_fit::problem_from_dataset(&ds)?;
-    if !a.video.is_empty() {
+    let mut problem = if a.video.is_empty() {
+        resonance4d::video_fit::problem_from_dataset(&ds)?
+    } else {
         let cams = need(&a.cameras, "--cameras (with --video)")?;
-        problem.views = video_views(a, cams)?.0;
-        problem.fps = a.fps.unwrap_or(problem.fps);
-    }
+        let fps = a.fps.or(ds.views.first().map(|v| v.video.fps));
+        let fps = fps.context("--fps is required with --video when the dataset has no video")?;
+        resonance4d::video_fit::problem_with_views(&ds, video_views(a, cams)?.0, fps)?
+    };
     if let Some(p) = &a.parts {
-        let labels = PartLabels::load(p)?;
-        if labels.labels.len() != problem.scene.len() {
-            bail!(
-                "{}: {} labels but the dataset's scene has {} Gaussians (after its opacity filter)",
-                p.display(),
-                labels.labels.len(),
-                problem.scene.len()
-            );
-        }
-        problem.particles.part = labels
-            .particle_parts(&problem.link, &problem.particles.x)
-            .with_context(|| format!("assigning parts from {}", p.display()))?;
-        if problem.config.parts.len() < labels.num_parts {
-            let last = *problem
-                .config
-                .parts
-                .last()
-                .context("the config has no part")?;
-            problem.config.parts.resize(labels.num_parts, last);
-        }
+        assign_parts(
+            &PartLabels::load(p)?,
+            p,
+            (
+                "the dataset's scene (after its opacity filter)",
+                problem.scene.len(),
+            ),
+            &problem.link,
+            &mut problem.particles,
+            &mut problem.config,
+            "the dataset's physics config",
+        )?;
     }
     problem.validate()?;
     note_small_frames(&problem);
-    Ok(problem)
+    Ok((problem, ds.physflow.is_some()))
+}
+
+/// Gives every particle the part of its Gaussian's label (`labels` has one per Gaussian of
+/// `scene`, named with its size) and, when the labels name more parts than `config`, adds
+/// copies of the last part.
+fn assign_parts(
+    labels: &PartLabels,
+    labels_path: &Path,
+    (scene_what, scene_len): (&str, usize),
+    link: &r4d_splat::SimLink,
+    particles: &mut r4d_mpm::ParticleSet,
+    config: &mut r4d_mpm::SimConfig,
+    config_what: &str,
+) -> Result<()> {
+    if labels.labels.len() != scene_len {
+        bail!(
+            "{}: {} labels but {scene_what} has {scene_len} Gaussians",
+            labels_path.display(),
+            labels.labels.len(),
+        );
+    }
+    particles.part = labels
+        .particle_parts(link, &particles.x)
+        .with_context(|| format!("assigning parts from {}", labels_path.display()))?;
+    if config.parts.len() < labels.num_parts {
+        let last = *config
+            .parts
+            .last()
+            .context("the simulation config has no part")?;
+        eprintln!(
+            "warning: {config_what} has {} part(s), the labels {}: the missing parts start from the last part's parameters",
+            config.parts.len(),
+            labels.num_parts
+        );
+        config.parts.resize(labels.num_parts, last);
+    }
+    Ok(())
 }
 
 fn note_small_frames(problem: &VideoProblem) {
@@ -241,8 +274,9 @@ fn note_small_frames(problem: &VideoProblem) {
     }
 }
 
-/// Loads every input into a problem.
-pub fn load_problem(a: &FitArgs) -> Result<VideoProblem> {
+/// Loads every input into a problem; the flag says whether the parameters are also to be
+/// written in PhysFlow's units (a dataset whose physics config is in PhysFlow's dialect).
+pub fn load_problem(a: &FitArgs) -> Result<(VideoProblem, bool)> {
     if let Some(dir) = &a.dataset {
         return load_dataset_problem(a, dir);
     }
@@ -262,31 +296,15 @@ pub fn load_problem(a: &FitArgs) -> Result<VideoProblem> {
         Some(p) => r4d_splat::SimLink::load(p)?,
         None => labels.identity_link(),
     };
-    if labels.labels.len() != scene.len() {
-        bail!(
-            "{}: {} labels but {} has {} Gaussians",
-            parts_path.display(),
-            labels.labels.len(),
-            scene_path.display(),
-            scene.len()
-        );
-    }
-    particles.part = labels
-        .particle_parts(&link, &particles.x)
-        .with_context(|| format!("assigning parts from {}", parts_path.display()))?;
-    if config.parts.len() < labels.num_parts {
-        let last = *config
-            .parts
-            .last()
-            .context("the simulation config has no part")?;
-        eprintln!(
-            "warning: {} has {} part(s), the labels {}: the missing parts start from the last part's parameters",
-            sim_path.display(),
-            config.parts.len(),
-            labels.num_parts
-        );
-        config.parts.resize(labels.num_parts, last);
-    }
+    assign_parts(
+        &labels,
+        parts_path,
+        (&scene_path.display().to_string(), scene.len()),
+        &link,
+        &mut particles,
+        &mut config,
+        &sim_path.display().to_string(),
+    )?;
     let (views, set) = video_views(a, cams_path)?;
     let t = &config.time;
     let frame_dt = t.substeps() as f64 * t.substep_dt;
@@ -306,7 +324,7 @@ pub fn load_problem(a: &FitArgs) -> Result<VideoProblem> {
     };
     problem.validate()?;
     note_small_frames(&problem);
-    Ok(problem)
+    Ok((problem, false))
 }
 
 /// Runs the command.
@@ -340,7 +358,7 @@ pub fn run(a: FitArgs) -> Result<()> {
         Some(p) => FitConfig::load(p)?,
         None => FitConfig::default(),
     };
-    let mut problem = load_problem(&a)?;
+    let (mut problem, physflow_units) = load_problem(&a)?;
     problem.gpu = gpu;
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     write_json(&out.join("invocation.json"), &a)?;
@@ -356,7 +374,7 @@ pub fn run(a: FitArgs) -> Result<()> {
     let outcome = run_fit(&problem, &cfg, resume, &mut hooks)?;
     hooks.finish()?;
     let files = write_results(&out, &problem, &cfg, &outcome, &hooks.log, a.row, &lpips)?;
-    if physflow_units(&a)? {
+    if physflow_units {
         add_physflow_units(&files.params, &outcome.parts)?;
     }
     println!(
@@ -371,31 +389,6 @@ pub fn run(a: FitArgs) -> Result<()> {
         out.display()
     );
     Ok(())
-}
-
-/// Whether the run's parameters are also written in PhysFlow's config units (a dataset whose
-/// physics config is in PhysFlow's dialect).
-fn physflow_units(a: &FitArgs) -> Result<bool> {
-    Ok(match &a.dataset {
-        None => false,
-        Some(dir) => {
-            let opts = a.dataset_opts.load_options(a.sim.as_ref(), a.fps)?;
-            let layout = match opts.format {
-                Some(l) => l,
-                None => r4d_datasets::detect(dir)?,
-            };
-            layout != r4d_datasets::Layout::PhysDreamer
-                || a.sim.is_some()
-                || dir
-                    .join(format!(
-                        "{}_config.json",
-                        dir.file_name()
-                            .map(|n| n.to_string_lossy())
-                            .unwrap_or_default()
-                    ))
-                    .is_file()
-        }
-    })
 }
 
 /// Adds `physflow: {E, nu, density, yield_stress, plastic_viscosity}` (PhysFlow's config

@@ -6,6 +6,35 @@ use r4d_datasets::Dataset;
 /// Builds the problem of a loaded dataset: its scene, particles, link and config, one view per
 /// reference video (frames decoded here). Every video must have the same frame rate.
 pub fn problem_from_dataset(ds: &Dataset) -> Result<VideoProblem, FitError> {
+    let (views, fps) = dataset_views(ds)?;
+    problem_with_views(ds, views, fps)
+}
+
+/// The dataset's scene, particles, link and config with the given views (videos at `fps`).
+pub fn problem_with_views(
+    ds: &Dataset,
+    views: Vec<View>,
+    fps: f64,
+) -> Result<VideoProblem, FitError> {
+    let problem = VideoProblem {
+        config: ds.config.clone(),
+        particles: ds.particles.clone(),
+        scene: ds.scene.clone(),
+        link: ds.link.clone(),
+        settings: r4d_splat::RenderSettings {
+            background: ds.background,
+            mode: Default::default(),
+        },
+        views,
+        fps,
+        gpu: None,
+    };
+    problem.validate()?;
+    Ok(problem)
+}
+
+/// The dataset's views with their videos decoded, and their common frame rate.
+fn dataset_views(ds: &Dataset) -> Result<(Vec<View>, f64), FitError> {
     let first = ds
         .views
         .first()
@@ -23,36 +52,11 @@ pub fn problem_from_dataset(ds: &Dataset) -> Result<VideoProblem, FitError> {
             )));
         }
         let video = v.video.read().map_err(|e| FitError::Input(e.to_string()))?;
-        if (video.width(), video.height()) != (v.camera.width as usize, v.camera.height as usize) {
-            return Err(FitError::Input(format!(
-                "{}: frames are {}x{}, camera '{}' is {}x{}",
-                v.video.path.display(),
-                video.width(),
-                video.height(),
-                v.camera.name,
-                v.camera.width,
-                v.camera.height
-            )));
-        }
         views.push(View {
             name: format!("{} ({})", v.video.path.display(), v.camera.name),
             camera: v.camera.clone(),
             video: video.into(),
         });
     }
-    let problem = VideoProblem {
-        config: ds.config.clone(),
-        particles: ds.particles.clone(),
-        scene: ds.scene.clone(),
-        link: ds.link.clone(),
-        settings: r4d_splat::RenderSettings {
-            background: ds.background,
-            mode: Default::default(),
-        },
-        views,
-        fps,
-        gpu: None,
-    };
-    problem.validate()?;
-    Ok(problem)
+    Ok((views, fps))
 }

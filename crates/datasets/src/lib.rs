@@ -108,6 +108,17 @@ pub struct GroundTruth {
     pub point_clouds: Vec<PathBuf>,
 }
 
+impl GroundTruth {
+    /// PhysFlow's `DIR/pcd/1.ply, 2.ply, ...` (up to the first missing number).
+    pub fn from_pcd(dir: &Path) -> GroundTruth {
+        let point_clouds = (1..)
+            .map(|k| dir.join("pcd").join(format!("{k}.ply")))
+            .take_while(|f| f.is_file())
+            .collect();
+        GroundTruth { point_clouds }
+    }
+}
+
 /// A dataset folder read and interpreted: everything a fit needs.
 #[derive(Clone, Debug)]
 pub struct Dataset {

@@ -34,21 +34,21 @@ pub fn within(queries: &[[f64; 3]], refs: &[[f64; 3]], threshold: f64) -> Vec<bo
         .collect()
 }
 
-/// Merges grid nodes `(i, j, k)` (each `< n`) into disjoint axis-aligned boxes of nodes,
-/// `[lo, hi]` inclusive, covering exactly the given set: runs along z, merged along y where the
-/// runs match, then along x where the rectangles match.
-pub fn freeze_boxes(nodes: &[[u32; 3]], n: usize) -> Vec<([u32; 3], [u32; 3])> {
-    let mut set = std::collections::BTreeSet::new();
-    for &c in nodes {
-        set.insert(c);
-    }
+/// Merges grid nodes `(i, j, k)` into disjoint axis-aligned boxes of nodes, `[lo, hi]`
+/// inclusive, covering exactly the given set: runs along k, merged along j where the runs
+/// match, then along i where the rectangles match. Work is proportional to the number of
+/// nodes (only occupied rows are visited).
+pub fn freeze_boxes(nodes: &[[u32; 3]]) -> Vec<([u32; 3], [u32; 3])> {
+    use std::collections::{BTreeMap, BTreeSet};
+    type Rect = (u32, u32, u32, u32); // (j0, j1, k0, k1)
+    let set: BTreeSet<[u32; 3]> = nodes.iter().copied().collect();
     // Runs along k per (i, j).
-    let mut runs: std::collections::BTreeMap<(u32, u32), Vec<(u32, u32)>> = Default::default();
+    let mut runs: BTreeMap<(u32, u32), Vec<(u32, u32)>> = BTreeMap::new();
     let mut iter = set.iter().peekable();
     while let Some(&[i, j, k0]) = iter.next() {
         let mut k1 = k0;
         while let Some(&&[i2, j2, k2]) = iter.peek() {
-            if i2 == i && j2 == j && k2 == k1 + 1 {
+            if i2 == i && j2 == j && Some(k2) == k1.checked_add(1) {
                 k1 = k2;
                 iter.next();
             } else {
@@ -57,49 +57,61 @@ pub fn freeze_boxes(nodes: &[[u32; 3]], n: usize) -> Vec<([u32; 3], [u32; 3])> {
         }
         runs.entry((i, j)).or_default().push((k0, k1));
     }
-    // Rectangles in (j, k) per i: merge equal runs of consecutive j.
-    let mut rects: std::collections::BTreeMap<u32, Vec<(u32, u32, u32, u32)>> = Default::default();
-    for i in 0..n as u32 {
-        let mut open: Vec<(u32, u32, u32, u32)> = Vec::new(); // (j0, j1, k0, k1)
-        for j in 0..n as u32 {
-            let row = runs.get(&(i, j)).cloned().unwrap_or_default();
-            let mut next_open = Vec::new();
-            for &(k0, k1) in &row {
-                match open
-                    .iter()
-                    .position(|r| r.1 + 1 == j && r.2 == k0 && r.3 == k1)
-                {
-                    Some(p) => {
-                        let r = open.swap_remove(p);
-                        next_open.push((r.0, j, k0, k1));
-                    }
-                    None => next_open.push((j, j, k0, k1)),
-                }
+    // Rectangles in (j, k) per i: equal runs of consecutive j merge.
+    let mut rects: BTreeMap<u32, Vec<Rect>> = BTreeMap::new();
+    let mut open: Vec<Rect> = Vec::new();
+    let mut cur_i = None;
+    for (&(i, j), row) in &runs {
+        if cur_i != Some(i) {
+            if let Some(ci) = cur_i {
+                rects.entry(ci).or_default().append(&mut open);
             }
-            rects.entry(i).or_default().append(&mut open);
-            open = next_open;
+            cur_i = Some(i);
         }
-        rects.entry(i).or_default().extend(open);
-    }
-    // Boxes: merge equal rectangles of consecutive i.
-    let mut boxes = Vec::new();
-    let mut open: Vec<(u32, (u32, u32, u32, u32))> = Vec::new(); // (i0, rect)
-    for i in 0..n as u32 {
-        let here = rects.get(&i).cloned().unwrap_or_default();
         let mut next_open = Vec::new();
-        for r in here {
-            match open.iter().position(|o| o.1 == r) {
-                Some(p) => next_open.push(open.swap_remove(p)),
-                None => next_open.push((i, r)),
+        for &(k0, k1) in row {
+            match open
+                .iter()
+                .position(|r| Some(j) == r.1.checked_add(1) && r.2 == k0 && r.3 == k1)
+            {
+                Some(p) => {
+                    let r = open.swap_remove(p);
+                    next_open.push((r.0, j, k0, k1));
+                }
+                None => next_open.push((j, j, k0, k1)),
             }
         }
-        for (i0, r) in open.drain(..) {
-            boxes.push(([i0, r.0, r.2], [i - 1, r.1, r.3]));
+        rects.entry(i).or_default().append(&mut open);
+        open = next_open;
+    }
+    if let Some(ci) = cur_i {
+        rects.entry(ci).or_default().append(&mut open);
+    }
+    // Boxes: equal rectangles of consecutive i merge.
+    let mut boxes = Vec::new();
+    let mut open: Vec<(u32, Rect, u32)> = Vec::new(); // (i0, rect, i1)
+    for (&i, here) in &rects {
+        let mut next_open = Vec::new();
+        for &r in here {
+            match open
+                .iter()
+                .position(|o| o.1 == r && Some(i) == o.2.checked_add(1))
+            {
+                Some(p) => {
+                    let mut o = open.swap_remove(p);
+                    o.2 = i;
+                    next_open.push(o);
+                }
+                None => next_open.push((i, r, i)),
+            }
+        }
+        for (i0, r, i1) in open.drain(..) {
+            boxes.push(([i0, r.0, r.2], [i1, r.1, r.3]));
         }
         open = next_open;
     }
-    for (i0, r) in open {
-        boxes.push(([i0, r.0, r.2], [n as u32 - 1, r.1, r.3]));
+    for (i0, r, i1) in open {
+        boxes.push(([i0, r.0, r.2], [i1, r.1, r.3]));
     }
     boxes
 }
@@ -125,7 +137,6 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (rng >> 33) as u32
         };
-        let n = 9usize;
         let mut nodes = Vec::new();
         // A solid block plus random nodes.
         for i in 2..5 {
@@ -138,7 +149,7 @@ mod tests {
         for _ in 0..60 {
             nodes.push([next() % 9, next() % 9, next() % 9]);
         }
-        let boxes = freeze_boxes(&nodes, n);
+        let boxes = freeze_boxes(&nodes);
         let set: std::collections::BTreeSet<[u32; 3]> = nodes.iter().copied().collect();
         let mut covered = std::collections::BTreeSet::new();
         for (lo, hi) in &boxes {

@@ -224,8 +224,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
                     format!("camera {idx} has no image"),
                 )
             })?;
-        let (w, h) = image::image_dimensions(first)
-            .map_err(|e| DatasetError::invalid(first, format!("not a readable image: {e}")))?;
+        let (w, h) = crate::video::image_size(first)?;
         let cam = cameras::from_gl_c2w(format!("r_{idx}"), w, h, pc.k, &pc.c2w);
         cam.validate(&dir.join("all_data.json").display().to_string())
             .map_err(|m| DatasetError::invalid(dir.join("all_data.json"), m))?;
@@ -252,14 +251,6 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
     if pcams.values().any(|c| c.ignore.is_some()) {
         warnings.push("ignore masks (frame -2) are listed but not used by the loss".into());
     }
-    let mut pcd = Vec::new();
-    for k in 1.. {
-        let f = dir.join("pcd").join(format!("{k}.ply"));
-        if !f.is_file() {
-            break;
-        }
-        pcd.push(f);
-    }
     Ok(Dataset {
         layout: Layout::PacNerf,
         dir: dir.to_path_buf(),
@@ -275,7 +266,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
         cameras: cams,
         background: [1.0; 3],
         views,
-        ground_truth: GroundTruth { point_clouds: pcd },
+        ground_truth: GroundTruth::from_pcd(dir),
         physflow: Some(cfg.extras.clone()),
         warnings,
     })

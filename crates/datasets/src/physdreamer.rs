@@ -44,11 +44,6 @@ const DEFAULT_CONFIG: &str = r#"{"material": "jelly", "E": 0.01, "nu": 0.3, "den
     "frame_dt": 0.03333333333333333, "frame_num": 14, "opacity_threshold": 0.0,
     "boundary_conditions": [{"type": "bounding_box"}]}"#;
 
-fn image_size(path: &Path) -> Result<(u32, u32)> {
-    image::image_dimensions(path)
-        .map_err(|e| DatasetError::invalid(path, format!("not a readable image: {e}")))
-}
-
 /// Cameras from `transforms_train.json`.
 pub fn read_transforms(dir: &Path) -> Result<Vec<Camera>> {
     let path = dir.join("transforms_train.json");
@@ -77,7 +72,7 @@ pub fn read_transforms(dir: &Path) -> Result<Vec<Camera>> {
         .ok_or_else(|| {
             DatasetError::missing(&base, format!("the image of {ctx} of {}", path.display()))
         })?;
-        let (w, h) = image_size(&img)?;
+        let (w, h) = video::image_size(&img)?;
         let m = f
             .get("transform_matrix")
             .and_then(Value::as_array)
@@ -336,7 +331,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
                 }
             }
         }
-        let boxes = moving::freeze_boxes(&nodes, n);
+        let boxes = moving::freeze_boxes(&nodes);
         if boxes.len() > 4096 {
             return Err(DatasetError::invalid(
                 &moving_file,

@@ -260,14 +260,6 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
     }
     let video = reference_video(dir, &cfg, opts, &mut warnings)?;
     let camera = cameras::fit_to_video(&cams[cam_index], video.width, video.height, &video.path)?;
-    let mut pcd = Vec::new();
-    for k in 1.. {
-        let f = dir.join("pcd").join(format!("{k}.ply"));
-        if !f.is_file() {
-            break;
-        }
-        pcd.push(f);
-    }
     Ok(Dataset {
         layout: Layout::PhysFlow,
         dir: dir.to_path_buf(),
@@ -287,7 +279,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
             camera,
             video,
         }],
-        ground_truth: GroundTruth { point_clouds: pcd },
+        ground_truth: GroundTruth::from_pcd(dir),
         physflow: Some(cfg.extras.clone()),
         warnings,
     })

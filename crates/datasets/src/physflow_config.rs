@@ -237,7 +237,7 @@ pub fn decode(text: &str, path: &Path) -> Result<PhysFlowConfig> {
     map.insert("material".into(), Value::from(ours));
     scale_key(&mut map, "E", SCALE_E, "", path)?;
     // PhysFlow's decoder default E = 1e5 is also in scaled units.
-    if !map.contains_key("E") {
+    if map.get("E").is_none_or(Value::is_null) {
         map.insert("E".into(), Value::from(1e5 * SCALE_E));
     }
     scale_key(&mut map, "yield_stress", SCALE_YS, "", path)?;
@@ -416,6 +416,11 @@ mod tests {
         assert_eq!(d.extras.opt_frame_dt, 1e-2);
         assert_eq!(d.extras.reduction, "sum");
         assert_eq!(d.config.time.frames, 100);
+        let n = decode(r#"{"g": [0, 0, 0], "E": null}"#, Path::new("n.json")).unwrap();
+        assert!(
+            (n.config.parts[0].youngs_modulus_pa - 1e12).abs() < 1.0,
+            "null E = default"
+        );
     }
 
     #[test]

@@ -51,14 +51,19 @@ pub fn key_frame_indices(n: usize, key_frames: usize) -> Vec<usize> {
     (0..n).filter(|i| i % per == 0).collect()
 }
 
+/// An image file's width and height, from its header.
+pub fn image_size(path: &Path) -> Result<(u32, u32)> {
+    image::image_dimensions(path)
+        .map_err(|e| DatasetError::invalid(path, format!("not a readable image: {e}")))
+}
+
 impl VideoSource {
     /// A video made of image files at `fps`; reads the first frame's header for the size.
     pub fn from_frames(path: &Path, files: Vec<PathBuf>, fps: f64) -> Result<Self> {
         let first = files
             .first()
             .ok_or_else(|| DatasetError::missing(path, "image frames (.png or .jpg)"))?;
-        let (width, height) = image::image_dimensions(first)
-            .map_err(|e| DatasetError::invalid(first, format!("not a readable image: {e}")))?;
+        let (width, height) = image_size(first)?;
         if !(fps.is_finite() && fps > 0.0) {
             return Err(DatasetError::invalid(
                 path,

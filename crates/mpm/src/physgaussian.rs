@@ -207,6 +207,12 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
     if !(n_grid >= 1.0 && n_grid.fract() == 0.0) {
         return Err(r.err("n_grid", "expected a positive integer"));
     }
+    if !(8.0..=1024.0).contains(&n_grid) {
+        return Err(r.err("n_grid", &format!("{n_grid} must lie in [8, 1024]")));
+    }
+    if !(grid_lim.is_finite() && grid_lim > 0.0) {
+        return Err(r.err("grid_lim", &format!("{grid_lim} must be > 0")));
+    }
     let substep_dt = r.f64_or("substep_dt", 1e-4)?;
     let frame_dt = r.f64_or("frame_dt", 1e-2)?;
     let frame_num = r.f64_or("frame_num", 100.0)?;
@@ -496,5 +502,9 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("boundary_conditions[0].type"), "{e}");
+        let e = import_str(r#"{"g": [0,0,0], "n_grid": 1e9}"#, "s.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("n_grid") && e.contains("1024"), "{e}");
     }
 }
