@@ -33,6 +33,9 @@ pub enum DiagError {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// An MP4 could not be encoded or written.
+    #[error(transparent)]
+    Video(#[from] r4d_video::VideoError),
     /// An image or GIF could not be encoded or written.
     #[error("{}: {source}", path.display())]
     Image {
@@ -103,6 +106,10 @@ pub struct DiagnosticFiles {
     pub side_by_side_frames: Vec<PathBuf>,
     /// `side_by_side.gif`.
     pub side_by_side_gif: PathBuf,
+    /// `fitted.mp4` (H.264; see [`write_mp4`]).
+    pub fitted_mp4: PathBuf,
+    /// `side_by_side.mp4`.
+    pub side_by_side_mp4: PathBuf,
     /// `wt_reference.png`: the reference's w-t slice.
     pub wt_reference: PathBuf,
     /// `wt_fitted.png`: the fit's w-t slice.
@@ -192,6 +199,52 @@ pub fn write_gif(path: &Path, video: &Video<f32>, fps: f64) -> Result<()> {
         path: path.to_path_buf(),
         source,
     })
+}
+
+/// Writes `video` as an H.264 MP4 (yuv420p, plays in browsers; `r4d_video::write_mp4`) at
+/// `fps`. A video larger than the encoder's 3840 x 2160 (a side-by-side of two 1080p videos)
+/// is halved (2 x 2 box filter) until it fits.
+pub fn write_mp4(path: &Path, video: &Video<f32>, fps: f64) -> Result<()> {
+    create_parent(path)?;
+    let mut v = std::borrow::Cow::Borrowed(video);
+    while v.width().max(v.height()) > r4d_video::MAX_ENCODE_LONG
+        || v.width().min(v.height()) > r4d_video::MAX_ENCODE_SHORT
+    {
+        v = std::borrow::Cow::Owned(halve(&v));
+    }
+    Ok(r4d_video::write_mp4(path, &v, fps)?)
+}
+
+/// `video` at half the width and height (2 x 2 averages; an odd last row/column is dropped).
+fn halve(video: &Video<f32>) -> Video<f32> {
+    let (h, w) = (video.height() / 2, video.width() / 2);
+    let (h, w) = (h.max(1), w.max(1));
+    let src_w = video.width();
+    Video::from_frames(
+        h,
+        w,
+        (0..video.frames()).map(|t| {
+            let f = video.frame(t);
+            let at = |y: usize, x: usize, c: usize| {
+                let (y, x) = (y.min(video.height() - 1), x.min(src_w - 1));
+                f[(y * src_w + x) * 3 + c]
+            };
+            let mut out = vec![0f32; h * w * 3];
+            for y in 0..h {
+                for x in 0..w {
+                    for c in 0..3 {
+                        out[(y * w + x) * 3 + c] = 0.25
+                            * (at(2 * y, 2 * x, c)
+                                + at(2 * y, 2 * x + 1, c)
+                                + at(2 * y + 1, 2 * x, c)
+                                + at(2 * y + 1, 2 * x + 1, c));
+                    }
+                }
+            }
+            out
+        }),
+    )
+    .expect("a halved frame is non-empty")
 }
 
 /// The GIF frame delay for `fps` frames per second.
@@ -656,8 +709,9 @@ pub fn loss_curve_png(path: &Path, title: &str, series: &[(&str, Vec<(f64, f64)>
 
 /// Writes the diagnostics of a video fit into `dir` (created if needed):
 ///
-/// - `fitted/frame_XXXX.png` and `fitted.gif`: the fitted video;
-/// - `side_by_side/frame_XXXX.png` and `side_by_side.gif`: reference left, fit right
+/// - `fitted/frame_XXXX.png`, `fitted.gif` and `fitted.mp4`: the fitted video;
+/// - `side_by_side/frame_XXXX.png`, `side_by_side.gif` and `side_by_side.mp4`: reference
+///   left, fit right
 ///   ([`side_by_side`]);
 /// - `wt_reference.png`, `wt_fitted.png`: w-t slices of image row `row` ([`wt_slice`]);
 /// - `spectrum_reference.png`, `spectrum_fitted.png`: their temporal spectra on one colour
@@ -689,6 +743,10 @@ pub fn write_fit_diagnostics(
     let side_by_side_frames = write_png_frames(&dir.join("side_by_side"), &both, "frame")?;
     let side_by_side_gif = dir.join("side_by_side.gif");
     write_gif(&side_by_side_gif, &both, fps)?;
+    let fitted_mp4 = dir.join("fitted.mp4");
+    write_mp4(&fitted_mp4, fitted, fps)?;
+    let side_by_side_mp4 = dir.join("side_by_side.mp4");
+    write_mp4(&side_by_side_mp4, &both, fps)?;
 
     let wt_reference = dir.join("wt_reference.png");
     save_png(&wt_reference, &wt_slice(reference, row)?)?;
@@ -716,6 +774,8 @@ pub fn write_fit_diagnostics(
         fitted_gif,
         side_by_side_frames,
         side_by_side_gif,
+        fitted_mp4,
+        side_by_side_mp4,
         wt_reference,
         wt_fitted,
         spectrum_reference,
@@ -1005,6 +1065,8 @@ mod tests {
         let singles = [
             &files.fitted_gif,
             &files.side_by_side_gif,
+            &files.fitted_mp4,
+            &files.side_by_side_mp4,
             &files.wt_reference,
             &files.wt_fitted,
             &files.spectrum_reference,

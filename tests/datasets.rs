@@ -504,3 +504,108 @@ fn multi_view_fit_from_a_pacnerf_folder_recovers_youngs_modulus() {
         "one diagnostics folder per view"
     );
 }
+
+/// The frames of a video folder written as an H.264 MP4 at `fps`.
+fn frames_to_mp4(frames: &Path, mp4: &Path, fps: f64) -> r4d_loss::Video<f32> {
+    let v: r4d_loss::Video<f32> = r4d_loss::io::read_video(frames).unwrap();
+    r4d_video::write_mp4(mp4, &v, fps).unwrap();
+    v
+}
+
+#[test]
+fn mp4_videos_are_read_where_the_layouts_put_them() {
+    // PhysFlow: an MP4 in the scene folder wins over images_generated/, at its own rate.
+    let dir = tmp("physflow_mp4").join("toyphone");
+    copy_dir(&ds_fixture(PHYSFLOW), &dir);
+    let src = frames_to_mp4(
+        &dir.join("images_generated"),
+        &dir.join("toyphone.mp4"),
+        24.0,
+    );
+    let sim = ds_fixture("physflow/config/phys_dreamer/toyphone_config.json");
+    let opts = LoadOptions {
+        sim: Some(sim.clone()),
+        ..Default::default()
+    };
+    let ds = load(&dir, &opts).unwrap();
+    let v = &ds.views[0].video;
+    assert!(v.path.ends_with("toyphone.mp4"), "{}", v.path.display());
+    assert_eq!((v.frames, v.fps), (src.frames(), 24.0));
+    // The fixture's frames are per-pixel colour codes (no chroma subsampling survives them),
+    // so check order, not fidelity: decoded frame t is nearest to source frame t.
+    let decoded = v.read().unwrap();
+    assert_eq!(decoded.frames(), src.frames());
+    for t in 0..src.frames() {
+        let d = |u: usize| -> f64 {
+            decoded
+                .frame(t)
+                .iter()
+                .zip(src.frame(u))
+                .map(|(a, b)| ((a - b) as f64).powi(2))
+                .sum()
+        };
+        let best = (0..src.frames())
+            .min_by(|&a, &b| d(a).total_cmp(&d(b)))
+            .unwrap();
+        assert_eq!(best, t);
+    }
+    // --fps overrides the file's rate.
+    let ds = load(
+        &dir,
+        &LoadOptions {
+            sim: Some(sim.clone()),
+            fps: Some(30.0),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(ds.views[0].video.fps, 30.0);
+
+    // PhysDreamer: videos/<image name>*.mp4 matched to its camera by prefix.
+    let dir = tmp("physdreamer_mp4").join("toyplant");
+    copy_dir(&ds_fixture(PHYSDREAMER), &dir);
+    let vdir = dir.join("videos");
+    for take in ["frame_00001_take1", "frame_00002_take1"] {
+        frames_to_mp4(&vdir.join(take), &vdir.join(format!("{take}.mp4")), 30.0);
+        std::fs::remove_dir_all(vdir.join(take)).unwrap();
+    }
+    let ds = load(&dir, &LoadOptions::default()).unwrap();
+    assert_eq!(ds.views.len(), 2);
+    for v in &ds.views {
+        let stem = v
+            .video
+            .path
+            .file_stem()
+            .unwrap()
+            .to_str()
+            .unwrap()
+            .to_string();
+        assert!(
+            stem.starts_with(v.camera.name.trim_end_matches(".png")),
+            "{stem} vs {}",
+            v.camera.name
+        );
+        assert_eq!(v.video.fps, 30.0);
+    }
+    let out = r4d(&["dataset", "inspect", dir.to_str().unwrap(), "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(j["videos"][0]["path"].as_str().unwrap().ends_with(".mp4"));
+
+    // Another codec in videos/ is a typed error naming the file and the codec.
+    let bad = vdir.join("frame_00001_take1.mp4");
+    let mut bytes = std::fs::read(&bad).unwrap();
+    let stsd = bytes.windows(4).position(|w| w == b"stsd").unwrap();
+    let at = stsd + bytes[stsd..].windows(4).position(|w| w == b"avc1").unwrap();
+    bytes[at..at + 4].copy_from_slice(b"av01");
+    std::fs::write(&bad, bytes).unwrap();
+    let e = load(&dir, &LoadOptions::default()).unwrap_err().to_string();
+    assert!(
+        e.contains("frame_00001_take1.mp4") && e.contains("av01"),
+        "{e}"
+    );
+}

@@ -143,7 +143,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
         run.summary.wall_time_s
     );
     println!(
-        "run folder: {} (summary.json, params.json, side_by_side.gif, loss_curve.png, inputs/)",
+        "run folder: {} (summary.json, params.json, side_by_side.gif and .mp4, loss_curve.png, inputs/)",
         out.display()
     );
     Ok(())

@@ -37,8 +37,8 @@ pub struct FitArgs {
     #[command(flatten)]
     #[serde(default)]
     dataset_opts: super::dataset::DatasetOptions,
-    /// Reference video: a .npy (T, H, W, 3) float array or a folder of PNG frames (the format
-    /// of `r4d metrics`). Frame 0 shows the rest state. Repeatable: one per view, each with
+    /// Reference video: an H.264 .mp4, a .npy (T, H, W, 3) float array or a folder of PNG
+    /// frames (the formats of `r4d metrics`). Frame 0 shows the rest state. Repeatable: one per view, each with
     /// its --video-camera; the loss is summed over the views.
     #[arg(long)]
     #[serde(default, deserialize_with = "one_or_many")]
@@ -48,8 +48,8 @@ pub struct FitArgs {
     #[arg(long)]
     #[serde(default, deserialize_with = "one_or_many")]
     video_camera: Vec<usize>,
-    /// Frame rate of the video (default: the simulation's, 1 / frame_dt). Rendered frames are
-    /// resampled linearly in time when it differs.
+    /// Frame rate of the video (default: an MP4's own rate, else the simulation's,
+    /// 1 / frame_dt). Rendered frames are resampled linearly in time when it differs.
     #[arg(long)]
     fps: Option<f64>,
     /// Run folder: params.json, log.jsonl, checkpoint.json, the fitted video and diagnostics.
@@ -162,15 +162,39 @@ fn video_views(a: &FitArgs, cams_path: &Path) -> Result<(Vec<View>, r4d_splat::C
                 )
             })?
             .clone();
-        let video = r4d_loss::io::read_video::<f32>(path)?;
+        // 8-bit frames are kept as bytes (a quarter of f32, exact).
+        let video = if r4d_video::is_mp4(path) {
+            r4d_video::read_mp4_reference(path, None)?
+        } else {
+            r4d_loss::io::read_video::<f32>(path)?.into()
+        };
         views.push(View {
             name: path.display().to_string(),
             camera,
-            // 8-bit frames are kept as bytes (a quarter of f32, exact).
-            video: video.into(),
+            video,
         });
     }
     Ok((views, set))
+}
+
+/// The common frame rate of the MP4s among `videos` (`None` when there are none); MP4s at
+/// different rates need `--fps`.
+fn mp4_fps(videos: &[PathBuf]) -> Result<Option<f64>> {
+    let mut found: Option<(f64, &PathBuf)> = None;
+    for v in videos {
+        if let Some(f) = r4d_video::video_fps(v)? {
+            match found {
+                Some((g, w)) if (f - g).abs() > 1e-9 * g => bail!(
+                    "--video {} is {f} fps, --video {} is {g} fps: give --fps (every view is fitted at one frame rate)",
+                    v.display(),
+                    w.display()
+                ),
+                None => found = Some((f, v)),
+                _ => {}
+            }
+        }
+    }
+    Ok(found.map(|f| f.0))
 }
 
 /// Loads a fit straight from a dataset folder (`--dataset`); --sim, --fps, --parts,
@@ -197,7 +221,10 @@ fn load_dataset_problem(a: &FitArgs, dir: &Path) -> Result<(VideoProblem, bool)>
         resonance4d::video_fit::problem_from_dataset(&ds)?
     } else {
         let cams = need(&a.cameras, "--cameras (with --video)")?;
-        let fps = a.fps.or(ds.views.first().map(|v| v.video.fps));
+        let fps = match a.fps {
+            Some(f) => Some(f),
+            None => mp4_fps(&a.video)?.or(ds.views.first().map(|v| v.video.fps)),
+        };
         let fps = fps.context("--fps is required with --video when the dataset has no video")?;
         resonance4d::video_fit::problem_with_views(&ds, video_views(a, cams)?.0, fps)?
     };
@@ -308,7 +335,10 @@ pub fn load_problem(a: &FitArgs) -> Result<(VideoProblem, bool)> {
     let (views, set) = video_views(a, cams_path)?;
     let t = &config.time;
     let frame_dt = t.substeps() as f64 * t.substep_dt;
-    let fps = a.fps.unwrap_or(1.0 / frame_dt);
+    let fps = match a.fps {
+        Some(f) => f,
+        None => mp4_fps(&a.video)?.unwrap_or(1.0 / frame_dt),
+    };
     let problem = VideoProblem {
         config,
         particles,

@@ -1,10 +1,10 @@
 //! `r4d metrics`: every image/video metric and the DMS terms of a rendered video against a
 //! reference video.
 
-use anyhow::{Context, Result};
-use r4d_loss::io::read_video;
+use anyhow::{bail, Context, Result};
 use r4d_loss::lpips;
 use r4d_loss::metrics::{report, Report};
+use r4d_video::read_video;
 use resonance4d::video_fit::report::{lpips_json, lpips_of, LpipsValues};
 use serde_json::{json, Value};
 use std::path::PathBuf;
@@ -12,13 +12,24 @@ use std::path::PathBuf;
 /// Arguments of `r4d metrics`.
 #[derive(clap::Args, Debug)]
 pub struct MetricsArgs {
-    /// The reference (ground-truth) video: a directory of PNG frames (sorted by file name)
-    /// or a float32 .npy of shape (T, H, W, 3).
+    /// The reference (ground-truth) video: an H.264 .mp4, a directory of PNG frames (sorted
+    /// by file name) or a float32 .npy of shape (T, H, W, 3).
     #[arg(long)]
     reference: PathBuf,
     /// The rendered video, in the same formats.
     #[arg(long)]
     rendered: PathBuf,
+    /// Compare at this frame rate: each video is converted to it from its own rate (nearest
+    /// frame in time; the paper evaluates at 30). An MP4 knows its rate; give
+    /// --reference-fps / --rendered-fps for frame folders and .npy.
+    #[arg(long)]
+    fps: Option<f64>,
+    /// Frame rate of --reference (overrides an MP4's own).
+    #[arg(long)]
+    reference_fps: Option<f64>,
+    /// Frame rate of --rendered (overrides an MP4's own).
+    #[arg(long)]
+    rendered_fps: Option<f64>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
@@ -32,8 +43,52 @@ pub struct MetricsArgs {
 
 /// Runs `r4d metrics`.
 pub fn run(a: MetricsArgs) -> Result<()> {
+    for (flag, v) in [
+        ("--fps", a.fps),
+        ("--reference-fps", a.reference_fps),
+        ("--rendered-fps", a.rendered_fps),
+    ] {
+        if let Some(f) = v {
+            if !(f.is_finite() && f > 0.0 && f <= r4d_video::MAX_FPS) {
+                bail!("{flag} {f}: must be in (0, {}]", r4d_video::MAX_FPS);
+            }
+        }
+    }
+    let rate = |flag: &str, given: Option<f64>, path: &std::path::Path| -> Result<Option<f64>> {
+        Ok(match given {
+            Some(f) => Some(f),
+            None => r4d_video::video_fps(path)
+                .with_context(|| format!("{flag}: reading the frame rate"))?,
+        })
+    };
+    let ref_fps = rate("--reference", a.reference_fps, &a.reference)?;
+    let ren_fps = rate("--rendered", a.rendered_fps, &a.rendered)?;
     let reference = read_video::<f32>(&a.reference).context("reading the reference video")?;
     let rendered = read_video::<f32>(&a.rendered).context("reading the rendered video")?;
+    let (reference, rendered) = match a.fps {
+        Some(to) => {
+            let convert = |v: r4d_loss::Video<f32>, from: Option<f64>, which: &str| {
+                let from = from.with_context(|| {
+                    format!("--fps: the {which} video carries no frame rate; give --{which}-fps")
+                })?;
+                r4d_video::resample(&v, from, to).with_context(|| {
+                    format!("--fps {to}: converting the {which} video from {from} fps gives too many frames")
+                })
+            };
+            (
+                convert(reference, ref_fps, "reference")?,
+                convert(rendered, ren_fps, "rendered")?,
+            )
+        }
+        None => {
+            if let (Some(f), Some(g)) = (ref_fps, ren_fps) {
+                if (f - g).abs() > 1e-6 * f {
+                    bail!("the reference is {f} fps, the rendered video {g} fps: give --fps to compare them at one rate");
+                }
+            }
+            (reference, rendered)
+        }
+    };
     let r = report(&rendered, &reference).with_context(|| {
         format!(
             "comparing rendered {} with reference {}",

@@ -57,7 +57,7 @@ pub struct RenderArgs {
     #[arg(long, conflicts_with = "frames")]
     frame: Option<PathBuf>,
     /// Render every frame_NNNN.ply of a simulation folder to OUT/frame_NNNN.png plus
-    /// OUT/animation.gif.
+    /// OUT/animation.gif and OUT/animation.mp4 (H.264).
     #[arg(long)]
     frames: Option<PathBuf>,
     /// The simulation link (link.json from `r4d prepare`): simulated Gaussians and the
@@ -228,6 +228,19 @@ fn render_sequence(
     let mut gif = image::codecs::gif::GifEncoder::new_with_speed(gif_file, 10);
     gif.set_repeat(image::codecs::gif::Repeat::Infinite)?;
     let delay = image::Delay::from_numer_denom_ms(1000, a.fps.max(1));
+    let mp4_path = a.out.join("animation.mp4");
+    let mut mp4 = match r4d_video::Mp4Writer::create(
+        &mp4_path,
+        cam.width as usize,
+        cam.height as usize,
+        f64::from(a.fps.max(1)),
+    ) {
+        Ok(w) => Some(w),
+        Err(e) => {
+            eprintln!("note: no animation.mp4: {e}");
+            None
+        }
+    };
     for f in &frames {
         let d = frame_deformation(f, scene, link.as_ref())?;
         let img = renderer.render(scene, Some(&d), cam, settings)?;
@@ -235,11 +248,17 @@ fn render_sequence(
         write_png(&a.out.join(format!("{stem}.png")), &img)?;
         let rgba = to_rgba(&img);
         gif.encode_frame(image::Frame::from_parts(rgba, 0, 0, delay))?;
+        if let Some(m) = mp4.as_mut() {
+            m.push(&img.rgb)?;
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if let Some(m) = mp4 {
+        m.finish()?;
+    }
     eprintln!(
-        "rendered {} frames to {} (PNG per frame + animation.gif)",
+        "rendered {} frames to {} (PNG per frame + animation.gif + animation.mp4)",
         frames.len(),
         a.out.display()
     );

@@ -51,11 +51,14 @@ fn dataset_views(ds: &Dataset) -> Result<(Vec<View>, f64), FitError> {
                 v.video.fps
             )));
         }
-        let video = v.video.read().map_err(|e| FitError::Input(e.to_string()))?;
+        let video = v
+            .video
+            .read_reference()
+            .map_err(|e| FitError::Input(e.to_string()))?;
         views.push(View {
             name: format!("{} ({})", v.video.path.display(), v.camera.name),
             camera: v.camera.clone(),
-            video: video.into(),
+            video,
         });
     }
     Ok((views, fps))

@@ -45,6 +45,9 @@ pub enum DatasetError {
     /// A video or frame that cannot be read.
     #[error(transparent)]
     Video(#[from] r4d_loss::io::VideoIoError),
+    /// An MP4 that cannot be read (or another codec).
+    #[error(transparent)]
+    Mp4(#[from] r4d_video::VideoError),
     /// Reading a file failed.
     #[error("{path}: {source}")]
     Io {

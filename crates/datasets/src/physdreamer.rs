@@ -21,7 +21,9 @@
 //! * **Videos**: `videos/*.mp4` whose file name starts with a camera's image name (without
 //!   extension), or sub-folders of `videos/` of PNG frames named the same way; if `videos/`
 //!   holds PNG frames itself, its sorted first 60 and last 5 frames are the video (PhysDreamer's
-//!   rule), filmed from camera 0 unless `--camera` picks another. 30 fps unless `--fps`.
+//!   rule), filmed from camera 0 unless `--camera` picks another. Frame folders are 30 fps
+//!   unless `--fps`; an MP4 plays at its own rate unless `--fps` (H.264 only, decoded by
+//!   `r4d-video`; another codec is a typed error naming it).
 //! * **Physics**: PhysDreamer's are Python configs; give one in PhysFlow's JSON dialect with
 //!   `--sim` or as `<scene>_config.json` in the folder. Without one, PhysDreamer's set-up:
 //!   jelly, `E` 1e5 Pa, `nu` 0.3, density 2000, no gravity, grid 64 over `[0, 1]^3`, 256
@@ -167,6 +169,7 @@ fn find_videos(
     dir: &Path,
     cams: &[Camera],
     fps: f64,
+    fps_given: Option<f64>,
     warnings: &mut Vec<String>,
 ) -> Result<Vec<(usize, VideoSource)>> {
     let vdir = dir.join("videos");
@@ -201,10 +204,13 @@ fn find_videos(
                 out.push((c, VideoSource::from_frames(e, files, fps)?));
             }
         } else if e.extension().is_some_and(|x| x.eq_ignore_ascii_case("mp4")) {
-            warnings.push(format!(
-                "{}: MP4 decoding is not available in this build yet; skipped",
-                e.display()
-            ));
+            match camera_of(e) {
+                Some(c) => out.push((c, VideoSource::from_mp4(e, fps_given)?)),
+                None => warnings.push(format!(
+                    "{}: its name starts with no camera's image name; skipped",
+                    e.display()
+                )),
+            }
         }
     }
     if out.is_empty() {
@@ -372,7 +378,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
     };
     let fps = opts.fps.unwrap_or(30.0);
     let mut views = Vec::new();
-    for (ci, video) in find_videos(dir, &cams, fps, &mut warnings)? {
+    for (ci, video) in find_videos(dir, &cams, fps, opts.fps, &mut warnings)? {
         let camera = cameras::fit_to_video(&cams[ci], video.width, video.height, &video.path)?;
         views.push(ViewSource {
             camera_index: ci,

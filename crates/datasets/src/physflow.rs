@@ -29,7 +29,8 @@
 //! 7. **Cameras**: `cameras.json` (INRIA 3DGS: camera-to-world rotation and centre), capped at
 //!    1920 pixels per side as PhysFlow's `get_camera_view` does. The view is
 //!    `default_camera_index`.
-//! 8. **Reference video**: an `.mp4` in the folder (its own frame rate), else the frames of
+//! 8. **Reference video**: an `.mp4` in the folder (H.264, at its own frame rate unless `--fps`;
+//!    the first by name when there are several; `--key-frames` does not apply), else the frames of
 //!    `images_generated/` (PNG or JPEG, sorted by name) at `1 / frame_dt` unless `--fps` says
 //!    otherwise. With `--key-frames K`, PhysFlow's own rule: keep the files whose index `i` has
 //!    `i % (n / K) == 0` (PhysFlow's `n_key_frame`, 8), spaced `11 x opt_frame_dt` of simulated
@@ -300,12 +301,24 @@ fn reference_video(
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_file() && p.extension().is_some_and(|e| e.eq_ignore_ascii_case("mp4")))
         .collect();
+    let mut mp4s = mp4s;
+    mp4s.sort();
     let gen = dir.join("images_generated");
     if let Some(m) = mp4s.first() {
-        warnings.push(format!(
-            "{}: MP4 decoding is not available in this build yet; using images_generated/",
-            m.display()
-        ));
+        if mp4s.len() > 1 {
+            warnings.push(format!(
+                "{}: {} MP4 files in the scene folder; the first by name is the reference video",
+                dir.display(),
+                mp4s.len()
+            ));
+        }
+        if opts.key_frames.is_some() {
+            warnings.push(format!(
+                "{}: --key-frames applies to images_generated/ frames; the MP4 is used whole",
+                m.display()
+            ));
+        }
+        return VideoSource::from_mp4(m, opts.fps);
     }
     if !gen.is_dir() {
         return Err(DatasetError::missing(

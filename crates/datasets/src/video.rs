@@ -2,6 +2,7 @@
 //! Frames are read only when the fit asks ([`VideoSource::read`]).
 
 use crate::error::{DatasetError, Result};
+use r4d_loss::bands::ReferenceVideo;
 use r4d_loss::Video;
 use std::path::{Path, PathBuf};
 
@@ -80,15 +81,47 @@ impl VideoSource {
         })
     }
 
-    /// Decodes every frame (values `k / 255`, RGB).
-    pub fn read(&self) -> Result<Video<f32>> {
-        if self.files.is_empty() {
+    /// An H.264 MP4 (`.mp4`, `.m4v`, `.mov`), at its own frame rate unless `fps` says
+    /// otherwise; reads the header only.
+    pub fn from_mp4(path: &Path, fps: Option<f64>) -> Result<Self> {
+        let info = r4d_video::probe(path)?;
+        let fps = fps.unwrap_or(info.fps);
+        if !(fps.is_finite() && fps > 0.0) {
             return Err(DatasetError::invalid(
-                &self.path,
-                "reading MP4 video is not available in this build; give the frames as a folder of PNG files",
+                path,
+                format!("frame rate {fps} must be > 0"),
             ));
         }
+        Ok(VideoSource {
+            path: path.to_path_buf(),
+            files: Vec::new(),
+            frames: info.frames,
+            fps,
+            width: info.width,
+            height: info.height,
+        })
+    }
+
+    /// Whether the video is a container file (MP4) rather than image files.
+    pub fn is_container(&self) -> bool {
+        self.files.is_empty()
+    }
+
+    /// Decodes every frame (values `k / 255`, RGB).
+    pub fn read(&self) -> Result<Video<f32>> {
+        if self.is_container() {
+            return Ok(r4d_video::read_mp4(&self.path, None)?);
+        }
         Ok(r4d_loss::io::read_frames(&self.files, &self.path)?)
+    }
+
+    /// Decodes every frame into the fit's storage of a reference video (8-bit frames as
+    /// bytes: a 1080p MP4 frame takes 6 MB, not 25).
+    pub fn read_reference(&self) -> Result<ReferenceVideo> {
+        if self.is_container() {
+            return Ok(r4d_video::read_mp4_reference(&self.path, None)?);
+        }
+        Ok(ReferenceVideo::compact(self.read()?))
     }
 }
 

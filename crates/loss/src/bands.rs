@@ -46,6 +46,44 @@ pub struct Video8 {
 }
 
 impl Video8 {
+    /// A video from `(T, H, W, 3)` bytes (value `k` means `k / 255`); the length must be
+    /// `frames * height * width * 3` and no side zero.
+    pub fn new(
+        frames: usize,
+        height: usize,
+        width: usize,
+        data: Vec<u8>,
+    ) -> Result<Video8, LossError> {
+        if frames == 0 || height == 0 || width == 0 {
+            return Err(LossError::Empty {
+                input: Input::Reference,
+                frames,
+                height,
+                width,
+            });
+        }
+        let expected = frames
+            .checked_mul(height)
+            .and_then(|n| n.checked_mul(width))
+            .and_then(|n| n.checked_mul(3));
+        if expected != Some(data.len()) {
+            return Err(LossError::DataLength {
+                input: Input::Reference,
+                frames,
+                height,
+                width,
+                expected: expected.unwrap_or(usize::MAX),
+                got: data.len(),
+            });
+        }
+        Ok(Video8 {
+            frames,
+            height,
+            width,
+            data,
+        })
+    }
+
     /// The video of `video` when every value is exactly `k / 255` in f32 for an integer
     /// `k` (as the PNG reader stores 8-bit frames); `None` otherwise.
     pub fn from_exact(video: &Video<f32>) -> Option<Video8> {

@@ -33,7 +33,6 @@ impl<T: Real> Video<T> {
         width: usize,
         data: Vec<T>,
     ) -> Result<Self, LossError> {
-        let expected = frames * height * width * 3;
         if frames == 0 || height == 0 || width == 0 {
             return Err(LossError::Empty {
                 input,
@@ -42,13 +41,18 @@ impl<T: Real> Video<T> {
                 width,
             });
         }
-        if data.len() != expected {
+        // Checked: a shape read from a file header must not wrap around.
+        let expected = frames
+            .checked_mul(height)
+            .and_then(|n| n.checked_mul(width))
+            .and_then(|n| n.checked_mul(3));
+        if expected != Some(data.len()) {
             return Err(LossError::DataLength {
                 input,
                 frames,
                 height,
                 width,
-                expected,
+                expected: expected.unwrap_or(usize::MAX),
                 got: data.len(),
             });
         }
