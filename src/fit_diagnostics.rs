@@ -1065,8 +1065,6 @@ mod tests {
         let singles = [
             &files.fitted_gif,
             &files.side_by_side_gif,
-            &files.fitted_mp4,
-            &files.side_by_side_mp4,
             &files.wt_reference,
             &files.wt_fitted,
             &files.spectrum_reference,
@@ -1076,6 +1074,10 @@ mod tests {
         for p in all.chain(singles) {
             assert!(p.starts_with(&tmp.0), "{}", p.display());
             assert!(image::open(p).is_ok(), "{} unreadable", p.display());
+        }
+        for (p, frames) in [(&files.fitted_mp4, 6), (&files.side_by_side_mp4, 6)] {
+            assert!(p.starts_with(&tmp.0), "{}", p.display());
+            assert_eq!(r4d_video::probe(p).unwrap().frames, frames);
         }
         let spec = image::open(&files.spectrum_fitted).unwrap();
         // 4 frequency bins, each stretched to ceil(128 / 4) rows.

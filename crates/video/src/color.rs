@@ -36,8 +36,17 @@ fn q(x: f32) -> u8 {
 /// Converts an `h x w` RGB frame (`[0, 1]`, row-major, 3 values per pixel) to I420. An odd side
 /// is padded to even by repeating the last column or row.
 pub fn rgb_to_i420(rgb: &[f32], w: usize, h: usize) -> I420 {
+    rgb_to_i420_padded(rgb, w, h, w + (w & 1), h + (h & 1))
+}
+
+/// As [`rgb_to_i420`], padded (last column and row repeated) to `we x he` (even, at least
+/// `w x h`).
+pub fn rgb_to_i420_padded(rgb: &[f32], w: usize, h: usize, we: usize, he: usize) -> I420 {
     assert_eq!(rgb.len(), w * h * 3, "frame size");
-    let (we, he) = (w + (w & 1), h + (h & 1));
+    assert!(
+        we >= w && he >= h && we % 2 == 0 && he % 2 == 0,
+        "padded size"
+    );
     let (cw, ch) = (we / 2, he / 2);
     let mut data = vec![0u8; we * he + 2 * cw * ch];
     let (yp, uv) = data.split_at_mut(we * he);

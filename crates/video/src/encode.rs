@@ -9,7 +9,7 @@
 //! round-trip test checks >= 40 dB on every frame).
 
 use crate::avc::{annexb_units, nal_type, NAL_IDR, NAL_PPS, NAL_SPS};
-use crate::color::rgb_to_i420;
+use crate::color::rgb_to_i420_padded;
 use crate::demux::MAX_SIDE;
 use crate::error::{Result, VideoError};
 use crate::mux;
@@ -61,6 +61,15 @@ impl std::fmt::Debug for Mp4Writer {
     }
 }
 
+/// The smallest side OpenH264 encodes; smaller frames are padded up to it.
+pub const MIN_ENCODE_SIDE: usize = 16;
+
+/// The coded size of a `w x h` video: each side even and at least [`MIN_ENCODE_SIDE`].
+fn coded_size(w: usize, h: usize) -> (usize, usize) {
+    let side = |s: usize| (s + (s & 1)).max(MIN_ENCODE_SIDE);
+    (side(w), side(h))
+}
+
 /// Time scale and ticks per frame for `fps`: exact for rates with at most three decimals
 /// (30, 29.97 is 29970/1000, 12.5), else 90 kHz ticks.
 fn timing(fps: f64) -> (u32, u32) {
@@ -74,7 +83,8 @@ fn timing(fps: f64) -> (u32, u32) {
 
 impl Mp4Writer {
     /// Starts a video of `width x height` frames at `fps` frames per second. An odd side is
-    /// padded to even by repeating the last row or column (H.264 4:2:0 needs even sides).
+    /// padded to even by repeating the last row or column (H.264 4:2:0 needs even sides), and
+    /// a side under [`MIN_ENCODE_SIDE`] pixels is padded up to it the same way.
     pub fn create(path: &Path, width: usize, height: usize, fps: f64) -> Result<Self> {
         let err = |message: String| VideoError::Encode {
             path: path.to_path_buf(),
@@ -150,7 +160,8 @@ impl Mp4Writer {
                 self.width * self.height * 3
             )));
         }
-        let i420 = rgb_to_i420(rgb, self.width, self.height);
+        let (we, he) = coded_size(self.width, self.height);
+        let i420 = rgb_to_i420_padded(rgb, self.width, self.height, we, he);
         let yuv = YUVBuffer::from_vec(i420.data, i420.width, i420.height);
         let index = self.samples.len();
         let stream = self
@@ -199,9 +210,10 @@ impl Mp4Writer {
         if sps.len() < 4 {
             return Err(self.err("the encoder's sequence parameter set is too short"));
         }
+        let (we, he) = coded_size(self.width, self.height);
         let stream = mux::Stream {
-            width: (self.width + (self.width & 1)) as u16,
-            height: (self.height + (self.height & 1)) as u16,
+            width: we as u16,
+            height: he as u16,
             codec: *b"avc1",
             timescale: self.timescale,
             frame_ticks: self.frame_ticks,

@@ -39,7 +39,9 @@ mod resample;
 
 pub use decode::{probe, read_mp4, read_mp4_reference, Mp4Frames, Mp4Info, MAX_DECODED_BYTES};
 pub use demux::{MAX_MOOV_BYTES, MAX_SIDE};
-pub use encode::{write_mp4, Mp4Writer, MAX_ENCODE_LONG, MAX_ENCODE_SHORT, MAX_FPS};
+pub use encode::{
+    write_mp4, Mp4Writer, MAX_ENCODE_LONG, MAX_ENCODE_SHORT, MAX_FPS, MIN_ENCODE_SIDE,
+};
 pub use error::{Result, VideoError};
 pub use resample::{resample, resample_indices, MAX_FRAMES};
 

@@ -131,6 +131,15 @@ fn odd_sizes_are_padded_and_rates_kept() {
 }
 
 #[test]
+fn tiny_frames_are_padded_to_the_encoders_minimum() {
+    let v = clip(3, 5, 8);
+    let p = tmp("tiny.mp4");
+    write_mp4(&p, &v, 12.0).unwrap();
+    let info = probe(&p).unwrap();
+    assert_eq!((info.width, info.height, info.frames), (16, 16, 3));
+}
+
+#[test]
 fn writer_refuses_bad_frames_and_rates() {
     let p = tmp("bad.mp4");
     assert!(Mp4Writer::create(&p, 16, 16, 0.0).is_err());
