@@ -503,6 +503,7 @@ fn multi_view_fit_from_a_pacnerf_folder_recovers_youngs_modulus() {
         3,
         "one diagnostics folder per view"
     );
+    check_eval(&d, &run, e_true);
 }
 
 /// The frames of a video folder written as an H.264 MP4 at `fps`.
@@ -608,4 +609,167 @@ fn mp4_videos_are_read_where_the_layouts_put_them() {
         e.contains("frame_00001_take1.mp4") && e.contains("av01"),
         "{e}"
     );
+}
+
+fn json_of(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn run_ok(args: &[&str]) -> std::process::Output {
+    let out = r4d(args);
+    assert!(
+        out.status.success(),
+        "r4d {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// `r4d eval` on the fitted PAC-NeRF run: its video numbers are `r4d metrics`' on the frames it
+/// wrote, its 30 fps references are the nearest source frames, and its trajectory numbers are
+/// `r4d metrics-trajectory`'s on the point clouds; ground truth made by simulating the true
+/// parameters gives Chamfer 0 for a run holding the truth.
+fn check_eval(d: &Path, run: &Path, e_true: f64) {
+    // Ground truth: first a placeholder, so that eval simulates trajectories; then the true
+    // parameters' trajectory (from a copy of the run holding the truth) replaces it.
+    let pcd = d.join("pcd");
+    std::fs::create_dir_all(&pcd).unwrap();
+    let ds = load(d, &LoadOptions::default()).unwrap();
+    let n_gt = 6;
+    for k in 1..=n_gt {
+        std::fs::copy(d.join("point_cloud.ply"), pcd.join(format!("{k}.ply"))).unwrap();
+    }
+    let truth_run = run.with_file_name("truth_run");
+    copy_dir(run, &truth_run);
+    let mut params = json_of(&run.join("params.json"));
+    params["parts"][0]["E"] = serde_json::json!(e_true);
+    std::fs::write(truth_run.join("params.json"), params.to_string()).unwrap();
+    run_ok(&["eval", truth_run.to_str().unwrap()]);
+    for k in 1..=n_gt {
+        std::fs::copy(
+            truth_run.join(format!("eval/trajectory/frame_{:04}.ply", k - 1)),
+            pcd.join(format!("{k}.ply")),
+        )
+        .unwrap();
+    }
+    run_ok(&["eval", truth_run.to_str().unwrap()]);
+    let truth = json_of(&truth_run.join("eval.json"));
+    assert_eq!(truth["chamfer"].as_f64(), Some(0.0), "{truth}");
+    assert_eq!(truth["f_score"].as_f64(), Some(1.0));
+
+    // The fitted run.
+    let out = run_ok(&[
+        "eval",
+        run.to_str().unwrap(),
+        "--json",
+        run.join("e.json").to_str().unwrap(),
+    ]);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        table.contains("MS-SSIM") && table.contains("Chamfer"),
+        "{table}"
+    );
+    let ev = json_of(&run.join("e.json"));
+    for key in [
+        "ms_ssim",
+        "psnr",
+        "lpips_alex",
+        "lpips_vgg",
+        "peak_memory_bytes",
+        "chamfer",
+        "hd95",
+        "f_score",
+        "fps",
+        "frames",
+    ] {
+        assert!(ev.get(key).is_some(), "eval.json lacks {key}: {ev}");
+    }
+    assert_eq!(ev["fps"].as_f64(), Some(30.0));
+    assert_eq!(ev["views"].as_array().unwrap().len(), 3);
+    assert!(ev["chamfer"].as_f64().unwrap() < 1e-3, "{ev}");
+
+    // 30 fps references: the nearest source frames.
+    let src_fps = ds.views[0].video.fps;
+    let src = ds.views[0].video.read().unwrap();
+    let conv: r4d_loss::Video<f32> =
+        r4d_loss::io::read_video(&run.join("eval/view_0/reference")).unwrap();
+    assert_eq!(conv.frames(), ev["frames"].as_u64().unwrap() as usize);
+    assert_eq!(
+        conv.frames(),
+        ((src.frames() - 1) as f64 * 30.0 / src_fps).floor() as usize + 1
+    );
+    for k in 0..conv.frames() {
+        let j = ((k as f64 * src_fps / 30.0).round() as usize).min(src.frames() - 1);
+        assert_eq!(
+            conv.frame(k),
+            src.frame(j),
+            "30 fps frame {k} is source frame {j}"
+        );
+    }
+
+    // Video numbers = `r4d metrics` on the frames eval measured.
+    let m = run_ok(&[
+        "metrics",
+        "--json",
+        "--reference",
+        run.join("eval/view_0/reference").to_str().unwrap(),
+        "--rendered",
+        run.join("eval/view_0/rendered").to_str().unwrap(),
+    ]);
+    let m: serde_json::Value = serde_json::from_slice(&m.stdout).unwrap();
+    let v0 = &ev["views"][0];
+    for key in ["psnr", "ssim", "ms_ssim"] {
+        assert_eq!(
+            m[key], v0[key],
+            "{key}: metrics {} vs eval {}",
+            m[key], v0[key]
+        );
+    }
+    assert_eq!(
+        m["ms_ssim_small_window"]["value"],
+        v0["ms_ssim_small_window"]["value"]
+    );
+
+    // Trajectory numbers = `r4d metrics-trajectory` on the same point clouds (ground truth
+    // renamed so that name order is frame order).
+    let gt_sorted = run.join("gt_sorted");
+    std::fs::create_dir_all(&gt_sorted).unwrap();
+    for k in 1..=n_gt {
+        std::fs::copy(
+            pcd.join(format!("{k}.ply")),
+            gt_sorted.join(format!("{k:04}.ply")),
+        )
+        .unwrap();
+    }
+    let t = run_ok(&[
+        "metrics-trajectory",
+        "--json",
+        "--tau",
+        "0.04",
+        "--reference",
+        gt_sorted.to_str().unwrap(),
+        "--simulated",
+        run.join("eval/trajectory").to_str().unwrap(),
+    ]);
+    let t: serde_json::Value = serde_json::from_slice(&t.stdout).unwrap();
+    assert_eq!(t["cd"], ev["chamfer"]);
+    assert_eq!(t["hd95"], ev["hd95"]);
+    assert_eq!(t["fscore"], ev["f_score"]);
+
+    // A run folder whose parameters do not fit the scene is refused, naming the file.
+    let other = run.with_file_name("other_run");
+    copy_dir(run, &other);
+    let mut p = json_of(&other.join("params.json"));
+    p["parts"][0]["material"] = serde_json::json!("sand");
+    std::fs::write(other.join("params.json"), p.to_string()).unwrap();
+    let out = r4d(&["eval", other.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("params.json") && err.contains("another scene"),
+        "{err}"
+    );
+    let out = r4d(&["eval", d.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("invocation.json"));
 }

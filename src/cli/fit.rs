@@ -177,6 +177,13 @@ fn video_views(a: &FitArgs, cams_path: &Path) -> Result<(Vec<View>, r4d_splat::C
     Ok((views, set))
 }
 
+impl FitArgs {
+    /// The dataset folder of `--dataset`, if given.
+    pub(crate) fn dataset_dir(&self) -> Option<&Path> {
+        self.dataset.as_deref()
+    }
+}
+
 /// The common frame rate of the MP4s among `videos` (`None` when there are none); MP4s at
 /// different rates need `--fps`.
 fn mp4_fps(videos: &[PathBuf]) -> Result<Option<f64>> {

@@ -3,6 +3,7 @@
 mod bench_scale;
 mod dataset;
 mod demo;
+mod eval;
 mod fit;
 mod fit_trajectory;
 mod metrics;
@@ -49,6 +50,9 @@ enum Command {
     BenchScale(bench_scale::BenchScaleArgs),
     /// Dataset folders (PhysFlow's release, PhysDreamer, PAC-NeRF): `dataset inspect DIR`.
     Dataset(dataset::DatasetArgs),
+    /// The paper's evaluation of a fit's run folder: videos at 30 fps (MS-SSIM, PSNR, LPIPS),
+    /// peak memory, and Chamfer / HD95 / F-score where the dataset has ground truth.
+    Eval(eval::EvalArgs),
 }
 
 /// Compute backend.
@@ -77,6 +81,7 @@ pub fn main() -> std::process::ExitCode {
         Command::MetricsTrajectory(a) => metrics_trajectory::run(a),
         Command::Segment(a) => segment::run(a),
         Command::Dataset(a) => dataset::run(a),
+        Command::Eval(a) => eval::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

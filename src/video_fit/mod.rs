@@ -16,6 +16,7 @@
 
 pub mod config;
 pub mod dataset;
+pub mod eval;
 pub mod fit;
 pub mod params;
 pub mod parts;
