@@ -1,5 +1,6 @@
 //! Command-line interface: argument parsing and backend selection at runtime.
 
+mod ablate;
 mod bench_scale;
 mod dataset;
 mod demo;
@@ -53,6 +54,11 @@ enum Command {
     /// The paper's evaluation of a fit's run folder: videos at 30 fps (MS-SSIM, PSNR, LPIPS),
     /// peak memory, and Chamfer / HD95 / F-score where the dataset has ground truth.
     Eval(eval::EvalArgs),
+    /// The paper's ablations (Tables 4-7) on a dataset: every variant fitted and evaluated;
+    /// `--shard I/N` for a cluster.
+    Ablate(ablate::AblateArgs),
+    /// Combine the shards of `r4d ablate --shard` into OUT/ablation.json.
+    Merge(ablate::MergeArgs),
 }
 
 /// Compute backend.
@@ -82,6 +88,8 @@ pub fn main() -> std::process::ExitCode {
         Command::Segment(a) => segment::run(a),
         Command::Dataset(a) => dataset::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Ablate(a) => ablate::run(a),
+        Command::Merge(a) => ablate::run_merge(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,0 +1,564 @@
+//! `r4d ablate` and `r4d merge`: the paper's ablations (Tables 4-7) as one runner, sharded for
+//! a cluster's scheduler.
+//!
+//! A study is a fixed, ordered list of variants of the fit settings. Each variant is fitted
+//! with `r4d fit` and measured with `r4d eval`, each in its own process (so its peak memory is
+//! its own) and its own run folder; a variant whose run folder already holds `eval.json` for
+//! the same settings is not run again, and one interrupted mid-fit continues with `r4d fit
+//! --resume`, so a killed ablation loses at most the variant in progress. `--shard I/N` (I in
+//! 0..N) runs the variants whose index is `I mod N` and writes `OUT/shard-I-of-N/`; `r4d merge
+//! OUT` checks that the shards present cover every variant exactly once and writes
+//! `OUT/ablation.json`, the same file an unsharded run writes.
+
+use anyhow::{bail, Context, Result};
+use r4d_loss::{Ablation, DmsWeights};
+use resonance4d::video_fit::report::write_json;
+use resonance4d::video_fit::{FitConfig, Granularity};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+/// The ablation studies of the paper.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Study {
+    /// Table 4: L1, SSIM, L1+FFT, SSIM+FFT.
+    Loss,
+    /// Table 5: Latin-hypercube initialisation vs the config's start.
+    Init,
+    /// Table 6: one parameter set per particle, per object, per part.
+    Granularity,
+    /// Table 7: density free vs fixed.
+    Density,
+}
+
+impl Study {
+    fn name(self) -> &'static str {
+        match self {
+            Study::Loss => "loss",
+            Study::Init => "init",
+            Study::Granularity => "granularity",
+            Study::Density => "density",
+        }
+    }
+
+    fn parse(s: &str) -> Option<Study> {
+        [Study::Loss, Study::Init, Study::Granularity, Study::Density]
+            .into_iter()
+            .find(|x| x.name() == s)
+    }
+}
+
+/// One variant: its label, its folder name and its settings.
+struct Variant {
+    label: &'static str,
+    slug: &'static str,
+    cfg: FitConfig,
+}
+
+/// The variants of `study` from the base settings `base` (whose free parameters per part are
+/// `free`, names as in FIT.toml).
+fn variants(study: Study, base: &FitConfig, free: &[Vec<String>]) -> Vec<Variant> {
+    let with = |label, slug, f: &dyn Fn(&mut FitConfig)| {
+        let mut cfg = base.clone();
+        f(&mut cfg);
+        Variant { label, slug, cfg }
+    };
+    let loss = |a: Ablation| move |c: &mut FitConfig| c.loss.weights = DmsWeights::ablation(a);
+    let density = |free_density: bool| {
+        move |c: &mut FitConfig| {
+            c.free = None;
+            c.parts = free
+                .iter()
+                .enumerate()
+                .map(|(id, names)| {
+                    let mut names: Vec<String> =
+                        names.iter().filter(|n| *n != "density").cloned().collect();
+                    if free_density {
+                        names.push("density".into());
+                    }
+                    let mut p = base
+                        .parts
+                        .iter()
+                        .find(|p| p.id == id)
+                        .cloned()
+                        .unwrap_or_default();
+                    p.id = id;
+                    p.free = Some(names);
+                    p
+                })
+                .collect();
+        }
+    };
+    match study {
+        Study::Loss => vec![
+            with("L1", "l1", &loss(Ablation::L1)),
+            with("SSIM", "ssim", &loss(Ablation::Ssim)),
+            with("L1+FFT", "l1_fft", &loss(Ablation::L1Fft)),
+            with("SSIM+FFT", "ssim_fft", &loss(Ablation::SsimFft)),
+        ],
+        Study::Init => vec![
+            with("config start", "config_start", &|c| c.init.enabled = false),
+            with("LHS init", "lhs", &|c| c.init.enabled = true),
+        ],
+        Study::Granularity => vec![
+            with("particle", "particle", &|c| {
+                c.granularity = Granularity::Particle
+            }),
+            with("object", "object", &|c| c.granularity = Granularity::Object),
+            with("part", "part", &|c| c.granularity = Granularity::Part),
+        ],
+        Study::Density => vec![
+            with("density fixed", "density_fixed", &density(false)),
+            with("density free", "density_free", &density(true)),
+        ],
+    }
+}
+
+/// `--shard I/N`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Shard {
+    i: usize,
+    n: usize,
+}
+
+fn parse_shard(s: &str) -> Result<Shard> {
+    let bad = || {
+        anyhow::anyhow!(
+            "--shard {s}: expected I/N with 0 <= I < N (e.g. 0/4 .. 3/4; Slurm: $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT)"
+        )
+    };
+    let (i, n) = s.split_once('/').ok_or_else(bad)?;
+    let (i, n): (usize, usize) = (
+        i.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if n == 0 || i >= n || n > 100_000 {
+        return Err(bad());
+    }
+    Ok(Shard { i, n })
+}
+
+fn shard_dir(out: &Path, s: Shard) -> PathBuf {
+    out.join(format!("shard-{}-of-{}", s.i, s.n))
+}
+
+/// Arguments of `r4d ablate`.
+#[derive(clap::Args, Debug)]
+pub struct AblateArgs {
+    /// The dataset folder (as `r4d fit --dataset`).
+    #[arg(long)]
+    dataset: PathBuf,
+    /// Which table: loss (4), init (5), granularity (6), density (7).
+    #[arg(long, value_enum)]
+    study: Study,
+    /// Base fit settings (FIT.toml); each variant changes only what it ablates.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Output folder: run folders, per-variant eval.json, ablation.json.
+    #[arg(long)]
+    out: PathBuf,
+    /// Run only the variants of shard I of N (index mod N = I) into OUT/shard-I-of-N/.
+    #[arg(long)]
+    shard: Option<String>,
+    /// Physics config (as `r4d fit --sim`).
+    #[arg(long)]
+    sim: Option<PathBuf>,
+    /// Fit only the views of these cameras (as `r4d fit --camera`; repeatable).
+    #[arg(long = "camera", value_name = "NAME|INDEX")]
+    camera: Vec<String>,
+    /// LPIPS weights for `r4d eval` (repeatable).
+    #[arg(long = "lpips-weights", value_name = "FILE")]
+    lpips_weights: Vec<PathBuf>,
+}
+
+/// Arguments of `r4d merge`.
+#[derive(clap::Args, Debug)]
+pub struct MergeArgs {
+    /// The output folder of the sharded `r4d ablate` runs.
+    out: PathBuf,
+}
+
+fn r4d(args: &[String]) -> Result<()> {
+    let exe = std::env::current_exe().context("locating the r4d executable")?;
+    // The child's report goes to our stderr: stdout carries only the ablation table.
+    let st = std::process::Command::new(&exe)
+        .args(args)
+        .stdout(std::process::Stdio::from(std::io::stderr()))
+        .status()
+        .with_context(|| format!("running {} {}", exe.display(), args.join(" ")))?;
+    if !st.success() {
+        bail!("`r4d {}` failed ({st})", args.join(" "));
+    }
+    Ok(())
+}
+
+fn read_json(path: &Path) -> Result<Value> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))
+}
+
+/// Fits and evaluates one variant in `dir` (reusing what a previous run finished), and
+/// returns its row.
+fn run_variant(a: &AblateArgs, v: &Variant, dir: &Path) -> Result<Value> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let settings = json!({ "variant": v.slug, "dataset": a.dataset, "sim": a.sim, "camera": a.camera, "config": v.cfg });
+    let marker = dir.join("variant.json");
+    let same = marker.is_file() && read_json(&marker)? == settings;
+    if !same {
+        // Another variant's or older settings: start this folder afresh.
+        for f in [
+            "eval.json",
+            "params.json",
+            "checkpoint.json",
+            "invocation.json",
+        ] {
+            let _ = std::fs::remove_file(dir.join(f));
+        }
+        write_json(&marker, &settings)?;
+    }
+    let d = |p: &Path| p.display().to_string();
+    if !(same && dir.join("eval.json").is_file()) {
+        if !(same && dir.join("params.json").is_file()) {
+            if same
+                && dir.join("checkpoint.json").is_file()
+                && dir.join("invocation.json").is_file()
+            {
+                eprintln!("ablate: {} resumes", v.label);
+                r4d(&["fit".into(), "--resume".into(), d(dir)])?;
+            } else {
+                let toml_path = dir.join("fit.toml");
+                let text = toml::to_string(&v.cfg).context("writing the variant's FIT.toml")?;
+                std::fs::write(&toml_path, text)
+                    .with_context(|| format!("writing {}", toml_path.display()))?;
+                let mut args: Vec<String> = vec![
+                    "fit".into(),
+                    "--dataset".into(),
+                    d(&a.dataset),
+                    "--config".into(),
+                    d(&toml_path),
+                    "--out".into(),
+                    d(dir),
+                ];
+                if let Some(s) = &a.sim {
+                    args.extend(["--sim".into(), d(s)]);
+                }
+                for c in &a.camera {
+                    args.extend(["--camera".into(), c.clone()]);
+                }
+                eprintln!("ablate: fitting {}", v.label);
+                r4d(&args)?;
+            }
+        }
+        let mut args: Vec<String> = vec!["eval".into(), d(dir)];
+        for w in &a.lpips_weights {
+            args.extend(["--lpips-weights".into(), d(w)]);
+        }
+        r4d(&args)?;
+    }
+    let ev = read_json(&dir.join("eval.json"))?;
+    let params = read_json(&dir.join("params.json"))?;
+    let mut row = json!({ "variant": v.label, "slug": v.slug, "params": params["parts"] });
+    for k in [
+        "ms_ssim",
+        "ms_ssim_small_window",
+        "psnr",
+        "psnr_video",
+        "lpips_alex",
+        "lpips_vgg",
+        "chamfer",
+        "hd95",
+        "f_score",
+    ] {
+        row[k] = ev[k].clone();
+    }
+    Ok(row)
+}
+
+/// Free parameter names per part of the dataset's config under `cfg`.
+fn free_names(a: &AblateArgs, cfg: &FitConfig) -> Result<Vec<Vec<String>>> {
+    let opts = r4d_datasets::LoadOptions {
+        sim: a.sim.clone(),
+        ..Default::default()
+    };
+    let ds = r4d_datasets::load(&a.dataset, &opts)?;
+    let kinds = cfg.free_kinds(&ds.config.parts)?;
+    Ok(kinds
+        .iter()
+        .map(|ks| ks.iter().map(|k| k.name().to_string()).collect())
+        .collect())
+}
+
+/// Runs `r4d ablate`.
+pub fn run(a: AblateArgs) -> Result<()> {
+    let shard = a.shard.as_deref().map(parse_shard).transpose()?;
+    let base = match &a.config {
+        Some(p) => FitConfig::load(p)?,
+        None => FitConfig::default(),
+    };
+    let free = free_names(&a, &base)?;
+    let all = variants(a.study, &base, &free);
+    let mine: Vec<usize> = (0..all.len())
+        .filter(|i| shard.is_none_or(|s| i % s.n == s.i))
+        .collect();
+    let root = match shard {
+        Some(s) => shard_dir(&a.out, s),
+        None => a.out.join("runs"),
+    };
+    // Checked before any long work: the folders can be made.
+    std::fs::create_dir_all(&root).with_context(|| format!("creating {}", root.display()))?;
+    let mut rows = Vec::new();
+    for (k, &i) in mine.iter().enumerate() {
+        eprintln!(
+            "ablate {}: variant {}/{} ({})",
+            a.study.name(),
+            k + 1,
+            mine.len(),
+            all[i].label
+        );
+        rows.push(run_variant(&a, &all[i], &root.join(all[i].slug))?);
+    }
+    match shard {
+        Some(s) => {
+            let rec = json!({
+                "study": a.study.name(),
+                "shard": s.i,
+                "of": s.n,
+                "variants": mine.iter().map(|&i| all[i].slug).collect::<Vec<_>>(),
+                "rows": rows,
+            });
+            write_json(&shard_dir(&a.out, s).join("shard.json"), &rec)?;
+            eprintln!(
+                "shard {}/{} done ({} variant(s)); combine the shards with `r4d merge {}`",
+                s.i,
+                s.n,
+                mine.len(),
+                a.out.display()
+            );
+        }
+        None => {
+            let table = json!({ "study": a.study.name(), "rows": rows });
+            write_json(&a.out.join("ablation.json"), &table)?;
+            println!("{}", print_table(&table));
+        }
+    }
+    Ok(())
+}
+
+/// Runs `r4d merge`.
+pub fn run_merge(a: MergeArgs) -> Result<()> {
+    let mut shards: Vec<(Shard, PathBuf)> = Vec::new();
+    let rd = std::fs::read_dir(&a.out).with_context(|| format!("reading {}", a.out.display()))?;
+    for e in rd.filter_map(|e| e.ok()) {
+        let name = e.file_name().to_string_lossy().to_string();
+        let Some(rest) = name.strip_prefix("shard-") else {
+            continue;
+        };
+        let Some((i, n)) = rest.split_once("-of-") else {
+            continue;
+        };
+        if let (Ok(i), Ok(n)) = (i.parse::<usize>(), n.parse::<usize>()) {
+            shards.push((Shard { i, n }, e.path()));
+        }
+    }
+    if shards.is_empty() {
+        bail!(
+            "{}: no shard-I-of-N folders (run `r4d ablate --shard I/N --out {}` first)",
+            a.out.display(),
+            a.out.display()
+        );
+    }
+    shards.sort_by_key(|s| (s.0.n, s.0.i));
+    let n = shards[0].0.n;
+    if let Some(other) = shards.iter().find(|s| s.0.n != n) {
+        bail!(
+            "{} and {} split the work differently (N = {n} and {}): their variants overlap; keep one split",
+            shards[0].1.display(),
+            other.1.display(),
+            other.0.n
+        );
+    }
+    let have: Vec<usize> = shards.iter().map(|s| s.0.i).collect();
+    let missing: Vec<String> = (0..n)
+        .filter(|i| !have.contains(i))
+        .map(|i| format!("shard-{i}-of-{n}"))
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "{}: missing {} (a gap: run `r4d ablate --shard I/{n}` for each)",
+            a.out.display(),
+            missing.join(", ")
+        );
+    }
+    let mut study: Option<String> = None;
+    let mut by_slug: Vec<(String, Value)> = Vec::new();
+    for (s, dir) in &shards {
+        let path = dir.join("shard.json");
+        if !path.is_file() {
+            bail!(
+                "{}: shard {}/{} has not finished (no shard.json)",
+                dir.display(),
+                s.i,
+                s.n
+            );
+        }
+        let rec = read_json(&path)?;
+        let st = rec["study"].as_str().unwrap_or_default().to_string();
+        match &study {
+            None => study = Some(st.clone()),
+            Some(x) if *x != st => bail!(
+                "{}: study '{st}', the other shards ran '{x}'",
+                path.display()
+            ),
+            _ => {}
+        }
+        if rec["shard"].as_u64() != Some(s.i as u64) || rec["of"].as_u64() != Some(n as u64) {
+            bail!(
+                "{}: records shard {}/{}, its folder says {}/{n}",
+                path.display(),
+                rec["shard"],
+                rec["of"],
+                s.i
+            );
+        }
+        for row in rec["rows"].as_array().into_iter().flatten() {
+            let slug = row["slug"].as_str().unwrap_or_default().to_string();
+            if by_slug.iter().any(|(x, _)| *x == slug) {
+                bail!(
+                    "{}: variant '{slug}' is also in another shard (an overlap)",
+                    path.display()
+                );
+            }
+            by_slug.push((slug, row.clone()));
+        }
+    }
+    let study = study.unwrap_or_default();
+    let st =
+        Study::parse(&study).with_context(|| format!("unknown study '{study}' in the shards"))?;
+    // The study's variant order (settings do not change the names).
+    let order: Vec<&str> = variants(st, &FitConfig::default(), &[])
+        .iter()
+        .map(|v| v.slug)
+        .collect();
+    let mut rows = Vec::new();
+    for (i, slug) in order.iter().enumerate() {
+        let Some((_, row)) = by_slug.iter().find(|(s, _)| s == slug) else {
+            bail!(
+                "{}: variant '{slug}' is in no shard (it belongs to shard-{}-of-{n}, which did not run it)",
+                a.out.display(),
+                i % n
+            );
+        };
+        rows.push(row.clone());
+    }
+    if let Some((slug, _)) = by_slug.iter().find(|(s, _)| !order.contains(&s.as_str())) {
+        bail!(
+            "{}: variant '{slug}' is not part of the '{study}' study",
+            a.out.display()
+        );
+    }
+    let table = json!({ "study": study, "rows": rows });
+    write_json(&a.out.join("ablation.json"), &table)?;
+    println!("{}", print_table(&table));
+    Ok(())
+}
+
+/// The ablation table: one row per variant with the paper's columns.
+fn print_table(t: &Value) -> String {
+    let f = |v: &Value, d: usize| v.as_f64().map_or("n/a".to_string(), |x| format!("{x:.d$}"));
+    let rows = t["rows"].as_array().cloned().unwrap_or_default();
+    let traj = rows.iter().any(|r| !r["chamfer"].is_null());
+    let mut s = format!(
+        "study: {}\n{:<16} {:>9} {:>8} {:>11}",
+        t["study"].as_str().unwrap_or(""),
+        "variant",
+        "MS-SSIM^",
+        "PSNR^",
+        "LPIPS_"
+    );
+    if traj {
+        s.push_str(&format!(
+            " {:>12} {:>12} {:>9}",
+            "Chamfer_", "HD95_", "F-score^"
+        ));
+    }
+    for r in &rows {
+        let ms = if r["ms_ssim"].is_null() && !r["ms_ssim_small_window"].is_null() {
+            format!("{}*", f(&r["ms_ssim_small_window"], 4))
+        } else {
+            f(&r["ms_ssim"], 4)
+        };
+        let psnr = if r["psnr"].is_null() && !r["psnr_video"].is_null() {
+            format!("{}+", f(&r["psnr_video"], 2))
+        } else {
+            f(&r["psnr"], 2)
+        };
+        let lp = if r["lpips_alex"].is_null() {
+            f(&r["lpips_vgg"], 4)
+        } else {
+            f(&r["lpips_alex"], 4)
+        };
+        s.push_str(&format!(
+            "\n{:<16} {:>9} {:>8} {:>11}",
+            r["variant"].as_str().unwrap_or(""),
+            ms,
+            psnr,
+            lp
+        ));
+        if traj {
+            let e = |v: &Value| v.as_f64().map_or("n/a".into(), |x| format!("{x:.4e}"));
+            s.push_str(&format!(
+                " {:>12} {:>12} {:>9}",
+                e(&r["chamfer"]),
+                e(&r["hd95"]),
+                f(&r["f_score"], 4)
+            ));
+        }
+    }
+    s.push_str(
+        "\n(^ higher is better, _ lower is better; * small-window MS-SSIM; + whole-video PSNR)",
+    );
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_parse_and_partition() {
+        assert_eq!(parse_shard("1/3").unwrap(), Shard { i: 1, n: 3 });
+        for bad in ["3/3", "1", "a/2", "0/0", "-1/2"] {
+            assert!(parse_shard(bad).is_err(), "{bad}");
+        }
+        let v = variants(Study::Granularity, &FitConfig::default(), &[]);
+        let mut seen = vec![0; v.len()];
+        for i in 0..2 {
+            for k in (0..v.len()).filter(|k| k % 2 == i) {
+                seen[k] += 1;
+            }
+        }
+        assert!(seen.iter().all(|&c| c == 1));
+    }
+
+    #[test]
+    fn variants_change_only_what_they_ablate() {
+        let base = FitConfig::default();
+        let free = vec![vec!["E".to_string(), "density".to_string()]];
+        let v = variants(Study::Density, &base, &free);
+        assert_eq!(
+            v[0].cfg.parts[0].free.as_deref(),
+            Some(&["E".to_string()][..])
+        );
+        assert_eq!(
+            v[1].cfg.parts[0].free.as_deref(),
+            Some(&["E".to_string(), "density".to_string()][..])
+        );
+        let l = variants(Study::Loss, &base, &free);
+        assert_eq!(l[0].cfg.loss.weights, DmsWeights::ablation(Ablation::L1));
+        assert_eq!(l[0].cfg.loss.spectral, base.loss.spectral);
+        assert_eq!(l[0].cfg.iters, base.iters);
+    }
+}
