@@ -133,3 +133,94 @@ fn ablations_shard_merge_and_refuse_broken_shard_sets() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--shard 2/2"));
 }
+
+#[test]
+fn sharded_initialisation_merges_and_resumes_to_the_unsharded_fit() {
+    let base = tmp("lhs");
+    let ds = common::fixture("datasets").join("pacnerf/toyball");
+    let ds = ds.to_str().unwrap();
+    let cfg = base.join("fit.toml");
+    std::fs::write(
+        &cfg,
+        "iters = 2\nlr = 0.1\n[init]\ncandidates = 5\nframes = 2\n",
+    )
+    .unwrap();
+    let cfg = cfg.to_str().unwrap();
+    let full = base.join("full");
+    ok(&[
+        "fit",
+        "--dataset",
+        ds,
+        "--config",
+        cfg,
+        "--out",
+        full.to_str().unwrap(),
+    ]);
+    let sh = base.join("sharded");
+    let s = sh.to_str().unwrap();
+    for i in ["2/3", "0/3"] {
+        ok(&[
+            "fit",
+            "--dataset",
+            ds,
+            "--config",
+            cfg,
+            "--out",
+            s,
+            "--shard",
+            i,
+        ]);
+    }
+    let out = r4d(&["merge", s]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("shard-1-of-3"));
+    ok(&[
+        "fit",
+        "--dataset",
+        ds,
+        "--config",
+        cfg,
+        "--out",
+        s,
+        "--shard",
+        "1/3",
+    ]);
+    let merged = ok(&["merge", s]);
+    assert!(merged.contains("5 candidates from 3 shard(s)"), "{merged}");
+    assert_eq!(json(&sh.join("init.json")), json(&full.join("init.json")));
+    ok(&["fit", "--resume", s]);
+    assert_eq!(
+        std::fs::read(sh.join("params.json")).unwrap(),
+        std::fs::read(full.join("params.json")).unwrap()
+    );
+    // A shard of another fit's settings is refused.
+    let other = base.join("other.toml");
+    std::fs::write(&other, "iters = 2\n[init]\ncandidates = 5\nframes = 3\n").unwrap();
+    let mixed = base.join("mixed");
+    let m = mixed.to_str().unwrap();
+    ok(&[
+        "fit",
+        "--dataset",
+        ds,
+        "--config",
+        cfg,
+        "--out",
+        m,
+        "--shard",
+        "0/2",
+    ]);
+    ok(&[
+        "fit",
+        "--dataset",
+        ds,
+        "--config",
+        other.to_str().unwrap(),
+        "--out",
+        m,
+        "--shard",
+        "1/2",
+    ]);
+    let out = r4d(&["merge", m]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("different fits"));
+}

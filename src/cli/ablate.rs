@@ -118,12 +118,12 @@ fn variants(study: Study, base: &FitConfig, free: &[Vec<String>]) -> Vec<Variant
 
 /// `--shard I/N`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Shard {
-    i: usize,
-    n: usize,
+pub(crate) struct Shard {
+    pub(crate) i: usize,
+    pub(crate) n: usize,
 }
 
-fn parse_shard(s: &str) -> Result<Shard> {
+pub(crate) fn parse_shard(s: &str) -> Result<Shard> {
     let bad = || {
         anyhow::anyhow!(
             "--shard {s}: expected I/N with 0 <= I < N (e.g. 0/4 .. 3/4; Slurm: $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT)"
@@ -347,10 +347,10 @@ pub fn run(a: AblateArgs) -> Result<()> {
     Ok(())
 }
 
-/// Runs `r4d merge`.
-pub fn run_merge(a: MergeArgs) -> Result<()> {
+/// The shard folders of `out`: one split, no gap, every shard finished; with their records.
+fn collect_shards(out: &Path) -> Result<Vec<(Shard, PathBuf, Value)>> {
     let mut shards: Vec<(Shard, PathBuf)> = Vec::new();
-    let rd = std::fs::read_dir(&a.out).with_context(|| format!("reading {}", a.out.display()))?;
+    let rd = std::fs::read_dir(out).with_context(|| format!("reading {}", out.display()))?;
     for e in rd.filter_map(|e| e.ok()) {
         let name = e.file_name().to_string_lossy().to_string();
         let Some(rest) = name.strip_prefix("shard-") else {
@@ -365,16 +365,16 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
     }
     if shards.is_empty() {
         bail!(
-            "{}: no shard-I-of-N folders (run `r4d ablate --shard I/N --out {}` first)",
-            a.out.display(),
-            a.out.display()
+            "{}: no shard-I-of-N folders (run `r4d ablate --shard I/N` or `r4d fit --shard I/N` with --out {} first)",
+            out.display(),
+            out.display()
         );
     }
     shards.sort_by_key(|s| (s.0.n, s.0.i));
     let n = shards[0].0.n;
     if let Some(other) = shards.iter().find(|s| s.0.n != n) {
         bail!(
-            "{} and {} split the work differently (N = {n} and {}): their variants overlap; keep one split",
+            "{} and {} split the work differently (N = {n} and {}): their work overlaps; keep one split",
             shards[0].1.display(),
             other.1.display(),
             other.0.n
@@ -387,14 +387,14 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
         .collect();
     if !missing.is_empty() {
         bail!(
-            "{}: missing {} (a gap: run `r4d ablate --shard I/{n}` for each)",
-            a.out.display(),
+            "{}: missing {} (a gap: run shard I/{n} for each)",
+            out.display(),
             missing.join(", ")
         );
     }
-    let mut study: Option<String> = None;
-    let mut by_slug: Vec<(String, Value)> = Vec::new();
-    for (s, dir) in &shards {
+    let mut recs = Vec::new();
+    let mut kind: Option<String> = None;
+    for (s, dir) in shards {
         let path = dir.join("shard.json");
         if !path.is_file() {
             bail!(
@@ -405,15 +405,6 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
             );
         }
         let rec = read_json(&path)?;
-        let st = rec["study"].as_str().unwrap_or_default().to_string();
-        match &study {
-            None => study = Some(st.clone()),
-            Some(x) if *x != st => bail!(
-                "{}: study '{st}', the other shards ran '{x}'",
-                path.display()
-            ),
-            _ => {}
-        }
         if rec["shard"].as_u64() != Some(s.i as u64) || rec["of"].as_u64() != Some(n as u64) {
             bail!(
                 "{}: records shard {}/{}, its folder says {}/{n}",
@@ -422,6 +413,39 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
                 rec["of"],
                 s.i
             );
+        }
+        let k = rec["kind"].as_str().unwrap_or("ablation").to_string();
+        match &kind {
+            None => kind = Some(k),
+            Some(x) if *x != k => {
+                bail!("{}: a shard of {k}, the others are of {x}", path.display())
+            }
+            _ => {}
+        }
+        recs.push((s, path, rec));
+    }
+    Ok(recs)
+}
+
+/// Runs `r4d merge`: ablation shards into `ablation.json`, initialisation shards (`r4d fit
+/// --shard`) into the run's `init.json` and `checkpoint.json`.
+pub fn run_merge(a: MergeArgs) -> Result<()> {
+    let recs = collect_shards(&a.out)?;
+    if recs[0].2["kind"] == "init" {
+        return merge_init(&a.out, &recs);
+    }
+    let n = recs[0].0.n;
+    let mut study: Option<String> = None;
+    let mut by_slug: Vec<(String, Value)> = Vec::new();
+    for (_, path, rec) in &recs {
+        let st = rec["study"].as_str().unwrap_or_default().to_string();
+        match &study {
+            None => study = Some(st.clone()),
+            Some(x) if *x != st => bail!(
+                "{}: study '{st}', the other shards ran '{x}'",
+                path.display()
+            ),
+            _ => {}
         }
         for row in rec["rows"].as_array().into_iter().flatten() {
             let slug = row["slug"].as_str().unwrap_or_default().to_string();
@@ -462,6 +486,93 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
     let table = json!({ "study": study, "rows": rows });
     write_json(&a.out.join("ablation.json"), &table)?;
     println!("{}", print_table(&table));
+    Ok(())
+}
+
+/// Initialisation shards: every candidate exactly once, ranked as one unsharded
+/// initialisation ranks them; writes `init.json` and a `checkpoint.json` after the
+/// initialisation, so `r4d fit --resume OUT` optimises from the best candidate.
+fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
+    use r4d_optim::{Candidate, InitOutcome};
+    let first = &recs[0].2;
+    let n = recs[0].0.n;
+    let total = first["total"].as_u64().context("shard.json: no 'total'")? as usize;
+    let mut slots: Vec<Option<Candidate>> = (0..total).map(|_| None).collect();
+    for (s, path, rec) in recs {
+        for key in ["names", "total", "top_k", "fit_config"] {
+            if rec[key] != first[key] {
+                bail!(
+                    "{}: '{key}' differs from {}'s: the shards are of different fits",
+                    path.display(),
+                    recs[0].1.display()
+                );
+            }
+        }
+        let cands: Vec<Candidate> = serde_json::from_value(rec["candidates"].clone())
+            .with_context(|| format!("{}: bad candidates", path.display()))?;
+        for c in cands {
+            if c.index >= total || c.index % n != s.i {
+                bail!(
+                    "{}: candidate #{} does not belong to shard {}/{n} of {total}",
+                    path.display(),
+                    c.index,
+                    s.i
+                );
+            }
+            if slots[c.index].is_some() {
+                bail!(
+                    "{}: candidate #{} is also in another shard (an overlap)",
+                    path.display(),
+                    c.index
+                );
+            }
+            let i = c.index;
+            slots[i] = Some(c);
+        }
+    }
+    let missing: Vec<String> = slots
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.is_none())
+        .map(|(i, _)| format!("#{i} (shard {})", i % n))
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "{}: candidates {} were not evaluated (a gap)",
+            out.display(),
+            missing.join(", ")
+        );
+    }
+    let candidates: Vec<Candidate> = slots.into_iter().flatten().collect();
+    let top_k = first["top_k"].as_u64().unwrap_or(1) as usize;
+    let outcome = InitOutcome::from_candidates(candidates, top_k)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+    let names: Vec<String> = serde_json::from_value(first["names"].clone())?;
+    write_json(
+        &out.join("init.json"),
+        &json!({ "names": names, "outcome": outcome }),
+    )?;
+    let state = resonance4d::video_fit::FitState {
+        names: names.clone(),
+        init: Some(outcome.clone()),
+        iters_done: 0,
+        optimizer: None,
+        best: None,
+    };
+    write_json(&out.join("checkpoint.json"), &state)?;
+    let best = &outcome.candidates[outcome.ranking[0]];
+    let vals: Vec<String> = names
+        .iter()
+        .zip(&best.theta)
+        .map(|(k, v)| format!("{k}={v:.4e}"))
+        .collect();
+    println!(
+        "{total} candidates from {n} shard(s); best #{} MS-SSIM {:.4}: {}\ncontinue with `r4d fit --resume {}`",
+        best.index,
+        best.score.unwrap_or(f64::NAN),
+        vals.join(" "),
+        out.display()
+    );
     Ok(())
 }
 

@@ -83,6 +83,12 @@ pub struct FitArgs {
     #[arg(long)]
     #[serde(skip)]
     resume: Option<PathBuf>,
+    /// Evaluate only shard I of N of the initialisation's candidates (index mod N = I) into
+    /// OUT/shard-I-of-N/ and stop; `r4d merge OUT` ranks every shard's candidates and
+    /// `r4d fit --resume OUT` then optimises from the best (see docs/cluster.md).
+    #[arg(long)]
+    #[serde(skip)]
+    shard: Option<String>,
 }
 
 /// Reads a value or a list of values (invocation.json of runs made before a flag became
@@ -364,8 +370,70 @@ pub fn load_problem(a: &FitArgs) -> Result<(VideoProblem, bool)> {
     Ok((problem, false))
 }
 
+/// `--shard`: evaluates this shard's initialisation candidates into `OUT/shard-I-of-N/`.
+fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
+    let shard = super::ablate::parse_shard(spec)?;
+    if a.resume.is_some() {
+        bail!("--shard cannot be combined with --resume (merge the shards, then resume)");
+    }
+    let out = need(&a.out, "--out")?.clone();
+    let cfg = match &a.config {
+        Some(p) => FitConfig::load(p)?,
+        None => FitConfig::default(),
+    };
+    if !cfg.init.enabled {
+        bail!("--shard splits the initialisation's candidates, and [init] enabled = false in the fit settings");
+    }
+    let (mut problem, _) = load_problem(a)?;
+    problem.gpu = gpu_for(&a.backend)?;
+    let dir = out.join(format!("shard-{}-of-{}", shard.i, shard.n));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    // The run the merged shards continue: these arguments without --shard.
+    let mut whole = a.clone();
+    whole.shard = None;
+    write_json(&out.join("invocation.json"), &whole)?;
+    write_json(&out.join("fit_config.json"), &cfg)?;
+    let mut hooks = resonance4d::video_fit::fit::NoHooks;
+    let (names, total, candidates) = resonance4d::video_fit::fit::initialize_shard(
+        &problem,
+        &cfg,
+        (shard.i, shard.n),
+        &mut hooks,
+    )?;
+    let rec = serde_json::json!({
+        "kind": "init",
+        "shard": shard.i,
+        "of": shard.n,
+        "names": names,
+        "total": total,
+        "top_k": cfg.init.top_k,
+        "fit_config": cfg,
+        "candidates": candidates,
+    });
+    write_json(&dir.join("shard.json"), &rec)?;
+    let best = candidates
+        .iter()
+        .filter_map(|c| c.score.map(|s| (s, c.index)))
+        .max_by(|a, b| a.0.total_cmp(&b.0));
+    eprintln!(
+        "initialisation shard {}/{}: {} of {} candidates{}; combine the shards with `r4d merge {}`",
+        shard.i,
+        shard.n,
+        candidates.len(),
+        total,
+        best.map_or(String::new(), |(s, i)| format!(
+            ", best #{i} MS-SSIM {s:.4}"
+        )),
+        out.display()
+    );
+    Ok(())
+}
+
 /// Runs the command.
 pub fn run(a: FitArgs) -> Result<()> {
+    if let Some(spec) = a.shard.clone() {
+        return run_init_shard(&a, &spec);
+    }
     let (a, out, resume) = match &a.resume {
         Some(dir) => {
             let inv = dir.join("invocation.json");

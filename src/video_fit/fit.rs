@@ -11,6 +11,7 @@ use r4d_mpm::PartParams;
 use r4d_optim::{
     Candidate, InitOutcome, LatinHypercubeInit, LogDomainOptimizer, ParamKind, SearchSpace,
 };
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -190,13 +191,11 @@ fn init_space(cfg: &FitConfig, parts: &[PartParams]) -> Result<ParamSpace, FitEr
     Ok(ParamSpace::new(g, &free, &ids, |p, k| cfg.bounds(p, k)))
 }
 
-/// Simulation-driven initialisation: Latin hypercube candidates in log10 space, each
-/// simulated for `init.frames` frames and scored by MS-SSIM against the reference.
-pub fn initialize(
-    problem: &VideoProblem,
+/// The initialisation's objective (first `init.frames` frames), search space and sampler.
+fn init_setup<'a>(
+    problem: &'a VideoProblem,
     cfg: &FitConfig,
-    hooks: &mut dyn FitHooks,
-) -> Result<(ParamSpace, InitOutcome), FitError> {
+) -> Result<(ParamSpace, Objective<'a>, SearchSpace, LatinHypercubeInit), FitError> {
     let parts = &problem.config.parts;
     let space = init_space(cfg, parts)?;
     let mut obj = Objective::new(problem, Some(cfg.init.frames), &cfg.loss, false)?;
@@ -217,12 +216,31 @@ pub fn initialize(
             Vec::new()
         },
     };
-    let evaluate = |_i: usize, theta: &[f64]| -> Result<f64, String> {
-        let mut slots = parts.clone();
-        space.apply(&mut slots, theta);
-        let videos = obj.render(&slots).map_err(|e| e.to_string())?;
-        ms_ssim_score(problem, &videos).map_err(|e| e.to_string())
-    };
+    Ok((space, obj, search, init))
+}
+
+/// MS-SSIM of the candidate `theta` (the initialisation's score).
+fn score_candidate(
+    problem: &VideoProblem,
+    obj: &Objective,
+    space: &ParamSpace,
+    theta: &[f64],
+) -> Result<f64, String> {
+    let mut slots = problem.config.parts.clone();
+    space.apply(&mut slots, theta);
+    let videos = obj.render(&slots).map_err(|e| e.to_string())?;
+    ms_ssim_score(problem, &videos).map_err(|e| e.to_string())
+}
+
+/// Simulation-driven initialisation: Latin hypercube candidates in log10 space, each
+/// simulated for `init.frames` frames and scored by MS-SSIM against the reference.
+pub fn initialize(
+    problem: &VideoProblem,
+    cfg: &FitConfig,
+    hooks: &mut dyn FitHooks,
+) -> Result<(ParamSpace, InitOutcome), FitError> {
+    let (space, obj, search, init) = init_setup(problem, cfg)?;
+    let evaluate = |_i: usize, theta: &[f64]| score_candidate(problem, &obj, &space, theta);
     let (tx, rx) = std::sync::mpsc::channel::<Candidate>();
     let tx = std::sync::Mutex::new(tx);
     let outcome = std::thread::scope(|s| {
@@ -246,6 +264,54 @@ pub fn initialize(
     })?;
     hooks.on_init(&outcome, &search.names);
     Ok((space, outcome))
+}
+
+/// One shard of the initialisation (for a cluster): the candidates whose index is
+/// `shard mod of`, evaluated exactly as [`initialize`] evaluates them. Returns the free
+/// parameters' names, the number of candidates in all shards, and this shard's candidates.
+/// [`InitOutcome::from_candidates`] on the union of every shard's candidates (in index order)
+/// gives what [`initialize`] gives.
+pub fn initialize_shard(
+    problem: &VideoProblem,
+    cfg: &FitConfig,
+    (shard, of): (usize, usize),
+    hooks: &mut dyn FitHooks,
+) -> Result<(Vec<String>, usize, Vec<Candidate>), FitError> {
+    if of == 0 || shard >= of {
+        return Err(FitError::Input(format!(
+            "shard {shard} of {of}: need 0 <= I < N"
+        )));
+    }
+    let (space, obj, search, init) = init_setup(problem, cfg)?;
+    let points = init
+        .sample(&search)
+        .map_err(|e| FitError::Input(format!("initialisation: {e}")))?;
+    let total = points.len();
+    let mine: Vec<(usize, Vec<f64>)> = points
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| i % of == shard)
+        .collect();
+    let candidates: Vec<Candidate> = mine
+        .into_par_iter()
+        .map(|(index, theta)| {
+            let (score, error) = match score_candidate(problem, &obj, &space, &theta) {
+                Ok(s) if s.is_nan() => (None, Some("score is NaN".to_string())),
+                Ok(s) => (Some(s), None),
+                Err(e) => (None, Some(e)),
+            };
+            Candidate {
+                index,
+                theta,
+                score,
+                error,
+            }
+        })
+        .collect();
+    for c in &candidates {
+        hooks.on_candidate(c);
+    }
+    Ok((search.names, total, candidates))
 }
 
 /// Runs a whole fit of `problem` with `cfg`, continuing from `resume` when given.
