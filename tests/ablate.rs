@@ -31,6 +31,19 @@ fn ok(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).to_string()
 }
 
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let t = to.join(e.file_name());
+        if e.path().is_dir() {
+            copy_dir(&e.path(), &t);
+        } else {
+            std::fs::copy(e.path(), &t).unwrap();
+        }
+    }
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -85,11 +98,11 @@ fn ablations_shard_merge_and_refuse_broken_shard_sets() {
     // The density variants differ in exactly the free density.
     let t = json(&base.join("density/ablation.json"));
     let fixed = &t["rows"][0]["params"][0]["density"];
-    let start = json(&base.join("density/runs/density_fixed/params.json"));
+    let start = json(&base.join("density/runs/toyball/density_fixed/params.json"));
     assert_eq!(*fixed, start["parts"][0]["density"]);
 
     // A finished variant is not fitted again.
-    let p = base.join("loss/runs/l1/params.json");
+    let p = base.join("loss/runs/toyball/l1/params.json");
     let before = std::fs::metadata(&p).unwrap().modified().unwrap();
     abl("loss", &base.join("loss"), None);
     assert_eq!(std::fs::metadata(&p).unwrap().modified().unwrap(), before);
@@ -110,13 +123,61 @@ fn ablations_shard_merge_and_refuse_broken_shard_sets() {
         std::fs::read(base.join("loss/ablation.json")).unwrap()
     );
     let s0 = json(&sh.join("shard-0-of-2/shard.json"));
-    assert_eq!(s0["variants"], serde_json::json!(["l1", "l1_fft"]));
+    assert_eq!(
+        s0["items"],
+        serde_json::json!(["toyball/l1", "toyball/l1_fft"])
+    );
 
     // An overlap: a shard of another split in the same folder.
     std::fs::create_dir_all(sh.join("shard-0-of-3")).unwrap();
     let out = r4d(&["merge", sh.to_str().unwrap()]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("overlap"));
+
+    // The main table over a list of scenes, sharded across them.
+    let scenes = base.join("scenes");
+    for name in ["ball_a", "ball_b"] {
+        copy_dir(
+            &common::fixture("datasets").join("pacnerf/toyball"),
+            &scenes.join(name),
+        );
+        let cfg_json = scenes.join(name).join("toyball_config.json");
+        std::fs::rename(
+            &cfg_json,
+            scenes.join(name).join(format!("{name}_config.json")),
+        )
+        .unwrap();
+    }
+    let (a_, b_) = (scenes.join("ball_a"), scenes.join("ball_b"));
+    let main_args = |out: &Path, shard: Option<&str>| {
+        let mut v: Vec<String> = ["ablate", "--study", "main", "--config", cfg]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        for d in [&a_, &b_] {
+            v.extend(["--dataset".into(), d.display().to_string()]);
+        }
+        v.extend(["--out".into(), out.display().to_string()]);
+        if let Some(s) = shard {
+            v.extend(["--shard".into(), s.into()]);
+        }
+        v
+    };
+    let run = |args: Vec<String>| ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let whole = base.join("main_whole");
+    let table = run(main_args(&whole, None));
+    assert!(
+        table.contains("ball_a") && table.contains("ball_b"),
+        "{table}"
+    );
+    let split = base.join("main_split");
+    run(main_args(&split, Some("0/2")));
+    run(main_args(&split, Some("1/2")));
+    ok(&["merge", split.to_str().unwrap()]);
+    assert_eq!(
+        std::fs::read(split.join("ablation.json")).unwrap(),
+        std::fs::read(whole.join("ablation.json")).unwrap()
+    );
 
     // Bad --shard values are refused before any work.
     let out = r4d(&[

@@ -1,5 +1,5 @@
-//! `r4d ablate` and `r4d merge`: the paper's ablations (Tables 4-7) as one runner, sharded for
-//! a cluster's scheduler.
+//! `r4d ablate` and `r4d merge`: the paper's ablations (Tables 4-7), and its main tables over
+//! a list of scenes (`--study main`), as one runner sharded for a cluster's scheduler.
 //!
 //! A study is a fixed, ordered list of variants of the fit settings. Each variant is fitted
 //! with `r4d fit` and measured with `r4d eval`, each in its own process (so its peak memory is
@@ -23,6 +23,8 @@ use std::path::{Path, PathBuf};
 )]
 #[serde(rename_all = "snake_case")]
 pub enum Study {
+    /// Tables 2-3: the fit as configured (one variant), for a list of scenes.
+    Main,
     /// Table 4: L1, SSIM, L1+FFT, SSIM+FFT.
     Loss,
     /// Table 5: Latin-hypercube initialisation vs the config's start.
@@ -36,6 +38,7 @@ pub enum Study {
 impl Study {
     fn name(self) -> &'static str {
         match self {
+            Study::Main => "main",
             Study::Loss => "loss",
             Study::Init => "init",
             Study::Granularity => "granularity",
@@ -44,9 +47,15 @@ impl Study {
     }
 
     fn parse(s: &str) -> Option<Study> {
-        [Study::Loss, Study::Init, Study::Granularity, Study::Density]
-            .into_iter()
-            .find(|x| x.name() == s)
+        [
+            Study::Main,
+            Study::Loss,
+            Study::Init,
+            Study::Granularity,
+            Study::Density,
+        ]
+        .into_iter()
+        .find(|x| x.name() == s)
     }
 }
 
@@ -92,6 +101,7 @@ fn variants(study: Study, base: &FitConfig, free: &[Vec<String>]) -> Vec<Variant
         }
     };
     match study {
+        Study::Main => vec![with("Resonance4D", "main", &|_| {})],
         Study::Loss => vec![
             with("L1", "l1", &loss(Ablation::L1)),
             with("SSIM", "ssim", &loss(Ablation::Ssim)),
@@ -147,10 +157,12 @@ fn shard_dir(out: &Path, s: Shard) -> PathBuf {
 /// Arguments of `r4d ablate`.
 #[derive(clap::Args, Debug)]
 pub struct AblateArgs {
-    /// The dataset folder (as `r4d fit --dataset`).
-    #[arg(long)]
-    dataset: PathBuf,
-    /// Which table: loss (4), init (5), granularity (6), density (7).
+    /// A dataset folder (as `r4d fit --dataset`); repeatable: every variant runs on every
+    /// scene, and the work items (scene x variant) are what `--shard` splits.
+    #[arg(long, required = true)]
+    dataset: Vec<PathBuf>,
+    /// Which table: main (Tables 2-3: the fit as configured, per scene), loss (4), init (5),
+    /// granularity (6), density (7).
     #[arg(long, value_enum)]
     study: Study,
     /// Base fit settings (FIT.toml); each variant changes only what it ablates.
@@ -202,9 +214,15 @@ fn read_json(path: &Path) -> Result<Value> {
 
 /// Fits and evaluates one variant in `dir` (reusing what a previous run finished), and
 /// returns its row.
-fn run_variant(a: &AblateArgs, v: &Variant, dir: &Path) -> Result<Value> {
+fn run_variant(
+    a: &AblateArgs,
+    dataset: &Path,
+    scene: &str,
+    v: &Variant,
+    dir: &Path,
+) -> Result<Value> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let settings = json!({ "variant": v.slug, "dataset": a.dataset, "sim": a.sim, "camera": a.camera, "config": v.cfg });
+    let settings = json!({ "variant": v.slug, "dataset": dataset, "sim": a.sim, "camera": a.camera, "config": v.cfg });
     let marker = dir.join("variant.json");
     let same = marker.is_file() && read_json(&marker)? == settings;
     if !same {
@@ -236,7 +254,7 @@ fn run_variant(a: &AblateArgs, v: &Variant, dir: &Path) -> Result<Value> {
                 let mut args: Vec<String> = vec![
                     "fit".into(),
                     "--dataset".into(),
-                    d(&a.dataset),
+                    d(dataset),
                     "--config".into(),
                     d(&toml_path),
                     "--out".into(),
@@ -260,7 +278,8 @@ fn run_variant(a: &AblateArgs, v: &Variant, dir: &Path) -> Result<Value> {
     }
     let ev = read_json(&dir.join("eval.json"))?;
     let params = read_json(&dir.join("params.json"))?;
-    let mut row = json!({ "variant": v.label, "slug": v.slug, "params": params["parts"] });
+    let mut row =
+        json!({ "scene": scene, "variant": v.label, "slug": v.slug, "params": params["parts"] });
     for k in [
         "ms_ssim",
         "ms_ssim_small_window",
@@ -278,17 +297,36 @@ fn run_variant(a: &AblateArgs, v: &Variant, dir: &Path) -> Result<Value> {
 }
 
 /// Free parameter names per part of the dataset's config under `cfg`.
-fn free_names(a: &AblateArgs, cfg: &FitConfig) -> Result<Vec<Vec<String>>> {
+fn free_names(a: &AblateArgs, dataset: &Path, cfg: &FitConfig) -> Result<Vec<Vec<String>>> {
     let opts = r4d_datasets::LoadOptions {
         sim: a.sim.clone(),
         ..Default::default()
     };
-    let ds = r4d_datasets::load(&a.dataset, &opts)?;
+    let ds = r4d_datasets::load(dataset, &opts)?;
     let kinds = cfg.free_kinds(&ds.config.parts)?;
     Ok(kinds
         .iter()
         .map(|ks| ks.iter().map(|k| k.name().to_string()).collect())
         .collect())
+}
+
+/// The scene names of the datasets (folder names; must differ).
+fn scene_names(datasets: &[PathBuf]) -> Result<Vec<String>> {
+    let mut names: Vec<String> = Vec::new();
+    for d in datasets {
+        let n = d
+            .canonicalize()
+            .unwrap_or_else(|_| d.clone())
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or("scene")
+            .to_string();
+        if names.contains(&n) {
+            bail!("--dataset {}: another --dataset is also named '{n}' (scenes are told apart by folder name)", d.display());
+        }
+        names.push(n);
+    }
+    Ok(names)
 }
 
 /// Runs `r4d ablate`.
@@ -298,10 +336,15 @@ pub fn run(a: AblateArgs) -> Result<()> {
         Some(p) => FitConfig::load(p)?,
         None => FitConfig::default(),
     };
-    let free = free_names(&a, &base)?;
-    let all = variants(a.study, &base, &free);
-    let mine: Vec<usize> = (0..all.len())
-        .filter(|i| shard.is_none_or(|s| i % s.n == s.i))
+    let scenes = scene_names(&a.dataset)?;
+    // Work items in order: scene-major, then the study's variants.
+    let mut items: Vec<(usize, Variant)> = Vec::new();
+    for (j, d) in a.dataset.iter().enumerate() {
+        let free = free_names(&a, d, &base)?;
+        items.extend(variants(a.study, &base, &free).into_iter().map(|v| (j, v)));
+    }
+    let mine: Vec<usize> = (0..items.len())
+        .filter(|k| shard.is_none_or(|s| k % s.n == s.i))
         .collect();
     let root = match shard {
         Some(s) => shard_dir(&a.out, s),
@@ -310,28 +353,33 @@ pub fn run(a: AblateArgs) -> Result<()> {
     // Checked before any long work: the folders can be made.
     std::fs::create_dir_all(&root).with_context(|| format!("creating {}", root.display()))?;
     let mut rows = Vec::new();
-    for (k, &i) in mine.iter().enumerate() {
+    for (n, &k) in mine.iter().enumerate() {
+        let (j, v) = &items[k];
         eprintln!(
-            "ablate {}: variant {}/{} ({})",
+            "ablate {}: {}/{}: {} on {}",
             a.study.name(),
-            k + 1,
+            n + 1,
             mine.len(),
-            all[i].label
+            v.label,
+            scenes[*j]
         );
-        rows.push(run_variant(&a, &all[i], &root.join(all[i].slug))?);
+        let dir = root.join(&scenes[*j]).join(v.slug);
+        rows.push(run_variant(&a, &a.dataset[*j], &scenes[*j], v, &dir)?);
     }
+    let key = |k: usize| format!("{}/{}", scenes[items[k].0], items[k].1.slug);
     match shard {
         Some(s) => {
             let rec = json!({
                 "study": a.study.name(),
                 "shard": s.i,
                 "of": s.n,
-                "variants": mine.iter().map(|&i| all[i].slug).collect::<Vec<_>>(),
+                "scenes": scenes,
+                "items": mine.iter().map(|&k| key(k)).collect::<Vec<_>>(),
                 "rows": rows,
             });
             write_json(&shard_dir(&a.out, s).join("shard.json"), &rec)?;
             eprintln!(
-                "shard {}/{} done ({} variant(s)); combine the shards with `r4d merge {}`",
+                "shard {}/{} done ({} run(s)); combine the shards with `r4d merge {}`",
                 s.i,
                 s.n,
                 mine.len(),
@@ -339,7 +387,7 @@ pub fn run(a: AblateArgs) -> Result<()> {
             );
         }
         None => {
-            let table = json!({ "study": a.study.name(), "rows": rows });
+            let table = json!({ "study": a.study.name(), "scenes": scenes, "rows": rows });
             write_json(&a.out.join("ablation.json"), &table)?;
             println!("{}", print_table(&table));
         }
@@ -435,55 +483,64 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
         return merge_init(&a.out, &recs);
     }
     let n = recs[0].0.n;
-    let mut study: Option<String> = None;
-    let mut by_slug: Vec<(String, Value)> = Vec::new();
+    let (study, scenes) = (&recs[0].2["study"], &recs[0].2["scenes"]);
+    let mut by_key: Vec<(String, Value)> = Vec::new();
     for (_, path, rec) in &recs {
-        let st = rec["study"].as_str().unwrap_or_default().to_string();
-        match &study {
-            None => study = Some(st.clone()),
-            Some(x) if *x != st => bail!(
-                "{}: study '{st}', the other shards ran '{x}'",
-                path.display()
-            ),
-            _ => {}
+        if rec["study"] != *study || rec["scenes"] != *scenes {
+            bail!(
+                "{}: study {} on scenes {}, the first shard ran {study} on {scenes}: the shards are of different runs",
+                path.display(),
+                rec["study"],
+                rec["scenes"]
+            );
         }
         for row in rec["rows"].as_array().into_iter().flatten() {
-            let slug = row["slug"].as_str().unwrap_or_default().to_string();
-            if by_slug.iter().any(|(x, _)| *x == slug) {
+            let key = format!(
+                "{}/{}",
+                row["scene"].as_str().unwrap_or_default(),
+                row["slug"].as_str().unwrap_or_default()
+            );
+            if by_key.iter().any(|(x, _)| *x == key) {
                 bail!(
-                    "{}: variant '{slug}' is also in another shard (an overlap)",
+                    "{}: '{key}' is also in another shard (an overlap)",
                     path.display()
                 );
             }
-            by_slug.push((slug, row.clone()));
+            by_key.push((key, row.clone()));
         }
     }
-    let study = study.unwrap_or_default();
+    let study = study.as_str().unwrap_or_default().to_string();
     let st =
         Study::parse(&study).with_context(|| format!("unknown study '{study}' in the shards"))?;
-    // The study's variant order (settings do not change the names).
-    let order: Vec<&str> = variants(st, &FitConfig::default(), &[])
+    let scene_list: Vec<String> =
+        serde_json::from_value(scenes.clone()).context("shard.json: bad 'scenes'")?;
+    // Scene-major, then the study's variant order (settings do not change the names).
+    let order: Vec<String> = scene_list
         .iter()
-        .map(|v| v.slug)
+        .flat_map(|sc| {
+            variants(st, &FitConfig::default(), &[])
+                .into_iter()
+                .map(move |v| format!("{sc}/{}", v.slug))
+        })
         .collect();
     let mut rows = Vec::new();
-    for (i, slug) in order.iter().enumerate() {
-        let Some((_, row)) = by_slug.iter().find(|(s, _)| s == slug) else {
+    for (i, key) in order.iter().enumerate() {
+        let Some((_, row)) = by_key.iter().find(|(k, _)| k == key) else {
             bail!(
-                "{}: variant '{slug}' is in no shard (it belongs to shard-{}-of-{n}, which did not run it)",
+                "{}: '{key}' is in no shard (it belongs to shard-{}-of-{n}, which did not run it)",
                 a.out.display(),
                 i % n
             );
         };
         rows.push(row.clone());
     }
-    if let Some((slug, _)) = by_slug.iter().find(|(s, _)| !order.contains(&s.as_str())) {
+    if let Some((key, _)) = by_key.iter().find(|(k, _)| !order.contains(k)) {
         bail!(
-            "{}: variant '{slug}' is not part of the '{study}' study",
+            "{}: '{key}' is not part of the '{study}' study on these scenes",
             a.out.display()
         );
     }
-    let table = json!({ "study": study, "rows": rows });
+    let table = json!({ "study": study, "scenes": scene_list, "rows": rows });
     write_json(&a.out.join("ablation.json"), &table)?;
     println!("{}", print_table(&table));
     Ok(())
@@ -582,8 +639,9 @@ fn print_table(t: &Value) -> String {
     let rows = t["rows"].as_array().cloned().unwrap_or_default();
     let traj = rows.iter().any(|r| !r["chamfer"].is_null());
     let mut s = format!(
-        "study: {}\n{:<16} {:>9} {:>8} {:>11}",
+        "study: {}\n{:<14} {:<16} {:>9} {:>8} {:>11}",
         t["study"].as_str().unwrap_or(""),
+        "scene",
         "variant",
         "MS-SSIM^",
         "PSNR^",
@@ -612,7 +670,8 @@ fn print_table(t: &Value) -> String {
             f(&r["lpips_alex"], 4)
         };
         s.push_str(&format!(
-            "\n{:<16} {:>9} {:>8} {:>11}",
+            "\n{:<14} {:<16} {:>9} {:>8} {:>11}",
+            r["scene"].as_str().unwrap_or(""),
             r["variant"].as_str().unwrap_or(""),
             ms,
             psnr,
