@@ -772,4 +772,11 @@ fn check_eval(d: &Path, run: &Path, e_true: f64) {
     let out = r4d(&["eval", d.to_str().unwrap()]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("invocation.json"));
+
+    // A gap in the ground truth is an error naming the missing file, not a shorter truth.
+    std::fs::remove_file(pcd.join("3.ply")).unwrap();
+    let out = r4d(&["eval", run.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("3.ply"), "{err}");
 }

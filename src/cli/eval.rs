@@ -150,10 +150,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
         .with_context(|| format!("loading the inputs {} names", inv.display()))?;
     let (slots, per_particle) = fitted_slots(dir, &problem)?;
     let peak = peak_memory(dir)?;
-    let gt = fit
-        .dataset_dir()
-        .map(|d| r4d_datasets::GroundTruth::from_pcd(d).point_clouds)
-        .unwrap_or_default();
+    let gt = match fit.dataset_dir() {
+        Some(d) => r4d_datasets::GroundTruth::from_pcd(d)?.point_clouds,
+        None => Vec::new(),
+    };
 
     eprintln!(
         "evaluating {} view(s) at {} fps{}",

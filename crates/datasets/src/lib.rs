@@ -109,13 +109,57 @@ pub struct GroundTruth {
 }
 
 impl GroundTruth {
-    /// PhysFlow's `DIR/pcd/1.ply, 2.ply, ...` (up to the first missing number).
-    pub fn from_pcd(dir: &Path) -> GroundTruth {
-        let point_clouds = (1..)
-            .map(|k| dir.join("pcd").join(format!("{k}.ply")))
-            .take_while(|f| f.is_file())
-            .collect();
-        GroundTruth { point_clouds }
+    /// PhysFlow's `DIR/pcd/1.ply, 2.ply, ..., n.ply` (none without `pcd/`). The numbers
+    /// must run from 1 without a gap: a missing file is an error naming it, not a silently
+    /// shorter ground truth.
+    pub fn from_pcd(dir: &Path) -> Result<GroundTruth> {
+        let pcd = dir.join("pcd");
+        if !pcd.is_dir() {
+            return Ok(GroundTruth::default());
+        }
+        let rd = std::fs::read_dir(&pcd).map_err(|source| DatasetError::Io {
+            path: pcd.clone(),
+            source,
+        })?;
+        let mut numbers: Vec<u64> = Vec::new();
+        for e in rd.filter_map(|e| e.ok()) {
+            let p = e.path();
+            if !p.extension().is_some_and(|x| x.eq_ignore_ascii_case("ply")) {
+                continue;
+            }
+            let n = p
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .and_then(|s| s.parse::<u64>().ok())
+                .filter(|&n| n >= 1)
+                .ok_or_else(|| {
+                    DatasetError::invalid(
+                        &p,
+                        "ground-truth point clouds are named 1.ply, 2.ply, ... (frame k - 1)",
+                    )
+                })?;
+            numbers.push(n);
+        }
+        numbers.sort_unstable();
+        for (i, &n) in numbers.iter().enumerate() {
+            let want = i as u64 + 1;
+            if n != want {
+                return Err(DatasetError::missing(
+                    &pcd.join(format!("{want}.ply")),
+                    &format!(
+                        "ground-truth frame {} (pcd/ holds up to {}.ply)",
+                        want - 1,
+                        numbers.last().copied().unwrap_or(0)
+                    ),
+                ));
+            }
+        }
+        Ok(GroundTruth {
+            point_clouds: numbers
+                .iter()
+                .map(|k| pcd.join(format!("{k}.ply")))
+                .collect(),
+        })
     }
 }
 

@@ -266,7 +266,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
         cameras: cams,
         background: [1.0; 3],
         views,
-        ground_truth: GroundTruth::from_pcd(dir),
+        ground_truth: GroundTruth::from_pcd(dir)?,
         physflow: Some(cfg.extras.clone()),
         warnings,
     })

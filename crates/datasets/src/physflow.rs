@@ -280,7 +280,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
             camera,
             video,
         }],
-        ground_truth: GroundTruth::from_pcd(dir),
+        ground_truth: GroundTruth::from_pcd(dir)?,
         physflow: Some(cfg.extras.clone()),
         warnings,
     })
