@@ -145,8 +145,8 @@ impl GroundTruth {
             let want = i as u64 + 1;
             if n != want {
                 return Err(DatasetError::missing(
-                    &pcd.join(format!("{want}.ply")),
-                    &format!(
+                    pcd.join(format!("{want}.ply")),
+                    format!(
                         "ground-truth frame {} (pcd/ holds up to {}.ply)",
                         want - 1,
                         numbers.last().copied().unwrap_or(0)
