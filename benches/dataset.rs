@@ -40,7 +40,11 @@ fn scene(root: &Path) -> (PathBuf, PathBuf) {
     let dir = root.join("model/phys_dreamer/toyphone");
     copy_dir(&fixtures.join("model/phys_dreamer/toyphone"), &dir);
     let cfg = fixtures.join("config/phys_dreamer/toyphone_config.json");
-    let pc = dir.join("point_cloud/iteration_30/point_cloud.ply");
+    // The fixture's inpainted background is SH degree 1; the scene here is degree 3 (as
+    // PhysFlow's scenes are), so leave the background out.
+    std::fs::remove_file(dir.join("inpaint_points.ply")).expect("inpaint_points.ply");
+    // The loader reads the largest iteration; the fixture's is 7000.
+    let pc = dir.join("point_cloud/iteration_7000/point_cloud.ply");
     let src = r4d_splat::ply::read_gaussians(&pc).expect("fixture");
     let k = r4d_splat::gaussians::sh_coeffs(3);
     let mut g = r4d_splat::Gaussians {
