@@ -216,3 +216,36 @@ fn other_codecs_and_broken_files_are_typed_errors() {
         let _ = probe(&q);
     }
 }
+
+#[test]
+fn corrupt_h264_payloads_are_errors_or_frames_never_crashes() {
+    let v = clip(6, 64, 96);
+    let p = tmp("payload.mp4");
+    write_mp4(&p, &v, 30.0).unwrap();
+    let good = std::fs::read(&p).unwrap();
+    let mdat = find(&good, b"mdat", 0) + 4;
+    let q = tmp("payload_bad.mp4");
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let (mut ok, mut err) = (0, 0);
+    for round in 0..300 {
+        let mut bad = good.clone();
+        // 1 to 8 random bytes of the coded frames changed.
+        for _ in 0..1 + round % 8 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let i = mdat + (state >> 20) as usize % (good.len() - mdat);
+            bad[i] = (state >> 8) as u8;
+        }
+        std::fs::write(&q, &bad).unwrap();
+        match read_mp4::<f32>(&q, None) {
+            Ok(v) => {
+                assert_eq!(v.frames(), 6);
+                assert!(v.data().iter().all(|x| (0.0..=1.0).contains(x)));
+                ok += 1;
+            }
+            Err(_) => err += 1,
+        }
+    }
+    eprintln!("corrupted payloads: {ok} decoded, {err} typed errors");
+}
