@@ -553,7 +553,19 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
     use r4d_optim::{Candidate, InitOutcome};
     let first = &recs[0].2;
     let n = recs[0].0.n;
-    let total = first["total"].as_u64().context("shard.json: no 'total'")? as usize;
+    let total = first["total"].as_u64().context("shard.json: no 'total'")?;
+    // The candidates the shards hold bound what is allocated (a hand-edited `total` must not).
+    let held: usize = recs
+        .iter()
+        .map(|r| r.2["candidates"].as_array().map_or(0, |c| c.len()))
+        .sum();
+    if total != held as u64 {
+        bail!(
+            "{}: the shards hold {held} candidates, their shard.json files say {total} (a gap or an overlap)",
+            out.display()
+        );
+    }
+    let total = held;
     let mut slots: Vec<Option<Candidate>> = (0..total).map(|_| None).collect();
     for (s, path, rec) in recs {
         for key in ["names", "total", "top_k", "fit_config"] {
