@@ -31,19 +31,6 @@ fn ok(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).to_string()
 }
 
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        let t = to.join(e.file_name());
-        if e.path().is_dir() {
-            copy_dir(&e.path(), &t);
-        } else {
-            std::fs::copy(e.path(), &t).unwrap();
-        }
-    }
-}
-
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -137,7 +124,7 @@ fn ablations_shard_merge_and_refuse_broken_shard_sets() {
     // The main table over a list of scenes, sharded across them.
     let scenes = base.join("scenes");
     for name in ["ball_a", "ball_b"] {
-        copy_dir(
+        common::copy_dir(
             &common::fixture("datasets").join("pacnerf/toyball"),
             &scenes.join(name),
         );

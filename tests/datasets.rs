@@ -30,19 +30,6 @@ fn tmp(name: &str) -> PathBuf {
     d
 }
 
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        let t = to.join(e.file_name());
-        if e.path().is_dir() {
-            copy_dir(&e.path(), &t);
-        } else {
-            std::fs::copy(e.path(), &t).unwrap();
-        }
-    }
-}
-
 fn r4d(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_r4d"))
         .args(args)
@@ -334,13 +321,13 @@ fn broken_folders_are_typed_errors_naming_the_file() {
     let base = tmp("broken");
     // A PAC-NeRF camera missing a frame file.
     let d = base.join("toyball");
-    copy_dir(&ds_fixture(PACNERF), &d);
+    common::copy_dir(&ds_fixture(PACNERF), &d);
     std::fs::remove_file(d.join("data/r_1_3.png")).unwrap();
     let e = load(&d, &LoadOptions::default()).unwrap_err().to_string();
     assert!(e.contains("r_1_3.png"), "{e}");
     // No physics config.
     let d = base.join("toyball2");
-    copy_dir(&ds_fixture(PACNERF), &d);
+    common::copy_dir(&ds_fixture(PACNERF), &d);
     std::fs::remove_file(d.join("toyball_config.json")).unwrap();
     let e = load(&d, &LoadOptions::default()).unwrap_err().to_string();
     assert!(
@@ -349,7 +336,7 @@ fn broken_folders_are_typed_errors_naming_the_file() {
     );
     // A config key PhysFlow would not accept.
     let d = base.join("toyball3");
-    copy_dir(&ds_fixture(PACNERF), &d);
+    common::copy_dir(&ds_fixture(PACNERF), &d);
     std::fs::write(
         d.join("toyball3_config.json"),
         r#"{"material": "honey", "g": [0, -9.8, 0]}"#,
@@ -362,7 +349,7 @@ fn broken_folders_are_typed_errors_naming_the_file() {
     );
     // A camera whose frames disagree with the others.
     let d = base.join("toyball4");
-    copy_dir(&ds_fixture(PACNERF), &d);
+    common::copy_dir(&ds_fixture(PACNERF), &d);
     std::fs::rename(
         d.join("toyball_config.json"),
         d.join("toyball4_config.json"),
@@ -445,7 +432,7 @@ fn render_references(ds: &Dataset) {
 fn multi_view_fit_from_a_pacnerf_folder_recovers_youngs_modulus() {
     let base = tmp("fit");
     let d = base.join("toyball");
-    copy_dir(&ds_fixture(PACNERF), &d);
+    common::copy_dir(&ds_fixture(PACNERF), &d);
     let truth = load(&d, &LoadOptions::default()).unwrap();
     assert_eq!(truth.views.len(), 3);
     render_references(&truth);
@@ -517,7 +504,7 @@ fn frames_to_mp4(frames: &Path, mp4: &Path, fps: f64) -> r4d_loss::Video<f32> {
 fn mp4_videos_are_read_where_the_layouts_put_them() {
     // PhysFlow: an MP4 in the scene folder wins over images_generated/, at its own rate.
     let dir = tmp("physflow_mp4").join("toyphone");
-    copy_dir(&ds_fixture(PHYSFLOW), &dir);
+    common::copy_dir(&ds_fixture(PHYSFLOW), &dir);
     let src = frames_to_mp4(
         &dir.join("images_generated"),
         &dir.join("toyphone.mp4"),
@@ -564,7 +551,7 @@ fn mp4_videos_are_read_where_the_layouts_put_them() {
 
     // PhysDreamer: videos/<image name>*.mp4 matched to its camera by prefix.
     let dir = tmp("physdreamer_mp4").join("toyplant");
-    copy_dir(&ds_fixture(PHYSDREAMER), &dir);
+    common::copy_dir(&ds_fixture(PHYSDREAMER), &dir);
     let vdir = dir.join("videos");
     for take in ["frame_00001_take1", "frame_00002_take1"] {
         frames_to_mp4(&vdir.join(take), &vdir.join(format!("{take}.mp4")), 30.0);
@@ -640,7 +627,7 @@ fn check_eval(d: &Path, run: &Path, e_true: f64) {
         std::fs::copy(d.join("point_cloud.ply"), pcd.join(format!("{k}.ply"))).unwrap();
     }
     let truth_run = run.with_file_name("truth_run");
-    copy_dir(run, &truth_run);
+    common::copy_dir(run, &truth_run);
     let mut params = json_of(&run.join("params.json"));
     params["parts"][0]["E"] = serde_json::json!(e_true);
     std::fs::write(truth_run.join("params.json"), params.to_string()).unwrap();
@@ -758,7 +745,7 @@ fn check_eval(d: &Path, run: &Path, e_true: f64) {
 
     // A run folder whose parameters do not fit the scene is refused, naming the file.
     let other = run.with_file_name("other_run");
-    copy_dir(run, &other);
+    common::copy_dir(run, &other);
     let mut p = json_of(&other.join("params.json"));
     p["parts"][0]["material"] = serde_json::json!("sand");
     std::fs::write(other.join("params.json"), p.to_string()).unwrap();

@@ -18,10 +18,7 @@ use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
 /// The ablation studies of the paper.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
-)]
-#[serde(rename_all = "snake_case")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Study {
     /// Tables 2-3: the fit as configured (one variant), for a list of scenes.
     Main,
@@ -36,26 +33,15 @@ pub enum Study {
 }
 
 impl Study {
-    fn name(self) -> &'static str {
-        match self {
-            Study::Main => "main",
-            Study::Loss => "loss",
-            Study::Init => "init",
-            Study::Granularity => "granularity",
-            Study::Density => "density",
-        }
+    /// The name on the command line and in the JSON files (clap's value name).
+    fn name(self) -> String {
+        clap::ValueEnum::to_possible_value(&self)
+            .map(|v| v.get_name().to_string())
+            .unwrap_or_default()
     }
 
     fn parse(s: &str) -> Option<Study> {
-        [
-            Study::Main,
-            Study::Loss,
-            Study::Init,
-            Study::Granularity,
-            Study::Density,
-        ]
-        .into_iter()
-        .find(|x| x.name() == s)
+        clap::ValueEnum::from_str(s, false).ok()
     }
 }
 
@@ -647,7 +633,7 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
 
 /// The ablation table: one row per variant with the paper's columns.
 fn print_table(t: &Value) -> String {
-    let f = |v: &Value, d: usize| v.as_f64().map_or("n/a".to_string(), |x| format!("{x:.d$}"));
+    let f = super::eval::num;
     let rows = t["rows"].as_array().cloned().unwrap_or_default();
     let traj = rows.iter().any(|r| !r["chamfer"].is_null());
     let mut s = format!(
@@ -666,16 +652,8 @@ fn print_table(t: &Value) -> String {
         ));
     }
     for r in &rows {
-        let ms = if r["ms_ssim"].is_null() && !r["ms_ssim_small_window"].is_null() {
-            format!("{}*", f(&r["ms_ssim_small_window"], 4))
-        } else {
-            f(&r["ms_ssim"], 4)
-        };
-        let psnr = if r["psnr"].is_null() && !r["psnr_video"].is_null() {
-            format!("{}+", f(&r["psnr_video"], 2))
-        } else {
-            f(&r["psnr"], 2)
-        };
+        let ms = super::eval::ms_ssim_cell(r);
+        let psnr = super::eval::psnr_cell(r);
         let lp = if r["lpips_alex"].is_null() {
             f(&r["lpips_vgg"], 4)
         } else {

@@ -256,23 +256,40 @@ fn scene_name(fit: &FitArgs, dir: &Path) -> String {
         .to_string()
 }
 
+/// A number with `d` decimals, or `n/a`.
+pub(crate) fn num(v: &Value, d: usize) -> String {
+    v.as_f64().map_or("n/a".to_string(), |x| format!("{x:.d$}"))
+}
+
+/// MS-SSIM of a report or row; the small-window value, marked `*`, when the standard one is
+/// undefined (frames <= 160 px).
+pub(crate) fn ms_ssim_cell(r: &Value) -> String {
+    if r["ms_ssim"].is_null() && !r["ms_ssim_small_window"].is_null() {
+        format!("{}*", num(&r["ms_ssim_small_window"], 4))
+    } else {
+        num(&r["ms_ssim"], 4)
+    }
+}
+
+/// PSNR (mean of frames) of a report or row; the whole-video value, marked `+`, when a frame
+/// is identical to its reference.
+pub(crate) fn psnr_cell(r: &Value) -> String {
+    if r["psnr"].is_null() && !r["psnr_video"].is_null() {
+        format!("{}+", num(&r["psnr_video"], 2))
+    } else {
+        num(&r["psnr"], 2)
+    }
+}
+
 /// The paper's columns: Table 2 (MS-SSIM, PSNR, LPIPS, memory) and, with ground truth, Table
 /// 3 (Chamfer, HD95, F-score).
 pub(crate) fn table(scene: &str, r: &Value) -> String {
-    let f = |v: &Value, d: usize| v.as_f64().map_or("n/a".to_string(), |x| format!("{x:.d$}"));
-    let ms = if r["ms_ssim"].is_null() && !r["ms_ssim_small_window"].is_null() {
-        format!("{}*", f(&r["ms_ssim_small_window"], 4))
-    } else {
-        f(&r["ms_ssim"], 4)
-    };
+    let f = num;
+    let ms = ms_ssim_cell(r);
     let mem = r["peak_memory_bytes"]
         .as_f64()
         .map_or("n/a".to_string(), |b| format!("{:.3}", b / 1e9));
-    let psnr = if r["psnr"].is_null() && !r["psnr_video"].is_null() {
-        format!("{}+", f(&r["psnr_video"], 2))
-    } else {
-        f(&r["psnr"], 2)
-    };
+    let psnr = psnr_cell(r);
     let mut s = format!(
         "{:<16} {:>9} {:>8} {:>12} {:>12} {:>11}\n{:<16} {:>9} {:>8} {:>12} {:>12} {:>11}",
         "scene",

@@ -134,6 +134,10 @@ pub fn evaluate_videos(
     })
 }
 
+/// The most simulated frames [`evaluate_trajectory`] runs (a frame rate and frame duration
+/// that disagree by orders of magnitude are refused, not simulated for hours).
+pub const MAX_TRAJECTORY_FRAMES: usize = 100_000;
+
 /// What [`evaluate_trajectory`] found.
 #[derive(Clone, Debug)]
 pub struct TrajectoryEval {
@@ -156,7 +160,10 @@ pub fn evaluate_trajectory(
             "no ground-truth point clouds (pcd/1.ply, 2.ply, ...) for trajectory metrics".into(),
         ));
     }
-    let reference: Vec<Vec<[f64; 3]>> = gt.iter().map(|f| read_xyz(f)).collect::<Result<_, _>>()?;
+    let reference: Vec<Vec<[f64; 3]>> = gt
+        .iter()
+        .map(|f| r4d_datasets::read_points(f).map_err(|e| FitError::Input(e.to_string())))
+        .collect::<Result<_, _>>()?;
     let mut sim = HostSim::new(&problem.config, &problem.particles)?;
     if per_particle {
         sim = sim.per_particle();
@@ -167,7 +174,15 @@ pub fn evaluate_trajectory(
     let at: Vec<f64> = (0..gt.len())
         .map(|j| j as f64 / (problem.fps * frame_dt))
         .collect();
-    let last = at.iter().fold(0.0f64, |a, &b| a.max(b)).ceil() as usize;
+    let last_f = at.iter().fold(0.0f64, |a, &b| a.max(b)).ceil();
+    if last_f > MAX_TRAJECTORY_FRAMES as f64 {
+        return Err(FitError::Input(format!(
+            "{} ground-truth frames at {} fps span {last_f} simulated frames of {frame_dt} s; the limit is {MAX_TRAJECTORY_FRAMES}",
+            gt.len(),
+            problem.fps
+        )));
+    }
+    let last = last_f as usize;
     let phys: Vec<PhysParams<f64>> = slots.iter().map(PhysParams::of).collect();
     let mut s = sim.init(&phys, &vec![[0.0; 3]; sim.len()]);
     let stepper = ParallelHost::<f64>::new(&sim);
@@ -212,17 +227,4 @@ pub fn evaluate_trajectory(
     let metrics = trajectory_metrics(&simulated, &reference, &[DEFAULT_TAU])
         .map_err(|e| FitError::Input(format!("trajectory metrics: {e}")))?;
     Ok(TrajectoryEval { metrics, simulated })
-}
-
-/// The `x, y, z` of a PLY point cloud.
-fn read_xyz(path: &std::path::Path) -> Result<Vec<[f64; 3]>, FitError> {
-    let ply = r4d_mpm::ply::read_ply(path)?;
-    let col = |n: &str| {
-        ply.get(n)
-            .ok_or_else(|| FitError::Input(format!("{}: no property '{n}'", path.display())))
-    };
-    let (x, y, z) = (col("x")?, col("y")?, col("z")?);
-    Ok((0..ply.count)
-        .map(|i| [x[i] as f64, y[i] as f64, z[i] as f64])
-        .collect())
 }

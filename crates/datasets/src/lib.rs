@@ -355,7 +355,7 @@ pub(crate) fn latest_point_cloud(dir: &Path) -> Option<PathBuf> {
 }
 
 /// Reads the positions of a point PLY (x, y, z), checked finite.
-pub(crate) fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
+pub fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
     let ply = r4d_ply::read_ply(path)?;
     let col = |n: &str| {
         ply.get(n)

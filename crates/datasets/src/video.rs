@@ -58,6 +58,16 @@ pub fn image_size(path: &Path) -> Result<(u32, u32)> {
         .map_err(|e| DatasetError::invalid(path, format!("not a readable image: {e}")))
 }
 
+fn check_fps(path: &Path, fps: f64) -> Result<()> {
+    if !(fps.is_finite() && fps > 0.0) {
+        return Err(DatasetError::invalid(
+            path,
+            format!("frame rate {fps} must be > 0"),
+        ));
+    }
+    Ok(())
+}
+
 impl VideoSource {
     /// A video made of image files at `fps`; reads the first frame's header for the size.
     pub fn from_frames(path: &Path, files: Vec<PathBuf>, fps: f64) -> Result<Self> {
@@ -65,12 +75,7 @@ impl VideoSource {
             .first()
             .ok_or_else(|| DatasetError::missing(path, "image frames (.png or .jpg)"))?;
         let (width, height) = image_size(first)?;
-        if !(fps.is_finite() && fps > 0.0) {
-            return Err(DatasetError::invalid(
-                path,
-                format!("frame rate {fps} must be > 0"),
-            ));
-        }
+        check_fps(path, fps)?;
         Ok(VideoSource {
             path: path.to_path_buf(),
             frames: files.len(),
@@ -86,12 +91,7 @@ impl VideoSource {
     pub fn from_mp4(path: &Path, fps: Option<f64>) -> Result<Self> {
         let info = r4d_video::probe(path)?;
         let fps = fps.unwrap_or(info.fps);
-        if !(fps.is_finite() && fps > 0.0) {
-            return Err(DatasetError::invalid(
-                path,
-                format!("frame rate {fps} must be > 0"),
-            ));
-        }
+        check_fps(path, fps)?;
         Ok(VideoSource {
             path: path.to_path_buf(),
             files: Vec::new(),

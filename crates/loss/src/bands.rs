@@ -54,28 +54,7 @@ impl Video8 {
         width: usize,
         data: Vec<u8>,
     ) -> Result<Video8, LossError> {
-        if frames == 0 || height == 0 || width == 0 {
-            return Err(LossError::Empty {
-                input: Input::Reference,
-                frames,
-                height,
-                width,
-            });
-        }
-        let expected = frames
-            .checked_mul(height)
-            .and_then(|n| n.checked_mul(width))
-            .and_then(|n| n.checked_mul(3));
-        if expected != Some(data.len()) {
-            return Err(LossError::DataLength {
-                input: Input::Reference,
-                frames,
-                height,
-                width,
-                expected: expected.unwrap_or(usize::MAX),
-                got: data.len(),
-            });
-        }
+        crate::video::check_shape(Input::Reference, frames, height, width, data.len())?;
         Ok(Video8 {
             frames,
             height,

@@ -14,6 +14,40 @@ pub struct Video<T = f32> {
     data: Vec<T>,
 }
 
+/// Checks that `len` values make `frames x height x width x 3` with no side zero; the product
+/// is checked, so a shape read from a file header cannot wrap around.
+pub(crate) fn check_shape(
+    input: Input,
+    frames: usize,
+    height: usize,
+    width: usize,
+    len: usize,
+) -> Result<(), LossError> {
+    if frames == 0 || height == 0 || width == 0 {
+        return Err(LossError::Empty {
+            input,
+            frames,
+            height,
+            width,
+        });
+    }
+    let expected = frames
+        .checked_mul(height)
+        .and_then(|n| n.checked_mul(width))
+        .and_then(|n| n.checked_mul(3));
+    if expected != Some(len) {
+        return Err(LossError::DataLength {
+            input,
+            frames,
+            height,
+            width,
+            expected: expected.unwrap_or(usize::MAX),
+            got: len,
+        });
+    }
+    Ok(())
+}
+
 impl<T: Real> Video<T> {
     /// A video from `(T, H, W, 3)` data. The length must match; frames must be non-empty.
     pub fn new(
@@ -33,29 +67,7 @@ impl<T: Real> Video<T> {
         width: usize,
         data: Vec<T>,
     ) -> Result<Self, LossError> {
-        if frames == 0 || height == 0 || width == 0 {
-            return Err(LossError::Empty {
-                input,
-                frames,
-                height,
-                width,
-            });
-        }
-        // Checked: a shape read from a file header must not wrap around.
-        let expected = frames
-            .checked_mul(height)
-            .and_then(|n| n.checked_mul(width))
-            .and_then(|n| n.checked_mul(3));
-        if expected != Some(data.len()) {
-            return Err(LossError::DataLength {
-                input,
-                frames,
-                height,
-                width,
-                expected: expected.unwrap_or(usize::MAX),
-                got: data.len(),
-            });
-        }
+        check_shape(input, frames, height, width, data.len())?;
         Ok(Video {
             frames,
             height,

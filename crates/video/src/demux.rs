@@ -16,6 +16,11 @@ use std::path::{Path, PathBuf};
 /// The largest `moov` box read (its sample tables); 64 MiB holds some 16 million samples.
 pub const MAX_MOOV_BYTES: u64 = 64 << 20;
 
+/// The most samples (frames) a track may list: 10 million, over 90 hours at 30 fps. Bounds
+/// the sample table a `stsz` with one size for every sample would otherwise make from a
+/// count alone.
+pub const MAX_SAMPLES: u32 = 10_000_000;
+
 /// The largest frame side accepted (H.264 level 6.2 allows 8192 x 4320).
 pub const MAX_SIDE: u32 = 8192;
 
@@ -225,6 +230,14 @@ fn parse_moov(moov: &[u8], file_len: u64, path: &Path) -> Result<Track> {
     let (_, mut stsz) = full_box(require(stbl, b"stsz", "stbl", path)?, "stsz", path)?;
     let fixed = stsz.u32()?;
     let count = stsz.u32()?;
+    if count > MAX_SAMPLES {
+        return Err(VideoError::Limit {
+            path: path.to_path_buf(),
+            what: "the samples of the video track ('stsz')",
+            got: u64::from(count),
+            limit: u64::from(MAX_SAMPLES),
+        });
+    }
     let sizes: Vec<u32> = if fixed == 0 {
         let mut t = stsz.table(count, 4)?;
         (0..count).map(|_| t.u32()).collect::<Result<_>>()?

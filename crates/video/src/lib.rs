@@ -38,7 +38,7 @@ mod mux;
 mod resample;
 
 pub use decode::{probe, read_mp4, read_mp4_reference, Mp4Frames, Mp4Info, MAX_DECODED_BYTES};
-pub use demux::{MAX_MOOV_BYTES, MAX_SIDE};
+pub use demux::{MAX_MOOV_BYTES, MAX_SAMPLES, MAX_SIDE};
 pub use encode::{
     write_mp4, Mp4Writer, MAX_ENCODE_LONG, MAX_ENCODE_SHORT, MAX_FPS, MIN_ENCODE_SIDE,
 };
