@@ -18,8 +18,9 @@ use resonance4d::video_fit::{Objective, Precision};
 static GLOBAL: Counting = Counting;
 
 fn bench_fit_iteration(c: &mut Criterion) {
-    let problem = resonance4d::demo::problem().expect("demo problem");
-    let cfg = resonance4d::demo::fit_config(&Default::default());
+    let spec = resonance4d::demo::DemoScene::Plant.spec(resonance4d::demo::Size::Full);
+    let problem = spec.problem().expect("demo problem");
+    let cfg = spec.fit_config(&Default::default());
     let start = problem.config.parts.clone();
     let mut group = c.benchmark_group("fit_iteration_demo");
     group.sample_size(10);

@@ -613,6 +613,7 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
         iters_done: 0,
         optimizer: None,
         best: None,
+        trust: None,
     };
     write_json(&out.join("checkpoint.json"), &state)?;
     let best = &outcome.candidates[outcome.ranking[0]];

@@ -1,32 +1,44 @@
-//! `r4d demo`: the built-in two-part plant, fitted from scratch (see `resonance4d::demo`).
+//! `r4d demo`: a built-in scene with known parameters, fitted from its video alone (see
+//! `resonance4d::demo`).
 
-use super::run_hooks::{param_table, RunHooks};
+use super::run_hooks::RunHooks;
 use anyhow::{Context, Result};
-use resonance4d::demo::{run_demo, DemoOptions};
+use resonance4d::demo::{run_demo, DemoOptions, DemoRun, DemoScene, Recovery, Size};
 use resonance4d::video_fit::report::{write_json, write_results};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `r4d demo`.
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
-    /// Run folder (the reference video, the inputs as files, the fit's outputs and
-    /// summary.json).
-    #[arg(long, default_value = "out/demo")]
-    out: PathBuf,
-    /// A smoke-test run: 4 candidates, 2 iterations (seconds, not minutes; no accuracy).
+    /// The scene: plant (two jelly parts, E and density), metal (a cantilever bent past
+    /// yield: E, nu, yield stress, density), sand (a slumping column: friction angle ...),
+    /// foam (a pressed block: yield stress, plastic viscosity ...) or plasticine (a blob
+    /// thrown onto the floor).
+    #[arg(long, default_value = "plant")]
+    scene: String,
+    /// Run folder (the reference videos, the inputs as files, the fit's outputs and
+    /// summary.json). Default: out/demo for the plant, out/demo-SCENE otherwise.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// A smoke-test run: 4 candidates, 2 iterations, coarse profiles (seconds to a minute,
+    /// not minutes; no accuracy).
     #[arg(long)]
     quick: bool,
-    /// AdamW iterations (default 30).
+    /// AdamW iterations (default: the scene's, 30-40).
     #[arg(long)]
     iters: Option<usize>,
-    /// Latin hypercube candidates (default 16).
+    /// Latin hypercube candidates (default: the scene's, 16-24).
     #[arg(long)]
     candidates: Option<usize>,
+    /// Skip the loss profiles and identifiability verdicts (faster; every parameter is then
+    /// reported as not judged).
+    #[arg(long)]
+    no_profiles: bool,
     /// Seed of the initialisation.
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Where the fit's simulation and reverse sweep run: cpu or wgpu (f32 on a GPU; the
-    /// reference video is always simulated on the CPU).
+    /// reference videos are always simulated on the CPU).
     #[arg(long, default_value = "cpu")]
     backend: String,
     /// LPIPS weights for the final report's metrics (as `r4d metrics --lpips-weights`).
@@ -38,29 +50,37 @@ pub struct DemoArgs {
 /// Runs the command.
 pub fn run(a: DemoArgs) -> Result<()> {
     let t_start = std::time::Instant::now();
+    let scene = DemoScene::parse(&a.scene)?;
     let mut opts = if a.quick {
         DemoOptions::quick()
     } else {
-        DemoOptions::default()
+        DemoOptions::full()
     };
-    if let Some(i) = a.iters {
-        opts.iters = i;
+    if a.iters.is_some() {
+        opts.iters = a.iters;
     }
-    if let Some(c) = a.candidates {
-        opts.candidates = c;
+    if a.candidates.is_some() {
+        opts.candidates = a.candidates;
+    }
+    if a.no_profiles {
+        opts.profiles = false;
     }
     opts.seed = a.seed;
     let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
-    let out = a.out.clone();
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    eprintln!(
-        "demo: a two-part plant (stiff stem, soft heavy head), 16 frames at 256x192; fitting E and density of both parts from {} Latin hypercube candidates and {} iterations",
-        opts.candidates, opts.iters
-    );
-    let cfg = resonance4d::demo::fit_config(&opts);
-    let mut hooks = RunHooks::new(&out, &cfg, None)?;
     let gpu = super::fit::gpu_for(&a.backend)?;
-    let mut run = run_demo(&opts, &mut hooks, gpu)?;
+    let out = a.out.clone().unwrap_or_else(|| match scene {
+        DemoScene::Plant => PathBuf::from("out/demo"),
+        s => PathBuf::from(format!("out/demo-{}", s.name())),
+    });
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let spec = scene.spec(Size::Full);
+    let cfg = spec.fit_config(&opts);
+    eprintln!(
+        "demo: {}; {} Latin hypercube candidates, {} iterations",
+        spec.description, cfg.init.candidates, cfg.iters
+    );
+    let mut hooks = RunHooks::new(&out, &cfg, None)?;
+    let mut run = run_demo(scene, Size::Full, &opts, &mut hooks, gpu)?;
     hooks.finish()?;
     let files = write_results(
         &out,
@@ -74,63 +94,35 @@ pub fn run(a: DemoArgs) -> Result<()> {
     run.summary.final_loss = Some(files.final_terms.clone());
     run.summary.metrics = Some(files.metrics.clone());
     run.summary.wall_time_s = t_start.elapsed().as_secs_f64();
-    // The inputs, so `r4d fit` can be run on them.
-    let p = &run.problem;
-    let inputs = out.join("inputs");
-    std::fs::create_dir_all(&inputs)?;
-    r4d_splat::ply::write_gaussians(&inputs.join("scene.ply"), &p.scene)?;
-    r4d_loss::io::write_npy(&inputs.join("reference.npy"), &p.views[0].video.to_f32())?;
-    // TOML: the clamp's end time is +infinity, which JSON cannot hold.
-    let mut sim = p.config.clone();
-    sim.particles = Some("particles.ply".into());
-    std::fs::write(inputs.join("sim.toml"), toml::to_string(&sim)?)?;
-    write_json(
-        &inputs.join("cameras.json"),
-        &serde_json::json!({
-            "background": p.settings.background,
-            "rasterize_mode": "classic",
-            "cameras": [p.views[0].camera],
-        }),
-    )?;
-    let mut labels = vec![-1i32; p.scene.len()];
-    for (s, &g) in p.link.simulated.iter().enumerate() {
-        labels[g as usize] = p.particles.part[s] as i32;
-    }
-    write_json(
-        &inputs.join("parts.json"),
-        &resonance4d::video_fit::PartLabels {
-            num_parts: 2,
-            class_names: vec!["stem".into(), "head".into()],
-            labels,
-            ..Default::default()
-        },
-    )?;
-    let particles_path = inputs.join("particles.ply");
-    let cols: Vec<Vec<f32>> = (0..3)
-        .map(|k| p.particles.x.iter().map(|x| x[k]).collect())
-        .chain(std::iter::once(p.particles.volume.clone()))
-        .collect();
-    let refs: Vec<&[f32]> = cols.iter().map(|c| c.as_slice()).collect();
-    r4d_mpm::ply::write_ply(&particles_path, &["x", "y", "z", "volume"], &refs)?;
+    write_inputs(&out.join("inputs"), &run)?;
     write_json(&out.join("summary.json"), &run.summary)?;
-    let truth = resonance4d::demo::truth();
     println!();
-    println!(
-        "{}",
-        param_table(&run.outcome.init_parts, &run.outcome.parts, Some(&truth))
-    );
-    println!("identifiability (loss profiles around the truth):");
-    for pr in &run.summary.profiles {
-        println!(
-            "  {:<16} relative sensitivity {:>6.3}  {}",
-            pr.name,
-            pr.relative_sensitivity,
-            if pr.identifiable {
-                "identifiable"
-            } else {
-                "NOT identifiable from this video"
-            }
-        );
+    println!("{}", recovery_table(&run.summary.recovery));
+    if run.summary.identifiability.is_empty() {
+        println!("identifiability: not judged (--no-profiles)");
+    } else {
+        println!("identifiability (loss profiles around the truth):");
+        for v in &run.summary.identifiability {
+            println!(
+                "  {:<26} {:<16} {}",
+                v.name,
+                if v.identifiable {
+                    "identifiable"
+                } else {
+                    "NOT determined"
+                },
+                v.reason
+            );
+        }
+        for q in &run.summary.profiles_2d {
+            println!(
+                "  2-D {} vs {}: correlation {:+.3}{}",
+                q.a,
+                q.b,
+                q.correlation,
+                if q.trade_off { " (trade-off)" } else { "" }
+            );
+        }
     }
     println!("{}", super::fit::metrics_line(&files.metrics));
     let t = &files.final_terms;
@@ -142,9 +134,107 @@ pub fn run(a: DemoArgs) -> Result<()> {
         t.phase.unwrap_or(f64::NAN),
         run.summary.wall_time_s
     );
+    let gifs = if run.problem.views.len() > 1 {
+        "view_K/side_by_side.gif and .mp4"
+    } else {
+        "side_by_side.gif and .mp4"
+    };
     println!(
-        "run folder: {} (summary.json, params.json, side_by_side.gif and .mp4, loss_curve.png, inputs/)",
+        "run folder: {} (summary.json, params.json, {gifs}, loss_curve.png, inputs/)",
         out.display()
     );
+    Ok(())
+}
+
+/// The recovery table: truth, start, fit and error per quantity; a quantity the profiles do
+/// not call identifiable is printed as "not determined" instead of an error.
+pub fn recovery_table(rows: &[Recovery]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{:<5} {:<18} {:>11} {:>11} {:>11} {:>15} {:>8}",
+        "part", "quantity", "truth", "init", "fit", "fit error", "target"
+    );
+    for r in rows {
+        let degrees = r.quantity == "friction_angle";
+        let err = if !r.identifiable {
+            "not determined".to_string()
+        } else if degrees {
+            format!("{:+.2} deg", r.fit_abs_error)
+        } else {
+            format!("{:+.2}%", 100.0 * r.fit_rel_error)
+        };
+        let target = match (r.tolerance, r.within_tolerance) {
+            (Some(t), Some(ok)) => {
+                let t = if degrees {
+                    format!("{t:.0} deg")
+                } else {
+                    format!("{:.0}%", 100.0 * t)
+                };
+                format!("{t} {}", if ok { "ok" } else { "MISS" })
+            }
+            _ => "-".into(),
+        };
+        let _ = writeln!(
+            s,
+            "{:<5} {:<18} {:>11.4e} {:>11.4e} {:>11.4e} {:>15} {:>8}",
+            r.part, r.quantity, r.truth, r.init, r.fit, err, target
+        );
+    }
+    s
+}
+
+/// The demo's inputs as files, so `r4d fit` can be run on them: scene, particles, parts,
+/// simulation, cameras and one reference video per view (`reference.npy` for one view,
+/// `reference_K.npy` for several).
+fn write_inputs(inputs: &Path, run: &DemoRun) -> Result<()> {
+    let p = &run.problem;
+    std::fs::create_dir_all(inputs)?;
+    r4d_splat::ply::write_gaussians(&inputs.join("scene.ply"), &p.scene)?;
+    for (k, v) in p.views.iter().enumerate() {
+        let name = if p.views.len() == 1 {
+            "reference.npy".to_string()
+        } else {
+            format!("reference_{k}.npy")
+        };
+        r4d_loss::io::write_npy(&inputs.join(name), &v.video.to_f32())?;
+    }
+    // TOML: the clamp's end time is +infinity, which JSON cannot hold.
+    let mut sim = p.config.clone();
+    sim.particles = Some("particles.ply".into());
+    std::fs::write(inputs.join("sim.toml"), toml::to_string(&sim)?)?;
+    let cams: Vec<_> = p.views.iter().map(|v| v.camera.clone()).collect();
+    write_json(
+        &inputs.join("cameras.json"),
+        &serde_json::json!({
+            "background": p.settings.background,
+            "rasterize_mode": "classic",
+            "cameras": cams,
+        }),
+    )?;
+    let mut labels = vec![-1i32; p.scene.len()];
+    for (s, &g) in p.link.simulated.iter().enumerate() {
+        labels[g as usize] = p.particles.part[s] as i32;
+    }
+    write_json(
+        &inputs.join("parts.json"),
+        &resonance4d::video_fit::PartLabels {
+            num_parts: run.spec.part_names.len(),
+            class_names: run.spec.part_names.clone(),
+            labels,
+            ..Default::default()
+        },
+    )?;
+    let cols: Vec<Vec<f32>> = (0..3)
+        .map(|k| p.particles.x.iter().map(|x| x[k]).collect())
+        .chain(std::iter::once(p.particles.volume.clone()))
+        .collect();
+    let refs: Vec<&[f32]> = cols.iter().map(|c| c.as_slice()).collect();
+    r4d_mpm::ply::write_ply(
+        &inputs.join("particles.ply"),
+        &["x", "y", "z", "volume"],
+        &refs,
+    )?;
     Ok(())
 }

@@ -14,6 +14,10 @@
 //! band_rows = 128         # rows per band of the band-wise loss (memory vs re-projection)
 //! frames = 16             # video frames fitted (default: all)
 //! checkpoint_every = 1    # iterations between checkpoints
+//! flat_probe = 6          # points probed along a parameter whose gradient is exactly 0
+//! optimizer = "adam"      # or "trust_bfgs" (first trust radius = lr)
+//! multi_start = 1         # top LHS candidates each given multi_start_iters iterations
+//! multi_start_iters = 4
 //! free = ["E", "density"] # free parameters of every part (default: by material)
 //!
 //! [loss]                  # the DMS loss (r4d_loss::DmsConfig); ablations:
@@ -54,6 +58,17 @@ pub enum LrSchedule {
     /// Cosine decay from `lr` to 5% of it over the run (default).
     #[default]
     Cosine,
+}
+
+/// The optimiser of a fit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OptimizerKind {
+    /// AdamW on `log(theta)` (the paper's).
+    #[default]
+    Adam,
+    /// Trust-region damped BFGS on `log(theta)` (`r4d_optim::TrustRegionBfgs`).
+    TrustBfgs,
 }
 
 /// The simulation-driven initialisation (paper Sec. 3.3).
@@ -143,6 +158,22 @@ pub struct FitConfig {
     pub init: InitConfig,
     /// Per-part overrides.
     pub parts: Vec<PartFit>,
+    /// Flat-direction probe: when the gradient of a yield stress, plastic viscosity or
+    /// friction angle is exactly zero at an iteration (no particle is on the branch of the
+    /// return mapping it acts through, e.g. a yield stress so high that nothing yields), the
+    /// loss is evaluated at this many log-spaced values across the parameter's bounds, the
+    /// others fixed, and the parameter jumps to the best one when that lowers the loss
+    /// (its Adam moments restart). 0: off. Default 6 (see `docs/fitting.md`).
+    pub flat_probe: usize,
+    /// The step: `adam` (AdamW, the paper's) or `trust_bfgs` (a trust-region quasi-Newton
+    /// step, `r4d_optim::TrustRegionBfgs`, whose first radius is `lr`).
+    pub optimizer: OptimizerKind,
+    /// Multi-start: the best this-many initialisation candidates each run
+    /// `multi_start_iters` iterations; the fit continues from the one with the lowest loss.
+    /// 1: off (the best candidate only).
+    pub multi_start: usize,
+    /// Iterations of each start in a multi-start (they count towards `iters`).
+    pub multi_start_iters: usize,
 }
 
 impl Default for FitConfig {
@@ -166,6 +197,10 @@ impl Default for FitConfig {
             loss: default_loss(),
             init: InitConfig::default(),
             parts: Vec::new(),
+            flat_probe: 6,
+            optimizer: OptimizerKind::Adam,
+            multi_start: 1,
+            multi_start_iters: 4,
         }
     }
 }
@@ -225,6 +260,30 @@ impl FitConfig {
         }
         if self.init.enabled && self.init.candidates == 0 {
             return bad("init.candidates must be at least 1".into());
+        }
+        if self.flat_probe == 1 || self.flat_probe > 64 {
+            return bad(format!(
+                "flat_probe = {}: 0 (off) or 2..=64 points",
+                self.flat_probe
+            ));
+        }
+        if self.multi_start == 0 || self.multi_start > 64 {
+            return bad(format!(
+                "multi_start = {}: 1 (off) to 64 starts",
+                self.multi_start
+            ));
+        }
+        if self.multi_start > 1 && self.multi_start > self.init.candidates {
+            return bad(format!(
+                "multi_start = {} exceeds init.candidates = {}",
+                self.multi_start, self.init.candidates
+            ));
+        }
+        if self.multi_start > 1 && self.multi_start * self.multi_start_iters > self.iters {
+            return bad(format!(
+                "multi_start = {} x multi_start_iters = {} exceeds iters = {}",
+                self.multi_start, self.multi_start_iters, self.iters
+            ));
         }
         if self.init.frames < 2 {
             return bad("init.frames must be at least 2".into());

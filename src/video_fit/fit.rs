@@ -1,7 +1,7 @@
 //! The fit loop: simulation-driven initialisation, then AdamW on `xi = log(theta)` with bound
 //! and gradient clipping; a record per iteration and a resumable checkpoint.
 
-use super::config::{FitConfig, LrSchedule};
+use super::config::{FitConfig, LrSchedule, OptimizerKind};
 use super::params::{get, set, Granularity, ParamSpace};
 use super::problem::{Evaluation, Objective, VideoProblem};
 use super::FitError;
@@ -10,6 +10,7 @@ use r4d_loss::{ssim::ms_ssim, MsSsimConfig, Video};
 use r4d_mpm::PartParams;
 use r4d_optim::{
     Candidate, InitOutcome, LatinHypercubeInit, LogDomainOptimizer, ParamKind, SearchSpace,
+    TrustRegion, TrustRegionBfgs,
 };
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -30,6 +31,46 @@ pub struct FitState {
     pub optimizer: Option<LogDomainOptimizer>,
     /// Lowest loss evaluated and its `theta`.
     pub best: Option<(f64, Vec<f64>)>,
+    /// The trust-region optimiser (`optimizer = "trust_bfgs"`), like `optimizer`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trust: Option<TrustRegionBfgs>,
+}
+
+/// The optimiser a fit steps with.
+enum Stepper {
+    Adam(LogDomainOptimizer),
+    Trust(TrustRegionBfgs),
+}
+
+impl Stepper {
+    fn theta(&self) -> Vec<f64> {
+        match self {
+            Stepper::Adam(o) => o.theta(),
+            Stepper::Trust(o) => o.theta(),
+        }
+    }
+    fn step(&mut self, loss: f64, g: &[f64], lr: f64) -> f64 {
+        match self {
+            Stepper::Adam(o) => {
+                o.adam.lr = lr;
+                o.step(g)
+            }
+            Stepper::Trust(o) => o.step(loss, g),
+        }
+    }
+    fn set_theta(&mut self, i: usize, v: f64) {
+        match self {
+            Stepper::Adam(o) => o.set_theta(i, v),
+            Stepper::Trust(o) => o.set_theta(i, v),
+        }
+    }
+    /// Stores the optimiser in the checkpoint state.
+    fn save(&self, state: &mut FitState) {
+        match self {
+            Stepper::Adam(o) => state.optimizer = Some(o.clone()),
+            Stepper::Trust(o) => state.trust = Some(o.clone()),
+        }
+    }
 }
 
 /// Loss terms summed over the views (absent terms were not evaluated).
@@ -86,6 +127,97 @@ pub struct IterRecord {
     /// Peak heap bytes of the process so far (0 when the counting allocator is not
     /// installed).
     pub peak_host_bytes: usize,
+    /// Flat-direction probes run after this evaluation (see [`FitConfig::flat_probe`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub probes: Vec<FlatProbe>,
+}
+
+/// One flat-direction probe: a parameter whose gradient was exactly zero, evaluated across
+/// its bounds with the others fixed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FlatProbe {
+    /// The parameter.
+    pub name: String,
+    /// Its value when the gradient was zero.
+    pub from: f64,
+    /// The value it continues from (= `from` when no probed value was better).
+    pub to: f64,
+    /// Loss at `from` (the iteration's loss).
+    pub loss_from: f64,
+    /// Lowest probed loss.
+    pub loss_best: f64,
+}
+
+/// The kinds that act only through a branch of the return mapping: their gradient is exactly
+/// zero while no particle is on that branch.
+fn branch_kind(k: ParamKind) -> bool {
+    matches!(
+        k,
+        ParamKind::YieldStress | ParamKind::PlasticViscosity | ParamKind::FrictionAngle
+    )
+}
+
+/// The flat-direction probes of one iteration (see [`FitConfig::flat_probe`]): for every
+/// part-level branch parameter with an exactly-zero gradient, `points` log-spaced values
+/// across its bounds (evaluated in parallel); returns the probes and the best values.
+fn flat_probes(
+    obj: &Objective,
+    space: &ParamSpace,
+    base_slots: &[PartParams],
+    theta: &[f64],
+    gtheta: &[f64],
+    loss: f64,
+    points: usize,
+) -> Result<Vec<(usize, FlatProbe)>, FitError> {
+    if points < 2 || space.granularity == Granularity::Particle {
+        return Ok(Vec::new());
+    }
+    let flat: Vec<usize> = (0..theta.len())
+        .filter(|&i| gtheta[i] == 0.0 && branch_kind(space.entries[i].kind))
+        .collect();
+    // Only when something else moves the loss (a zero gradient everywhere is a minimum or a
+    // scene without motion, not a flat direction).
+    if flat.is_empty() || flat.len() == theta.len() {
+        return Ok(Vec::new());
+    }
+    let names = space.names();
+    let mut out = Vec::new();
+    for i in flat {
+        let (lo, hi) = space.entries[i].bounds;
+        let values: Vec<f64> = (0..points)
+            .map(|j| lo * (hi / lo).powf(j as f64 / (points - 1) as f64))
+            .collect();
+        let losses: Vec<Result<f64, FitError>> = values
+            .par_iter()
+            .map(|&v| {
+                let mut t = theta.to_vec();
+                t[i] = v;
+                let mut slots = base_slots.to_vec();
+                space.apply(&mut slots, &t);
+                Ok(obj.value(&slots)?.total)
+            })
+            .collect();
+        let mut best = (loss, theta[i]);
+        for (v, l) in values.iter().zip(losses) {
+            // A probed point that fails (e.g. an unstable run) is skipped, not fatal.
+            if let Ok(l) = l {
+                if l < best.0 {
+                    best = (l, *v);
+                }
+            }
+        }
+        out.push((
+            i,
+            FlatProbe {
+                name: names[i].clone(),
+                from: theta[i],
+                to: best.1,
+                loss_from: loss,
+                loss_best: best.0,
+            },
+        ));
+    }
+    Ok(out)
 }
 
 /// Callbacks of [`run_fit`]: progress, logs and checkpoints.
@@ -353,6 +485,7 @@ pub fn run_fit(
             iters_done: 0,
             optimizer: None,
             best: None,
+            trust: None,
         },
     };
     // Starting point: the config's parts, replaced by the initialisation's best candidate.
@@ -368,20 +501,39 @@ pub fn run_fit(
         };
         ispace.apply(&mut base_parts, &outcome.best);
         state.init = Some(outcome);
-        if state.optimizer.is_none() {
+        if state.optimizer.is_none() && state.trust.is_none() {
             hooks.on_checkpoint(&state);
         }
     }
     let base_slots: Vec<PartParams> = slot_parts.iter().map(|&p| base_parts[p as usize]).collect();
     let init_parts = base_parts.clone();
-    let mut opt = match state.optimizer.take() {
-        Some(o) => o,
-        None => LogDomainOptimizer::new(
+    let mut opt = match (cfg.optimizer, state.optimizer.take(), state.trust.take()) {
+        (OptimizerKind::Adam, Some(o), _) => Stepper::Adam(o),
+        (OptimizerKind::TrustBfgs, _, Some(o)) => Stepper::Trust(o),
+        (kind, a, t) if a.is_some() || t.is_some() => {
+            return Err(FitError::Resume(format!(
+                "the checkpoint holds the state of another optimizer than '{}' (optimizer = ...)",
+                match kind {
+                    OptimizerKind::Adam => "adam",
+                    OptimizerKind::TrustBfgs => "trust_bfgs",
+                }
+            )))
+        }
+        (OptimizerKind::Adam, _, _) => Stepper::Adam(LogDomainOptimizer::new(
             space.values(&base_slots),
             space.bounds(),
             cfg.adam(),
             (cfg.clip_norm > 0.0).then_some(cfg.clip_norm),
-        )?,
+        )?),
+        (OptimizerKind::TrustBfgs, _, _) => Stepper::Trust(TrustRegionBfgs::new(
+            space.values(&base_slots),
+            space.bounds(),
+            TrustRegion {
+                initial_radius: cfg.lr,
+                max_radius: (5.0 * cfg.lr).max(cfg.lr),
+                min_radius: (1e-2 * cfg.lr).min(cfg.lr),
+            },
+        )?),
     };
     let peak = crate::alloc::peak;
     for iter in state.iters_done..cfg.iters {
@@ -401,8 +553,22 @@ pub fn run_fit(
                 cfg.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * p).cos()))
             }
         };
-        opt.adam.lr = lr;
-        let grad_norm = opt.step(&gtheta);
+        let grad_norm = opt.step(ev.total, &gtheta, lr);
+        let probes = flat_probes(
+            &obj,
+            &space,
+            &base_slots,
+            &theta,
+            &gtheta,
+            ev.total,
+            cfg.flat_probe,
+        )?;
+        for (i, p) in &probes {
+            if p.to != p.from {
+                opt.set_theta(*i, p.to);
+            }
+        }
+        let probes: Vec<FlatProbe> = probes.into_iter().map(|(_, p)| p).collect();
         let rec = IterRecord {
             iter,
             loss: Terms::of(&ev),
@@ -421,13 +587,15 @@ pub fn run_fit(
                 .collect(),
             time_s: start.elapsed().as_secs_f64(),
             peak_host_bytes: peak(),
+            probes,
         };
         hooks.on_iter(&rec);
         state.iters_done = iter + 1;
         if state.iters_done % cfg.checkpoint_every == 0 || state.iters_done == cfg.iters {
-            state.optimizer = Some(opt.clone());
+            opt.save(&mut state);
             hooks.on_checkpoint(&state);
             state.optimizer = None;
+            state.trust = None;
         }
     }
     let theta = match &state.best {

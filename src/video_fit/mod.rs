@@ -23,7 +23,7 @@ pub mod parts;
 pub mod problem;
 pub mod report;
 
-pub use config::{FitConfig, InitConfig};
+pub use config::{FitConfig, InitConfig, OptimizerKind};
 pub use dataset::{problem_from_dataset, problem_with_views};
 pub use fit::{run_fit, FitHooks, FitOutcome, FitState, IterRecord};
 pub use params::{Granularity, ParamSpace};

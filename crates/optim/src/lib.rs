@@ -51,9 +51,11 @@ use serde::{Deserialize, Serialize};
 
 mod init;
 mod lhs;
+mod trust_bfgs;
 
 pub use init::{Candidate, Evaluate, InitOutcome, Initializer, LatinHypercubeInit, SearchSpace};
 pub use lhs::{latin_hypercube, log_space};
+pub use trust_bfgs::{TrustRegion, TrustRegionBfgs};
 
 /// Errors of this crate.
 #[derive(Debug, thiserror::Error)]
@@ -255,6 +257,19 @@ impl LogDomainOptimizer {
     /// Current parameters `theta = exp(xi)`.
     pub fn theta(&self) -> Vec<f64> {
         self.xi.iter().map(|x| x.exp()).collect()
+    }
+
+    /// Moves parameter `i` to `value` (clamped to its bounds) and forgets its moments: the
+    /// next steps treat it as freshly started. Used when a fit jumps along a direction whose
+    /// gradient is exactly zero (a flat-direction probe); an index out of range is ignored.
+    pub fn set_theta(&mut self, i: usize, value: f64) {
+        if i >= self.xi.len() || value.is_nan() || value <= 0.0 {
+            return;
+        }
+        let (lo, hi) = self.log_bounds[i];
+        self.xi[i] = value.ln().clamp(lo, hi);
+        self.m[i] = 0.0;
+        self.v[i] = 0.0;
     }
 
     /// Steps taken.

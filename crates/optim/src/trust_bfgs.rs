@@ -1,0 +1,409 @@
+//! A trust-region quasi-Newton step on `xi = log(theta)` with box bounds: the second-order
+//! alternative to AdamW for fits with a handful of free parameters.
+//!
+//! Each iteration evaluates one trial point (loss and gradient, like an AdamW iteration).
+//! The model is `m(p) = f + g.p + p^T B p / 2` with `B` a damped-BFGS approximation of the
+//! log-space Hessian (Powell's damping keeps it positive definite when the loss is not
+//! locally convex). The step is the dogleg solution of the model inside a ball of radius
+//! `radius` (log units), projected onto the bounds. A trial that lowers the loss is accepted;
+//! the radius grows when the model predicted the decrease well and shrinks when it did not
+//! or the trial was rejected. Every trial, accepted or not, updates `B` with its gradient
+//! difference, so the curvature of a stiff direction (e.g. `E / density`, which sets the
+//! motion's time scale) is learned in a few iterations and the step is no longer limited by
+//! it — the zig-zag AdamW shows across such a valley.
+
+use crate::Error;
+use serde::{Deserialize, Serialize};
+
+/// Settings of [`TrustRegionBfgs`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrustRegion {
+    /// First radius (log units; 0.1 is a 10% change).
+    pub initial_radius: f64,
+    /// Largest radius.
+    pub max_radius: f64,
+    /// Smallest radius.
+    pub min_radius: f64,
+}
+
+impl Default for TrustRegion {
+    fn default() -> Self {
+        TrustRegion {
+            initial_radius: 0.1,
+            max_radius: 0.5,
+            min_radius: 1e-3,
+        }
+    }
+}
+
+/// Trust-region damped BFGS on `xi = log(theta)` (see the module docs). Serialisable, so a
+/// killed run resumes with its model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrustRegionBfgs {
+    /// Accepted point.
+    x: Vec<f64>,
+    /// Loss and gradient (w.r.t. xi) at `x`; `None` before the first evaluation.
+    at_x: Option<(f64, Vec<f64>)>,
+    /// Next point to evaluate.
+    trial: Vec<f64>,
+    /// Hessian approximation, row-major `n x n` (empty until the first evaluation).
+    b: Vec<f64>,
+    radius: f64,
+    log_bounds: Vec<(f64, f64)>,
+    evaluations: u64,
+    accepted: u64,
+    /// Settings.
+    pub settings: TrustRegion,
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn norm(a: &[f64]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// `B v` for a row-major `n x n` `B`.
+fn mat_vec(b: &[f64], v: &[f64]) -> Vec<f64> {
+    let n = v.len();
+    (0..n).map(|i| dot(&b[i * n..(i + 1) * n], v)).collect()
+}
+
+/// Solves `B x = r` by Cholesky; `None` when `B` is not positive definite.
+fn solve_spd(b: &[f64], r: &[f64]) -> Option<Vec<f64>> {
+    let n = r.len();
+    let mut l = vec![0.0; n * n];
+    for i in 0..n {
+        for j in 0..=i {
+            let s = b[i * n + j] - (0..j).map(|k| l[i * n + k] * l[j * n + k]).sum::<f64>();
+            if i == j {
+                if s <= 0.0 || !s.is_finite() {
+                    return None;
+                }
+                l[i * n + i] = s.sqrt();
+            } else {
+                l[i * n + j] = s / l[j * n + j];
+            }
+        }
+    }
+    let mut y = vec![0.0; n];
+    for i in 0..n {
+        y[i] = (r[i] - (0..i).map(|k| l[i * n + k] * y[k]).sum::<f64>()) / l[i * n + i];
+    }
+    let mut x = vec![0.0; n];
+    for i in (0..n).rev() {
+        x[i] = (y[i] - (i + 1..n).map(|k| l[k * n + i] * x[k]).sum::<f64>()) / l[i * n + i];
+    }
+    Some(x)
+}
+
+impl TrustRegionBfgs {
+    /// Starts at positive `theta` within positive `bounds`.
+    pub fn new(
+        theta: Vec<f64>,
+        bounds: Vec<(f64, f64)>,
+        settings: TrustRegion,
+    ) -> Result<Self, Error> {
+        if theta.len() != bounds.len() {
+            return Err(Error::Invalid {
+                index: theta.len().min(bounds.len()),
+                message: format!(
+                    "{} values for {} bounds: one bound per parameter",
+                    theta.len(),
+                    bounds.len()
+                ),
+            });
+        }
+        for (i, (&t, &(l, u))) in theta.iter().zip(&bounds).enumerate() {
+            if !(l.is_finite() && u.is_finite() && l > 0.0 && u >= l) {
+                return Err(Error::Invalid {
+                    index: i,
+                    message: format!("bounds [{l}, {u}] must be positive, finite and ordered"),
+                });
+            }
+            if !(t.is_finite() && t > 0.0) {
+                return Err(Error::Invalid {
+                    index: i,
+                    message: format!("value {t} must be positive and finite"),
+                });
+            }
+        }
+        let s = settings;
+        if !(s.min_radius > 0.0
+            && s.min_radius <= s.initial_radius
+            && s.initial_radius <= s.max_radius)
+            || !s.max_radius.is_finite()
+        {
+            return Err(Error::Invalid {
+                index: 0,
+                message: format!(
+                    "trust radii must satisfy 0 < min ({}) <= initial ({}) <= max ({}) < inf",
+                    s.min_radius, s.initial_radius, s.max_radius
+                ),
+            });
+        }
+        let log_bounds: Vec<(f64, f64)> = bounds.iter().map(|(l, u)| (l.ln(), u.ln())).collect();
+        let x: Vec<f64> = theta
+            .iter()
+            .zip(&log_bounds)
+            .map(|(t, (l, u))| t.ln().clamp(*l, *u))
+            .collect();
+        Ok(TrustRegionBfgs {
+            trial: x.clone(),
+            x,
+            at_x: None,
+            b: Vec::new(),
+            radius: settings.initial_radius,
+            log_bounds,
+            evaluations: 0,
+            accepted: 0,
+            settings,
+        })
+    }
+
+    /// The parameters to evaluate next.
+    pub fn theta(&self) -> Vec<f64> {
+        self.trial.iter().map(|x| x.exp()).collect()
+    }
+
+    /// The accepted parameters (the lowest loss seen so far).
+    pub fn accepted_theta(&self) -> Vec<f64> {
+        self.x.iter().map(|x| x.exp()).collect()
+    }
+
+    /// Current trust radius (log units).
+    pub fn radius(&self) -> f64 {
+        self.radius
+    }
+
+    /// Evaluations taken and how many of them were accepted.
+    pub fn counts(&self) -> (u64, u64) {
+        (self.evaluations, self.accepted)
+    }
+
+    /// Moves parameter `i` of the accepted point to `value` (clamped to its bounds) and
+    /// evaluates from there next: the jump of a flat-direction probe, whose loss the caller
+    /// has seen to be lower. The model's row and column of `i` are reset.
+    pub fn set_theta(&mut self, i: usize, value: f64) {
+        if i >= self.x.len() || value.is_nan() || value <= 0.0 {
+            return;
+        }
+        let (lo, hi) = self.log_bounds[i];
+        self.x[i] = value.ln().clamp(lo, hi);
+        self.trial = self.x.clone();
+        // The next evaluation re-anchors the model at the moved point.
+        self.at_x = None;
+        let n = self.x.len();
+        if self.b.len() == n * n {
+            let d = self.b[i * n + i];
+            for k in 0..n {
+                self.b[i * n + k] = 0.0;
+                self.b[k * n + i] = 0.0;
+            }
+            self.b[i * n + i] = d;
+        }
+    }
+
+    /// Takes the loss and `dL/dtheta` at [`TrustRegionBfgs::theta`], chooses the next trial;
+    /// returns the norm of `dL/dxi`. A non-finite loss or gradient counts as a rejected
+    /// trial (the radius shrinks).
+    pub fn step(&mut self, loss: f64, grad_theta: &[f64]) -> f64 {
+        let n = self.x.len();
+        let g: Vec<f64> = grad_theta
+            .iter()
+            .zip(&self.trial)
+            .map(|(g, x)| g * x.exp())
+            .collect();
+        let gnorm = norm(&g);
+        self.evaluations += 1;
+        let finite = loss.is_finite() && g.iter().all(|v| v.is_finite());
+        match self.at_x.take() {
+            None => {
+                if finite {
+                    self.x = self.trial.clone();
+                    if self.b.len() != n * n {
+                        let c = gnorm.max(1e-12) / self.radius;
+                        self.b = (0..n * n)
+                            .map(|k| if k % (n + 1) == 0 { c } else { 0.0 })
+                            .collect();
+                    }
+                    self.at_x = Some((loss, g));
+                    self.accepted += 1;
+                } else {
+                    self.radius = (0.25 * self.radius).max(self.settings.min_radius);
+                }
+            }
+            Some((f, gx)) => {
+                let s: Vec<f64> = self.trial.iter().zip(&self.x).map(|(a, b)| a - b).collect();
+                let bs = mat_vec(&self.b, &s);
+                let pred = -(dot(&gx, &s) + 0.5 * dot(&s, &bs));
+                if finite {
+                    // Damped BFGS update with y = g_trial - g_x.
+                    let y: Vec<f64> = g.iter().zip(&gx).map(|(a, b)| a - b).collect();
+                    let sbs = dot(&s, &bs);
+                    let sy = dot(&s, &y);
+                    if sbs > 1e-300 {
+                        let th = if sy >= 0.2 * sbs {
+                            1.0
+                        } else {
+                            0.8 * sbs / (sbs - sy)
+                        };
+                        let r: Vec<f64> = y
+                            .iter()
+                            .zip(&bs)
+                            .map(|(yi, bi)| th * yi + (1.0 - th) * bi)
+                            .collect();
+                        let sr = dot(&s, &r);
+                        if sr > 1e-300 {
+                            for i in 0..n {
+                                for j in 0..n {
+                                    self.b[i * n + j] += r[i] * r[j] / sr - bs[i] * bs[j] / sbs;
+                                }
+                            }
+                        }
+                    }
+                }
+                let step = norm(&s);
+                if finite && loss < f {
+                    let rho = if pred > 0.0 { (f - loss) / pred } else { 0.0 };
+                    if rho > 0.75 && step > 0.8 * self.radius {
+                        self.radius = (2.0 * self.radius).min(self.settings.max_radius);
+                    } else if rho < 0.25 {
+                        self.radius = (0.5 * self.radius).max(self.settings.min_radius);
+                    }
+                    self.x = self.trial.clone();
+                    self.at_x = Some((loss, g));
+                    self.accepted += 1;
+                } else {
+                    self.radius = (0.5 * step.min(self.radius)).max(self.settings.min_radius);
+                    self.at_x = Some((f, gx));
+                }
+            }
+        }
+        self.trial = self.next_trial();
+        gnorm
+    }
+
+    /// The dogleg step from `x` inside the radius, projected onto the bounds.
+    fn next_trial(&self) -> Vec<f64> {
+        let Some((_, g)) = &self.at_x else {
+            return self.x.clone();
+        };
+        // Directions that point out of the box at an active bound are dropped.
+        let g: Vec<f64> = g
+            .iter()
+            .zip(&self.x)
+            .zip(&self.log_bounds)
+            .map(|((&gi, &xi), &(lo, hi))| {
+                if (xi <= lo && gi > 0.0) || (xi >= hi && gi < 0.0) {
+                    0.0
+                } else {
+                    gi
+                }
+            })
+            .collect();
+        let gg = dot(&g, &g);
+        if gg == 0.0 {
+            return self.x.clone();
+        }
+        let r = self.radius;
+        let neg: Vec<f64> = g.iter().map(|v| -v).collect();
+        let p = match solve_spd(&self.b, &neg) {
+            Some(pn) if norm(&pn) <= r => pn,
+            newton => {
+                let gbg = dot(&g, &mat_vec(&self.b, &g));
+                let cauchy_len = if gbg > 0.0 { gg / gbg } else { f64::INFINITY };
+                let pu: Vec<f64> = g.iter().map(|v| -cauchy_len * v).collect();
+                match newton {
+                    Some(pn) if norm(&pu) < r => {
+                        // Walk from the Cauchy point towards the Newton point to the boundary.
+                        let d: Vec<f64> = pn.iter().zip(&pu).map(|(a, b)| a - b).collect();
+                        let (a, b, c) = (dot(&d, &d), 2.0 * dot(&pu, &d), dot(&pu, &pu) - r * r);
+                        let t = (-b + (b * b - 4.0 * a * c).max(0.0).sqrt()) / (2.0 * a);
+                        pu.iter()
+                            .zip(&d)
+                            .map(|(p, d)| p + t.clamp(0.0, 1.0) * d)
+                            .collect()
+                    }
+                    _ => {
+                        let s = r / gg.sqrt();
+                        g.iter().map(|v| -s * v).collect()
+                    }
+                }
+            }
+        };
+        self.x
+            .iter()
+            .zip(&p)
+            .zip(&self.log_bounds)
+            .map(|((x, p), (lo, hi))| (x + p).clamp(*lo, *hi))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An ill-conditioned quadratic valley in log space (condition number 1e3): the trust
+    /// region reaches the minimum in a few dozen evaluations.
+    #[test]
+    fn minimises_an_ill_conditioned_valley() {
+        let target = [2e5f64.ln(), 800f64.ln()];
+        let f = |x: &[f64]| {
+            let (u, v) = (x[0] - target[0], x[1] - target[1]);
+            let (a, b) = (u - v, u + v);
+            (
+                500.0 * a * a + 0.5 * b * b,
+                [1000.0 * a + b, -1000.0 * a + b],
+            )
+        };
+        let mut o = TrustRegionBfgs::new(
+            vec![1e6, 300.0],
+            vec![(1e4, 1e7), (100.0, 3000.0)],
+            TrustRegion::default(),
+        )
+        .unwrap();
+        for _ in 0..40 {
+            let th = o.theta();
+            let x: Vec<f64> = th.iter().map(|t| t.ln()).collect();
+            let (l, g) = f(&x);
+            o.step(l, &[g[0] / th[0], g[1] / th[1]]);
+        }
+        let t = o.accepted_theta();
+        assert!((t[0] / 2e5 - 1.0).abs() < 1e-3, "{t:?}");
+        assert!((t[1] / 800.0 - 1.0).abs() < 1e-3, "{t:?}");
+    }
+
+    #[test]
+    fn respects_bounds_and_rejects_bad_settings() {
+        let mut o =
+            TrustRegionBfgs::new(vec![5.0], vec![(1.0, 10.0)], TrustRegion::default()).unwrap();
+        for _ in 0..30 {
+            let t = o.theta()[0];
+            // Minimum at 100, outside the bounds: the fit stops at the bound.
+            let g = 2.0 * (t.ln() - 100f64.ln()) / t;
+            o.step((t.ln() - 100f64.ln()).powi(2), &[g]);
+        }
+        assert!((o.accepted_theta()[0] - 10.0).abs() < 1e-9);
+        let bad = TrustRegion {
+            min_radius: 0.0,
+            ..Default::default()
+        };
+        assert!(TrustRegionBfgs::new(vec![1.0], vec![(0.5, 2.0)], bad).is_err());
+        assert!(TrustRegionBfgs::new(vec![1.0], vec![], TrustRegion::default()).is_err());
+    }
+
+    #[test]
+    fn a_failed_evaluation_shrinks_the_radius() {
+        let mut o =
+            TrustRegionBfgs::new(vec![5.0, 5.0], vec![(1.0, 10.0); 2], TrustRegion::default())
+                .unwrap();
+        o.step(1.0, &[0.1, 0.1]);
+        let r = o.radius();
+        o.step(f64::NAN, &[0.0, 0.0]);
+        assert!(o.radius() < r);
+        assert_eq!(o.counts(), (2, 1));
+    }
+}

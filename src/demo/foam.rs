@@ -1,0 +1,132 @@
+//! The foam block: a block of foam on the floor is squeezed by a downward push on its top
+//! layer (a force impulse, so the absolute density enters the motion), flows viscoplastically
+//! past its yield stress while the push lasts (the flow rate follows the plastic viscosity),
+//! and springs back to a permanent dent when released. Free: `E`, `nu`, yield stress,
+//! plastic viscosity, density. Two views.
+
+use super::{bounds_around, sim_config, stage, with, SceneSpec, Size};
+use crate::video_fit::{FitConfig, Precision};
+use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
+use r4d_optim::ParamKind;
+
+/// The true parameters.
+pub fn truth() -> PartParams {
+    PartParams {
+        material: Material::Foam,
+        youngs_modulus_pa: 1e5,
+        poisson_ratio: 0.2,
+        yield_stress_pa: 3e3,
+        plastic_viscosity_pa_s: 2e3,
+        density_kg_m3: 300.0,
+        ..Default::default()
+    }
+}
+
+/// Height of the floor (m).
+const FLOOR: f64 = 0.1875;
+
+/// The scene at `size`.
+pub fn spec(size: Size) -> SceneSpec {
+    let (n_grid, frames, res) = match size {
+        Size::Full => (24, 20, (256, 192)),
+        Size::Small => (16, 12, (96, 72)),
+    };
+    let top = FLOOR + 0.25;
+    let text = format!(
+        r#"
+[domain]
+grid_lim = 1.0
+n_grid = {n_grid}
+[time]
+substep_dt = 2.5e-4
+frame_dt = 0.025
+frames = {frames}
+[solver]
+gravity = [0.0, 0.0, -9.8]
+[[parts]]
+material = "foam"
+[[boundary]]
+type = "bounding_box"
+[[boundary]]
+type = "surface_collider"
+point = [0.0, 0.0, {FLOOR}]
+normal = [0.0, 0.0, 1.0]
+surface = "sticky"
+[[boundary]]
+type = "particle_impulse"
+force = [0.0, 0.0, -0.6]
+point = [0.5, 0.5, {top}]
+size = [0.08, 0.08, 0.06]
+num_dt = 600
+"#
+    );
+    let config = sim_config(&text, vec![truth()]);
+    let dx = config.domain.dx();
+    let particles = ParticleSet::from_shapes(
+        &[Shape::Box {
+            min: [0.3125, 0.375, FLOOR],
+            max: [0.6875, 0.625, top],
+            part: 0,
+            per_cell: 2,
+        }],
+        dx,
+    );
+    let t = truth();
+    let start = vec![with(
+        with(t, ParamKind::YieldStress, 2e4),
+        ParamKind::PlasticViscosity,
+        100.0,
+    )];
+    let free = vec![vec![
+        ParamKind::YoungsModulus,
+        ParamKind::PoissonRatio,
+        ParamKind::YieldStress,
+        ParamKind::PlasticViscosity,
+        ParamKind::Density,
+    ]];
+    let bounds = vec![bounds_around(
+        &t,
+        &[
+            (ParamKind::YoungsModulus, 3.0),
+            (ParamKind::PoissonRatio, 0.0),
+            (ParamKind::YieldStress, 3.0),
+            (ParamKind::PlasticViscosity, 3.0),
+            (ParamKind::Density, 3.0),
+        ],
+    )];
+    let mut fit = FitConfig {
+        iters: 40,
+        lr: 0.1,
+        beta1: 0.6,
+        precision: Precision::F32,
+        ..Default::default()
+    };
+    fit.init.candidates = 24;
+    fit.init.frames = frames;
+    SceneSpec {
+        scene: super::DemoScene::Foam,
+        description: format!(
+            "a foam block pressed and released, {frames} frames at {}x{} from two views; fitting E, nu, yield stress, plastic viscosity and density",
+            res.0, res.1
+        ),
+        config,
+        particles,
+        part_names: vec!["foam".into()],
+        palettes: vec![stage::FOAM],
+        floor_z: FLOOR as f32,
+        cameras: vec![
+            stage::camera("front", res, [0.5, -0.3, 0.6], [0.5, 0.5, 0.3]),
+            stage::camera("oblique", res, [1.1, -0.1, 0.85], [0.5, 0.5, 0.3]),
+        ],
+        start,
+        free,
+        bounds,
+        pairs: vec![
+            (0, ParamKind::YieldStress, ParamKind::PlasticViscosity),
+            (0, ParamKind::YoungsModulus, ParamKind::YieldStress),
+        ],
+        fit,
+        profile_offsets: vec![-0.3, -0.15, -0.05, 0.05, 0.15, 0.3],
+        profile2d_offsets: vec![-0.15, -0.05, 0.05, 0.15],
+    }
+}

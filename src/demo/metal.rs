@@ -1,0 +1,124 @@
+//! The metal beam: a cantilever clamped at its left end, bent past yield by a downward push
+//! on its tip (a force impulse, so the absolute density enters the motion), then released:
+//! it springs back, rings at its bending frequency (`E / density`) around a permanently bent
+//! shape (the yield stress). Free: `E`, `nu`, yield stress, density. Two views.
+
+use super::{bounds_around, sim_config, stage, with, SceneSpec, Size};
+use crate::video_fit::{FitConfig, Precision};
+use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
+use r4d_optim::ParamKind;
+
+/// The true parameters.
+pub fn truth() -> PartParams {
+    PartParams {
+        material: Material::Metal,
+        youngs_modulus_pa: 2e6,
+        poisson_ratio: 0.3,
+        yield_stress_pa: 6.5e4,
+        density_kg_m3: 800.0,
+        ..Default::default()
+    }
+}
+
+/// The scene at `size`.
+pub fn spec(size: Size) -> SceneSpec {
+    let (n_grid, frames, res) = match size {
+        Size::Full => (24, 20, (256, 192)),
+        Size::Small => (16, 12, (96, 72)),
+    };
+    let text = format!(
+        r#"
+[domain]
+grid_lim = 1.0
+n_grid = {n_grid}
+[time]
+substep_dt = 2e-4
+frame_dt = 0.025
+frames = {frames}
+[solver]
+gravity = [0.0, 0.0, -9.8]
+[[parts]]
+material = "metal"
+[[boundary]]
+type = "bounding_box"
+[[boundary]]
+type = "cuboid"
+point = [0.2, 0.5, 0.5]
+size = [0.15, 0.2, 0.2]
+velocity = [0.0, 0.0, 0.0]
+[[boundary]]
+type = "particle_impulse"
+force = [0.0, 0.0, -0.3]
+point = [0.75, 0.5, 0.5]
+size = [0.05, 0.1, 0.1]
+num_dt = 400
+"#
+    );
+    let config = sim_config(&text, vec![truth()]);
+    let dx = config.domain.dx();
+    let particles = ParticleSet::from_shapes(
+        &[Shape::Box {
+            min: [0.2, 0.4375, 0.4375],
+            max: [0.8, 0.5625, 0.5625],
+            part: 0,
+            per_cell: 2,
+        }],
+        dx,
+    );
+    let t = truth();
+    let start = vec![with(
+        with(t, ParamKind::YieldStress, 3e5),
+        ParamKind::YoungsModulus,
+        1e6,
+    )];
+    let free = vec![vec![
+        ParamKind::YoungsModulus,
+        ParamKind::PoissonRatio,
+        ParamKind::YieldStress,
+        ParamKind::Density,
+    ]];
+    let bounds = vec![bounds_around(
+        &t,
+        &[
+            (ParamKind::YoungsModulus, 3.0),
+            (ParamKind::PoissonRatio, 0.0),
+            (ParamKind::YieldStress, 3.0),
+            (ParamKind::Density, 3.0),
+        ],
+    )];
+    let mut fit = FitConfig {
+        iters: 40,
+        lr: 0.1,
+        beta1: 0.6,
+        precision: Precision::F32,
+        ..Default::default()
+    };
+    fit.init.candidates = 24;
+    fit.init.frames = frames;
+    SceneSpec {
+        scene: super::DemoScene::Metal,
+        description: format!(
+            "a metal cantilever bent past yield by a push and released, {frames} frames at {}x{} from two views; fitting E, nu, yield stress and density",
+            res.0, res.1
+        ),
+        config,
+        particles,
+        part_names: vec!["beam".into()],
+        palettes: vec![stage::STEEL],
+        floor_z: 0.12,
+        cameras: vec![
+            stage::camera("front", res, [0.5, -0.45, 0.55], [0.5, 0.5, 0.45]),
+            stage::camera("oblique", res, [1.25, -0.15, 0.8], [0.5, 0.5, 0.42]),
+        ],
+        start,
+        free,
+        bounds,
+        pairs: vec![
+            (0, ParamKind::YoungsModulus, ParamKind::YieldStress),
+            (0, ParamKind::YoungsModulus, ParamKind::Density),
+        ],
+        fit,
+        profile_offsets: vec![-0.3, -0.15, -0.05, 0.05, 0.15, 0.3],
+        profile2d_offsets: vec![-0.15, -0.05, 0.05, 0.15],
+    }
+}

@@ -1,0 +1,124 @@
+//! The plasticine blob: a block of plasticine thrown down onto the floor (gravity plus a
+//! short force impulse, so the absolute density enters the motion) flattens plastically on
+//! impact and keeps its squashed shape. Free: `E`, `nu`, yield stress, density (softening
+//! fixed at its default). Two views.
+
+use super::{bounds_around, sim_config, stage, with, SceneSpec, Size};
+use crate::video_fit::{FitConfig, Precision};
+use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
+use r4d_optim::ParamKind;
+
+/// The true parameters.
+pub fn truth() -> PartParams {
+    PartParams {
+        material: Material::Plasticine,
+        youngs_modulus_pa: 2e5,
+        poisson_ratio: 0.3,
+        yield_stress_pa: 4e3,
+        density_kg_m3: 1200.0,
+        ..Default::default()
+    }
+}
+
+/// Height of the floor (m).
+const FLOOR: f64 = 0.1875;
+
+/// The scene at `size`.
+pub fn spec(size: Size) -> SceneSpec {
+    let (n_grid, frames, res) = match size {
+        Size::Full => (24, 20, (256, 192)),
+        Size::Small => (16, 12, (96, 72)),
+    };
+    let text = format!(
+        r#"
+[domain]
+grid_lim = 1.0
+n_grid = {n_grid}
+[time]
+substep_dt = 2.5e-4
+frame_dt = 0.025
+frames = {frames}
+[solver]
+gravity = [0.0, 0.0, -9.8]
+[[parts]]
+material = "plasticine"
+[[boundary]]
+type = "bounding_box"
+[[boundary]]
+type = "surface_collider"
+point = [0.0, 0.0, {FLOOR}]
+normal = [0.0, 0.0, 1.0]
+surface = "friction"
+friction = 0.8
+[[boundary]]
+type = "particle_impulse"
+force = [0.05, 0.0, -0.15]
+point = [0.4, 0.5, 0.5]
+size = [0.2, 0.2, 0.2]
+num_dt = 100
+"#
+    );
+    let config = sim_config(&text, vec![truth()]);
+    let dx = config.domain.dx();
+    let particles = ParticleSet::from_shapes(
+        &[Shape::Box {
+            min: [0.3125, 0.375, 0.4375],
+            max: [0.5, 0.625, 0.625],
+            part: 0,
+            per_cell: 2,
+        }],
+        dx,
+    );
+    let t = truth();
+    let start = vec![with(t, ParamKind::YieldStress, 3e4)];
+    let free = vec![vec![
+        ParamKind::YoungsModulus,
+        ParamKind::PoissonRatio,
+        ParamKind::YieldStress,
+        ParamKind::Density,
+    ]];
+    let bounds = vec![bounds_around(
+        &t,
+        &[
+            (ParamKind::YoungsModulus, 3.0),
+            (ParamKind::PoissonRatio, 0.0),
+            (ParamKind::YieldStress, 3.0),
+            (ParamKind::Density, 3.0),
+        ],
+    )];
+    let mut fit = FitConfig {
+        iters: 40,
+        lr: 0.1,
+        beta1: 0.6,
+        precision: Precision::F32,
+        ..Default::default()
+    };
+    fit.init.candidates = 24;
+    fit.init.frames = frames;
+    SceneSpec {
+        scene: super::DemoScene::Plasticine,
+        description: format!(
+            "a plasticine blob thrown onto the floor, {frames} frames at {}x{} from two views; fitting E, nu, yield stress and density",
+            res.0, res.1
+        ),
+        config,
+        particles,
+        part_names: vec!["blob".into()],
+        palettes: vec![stage::CLAY],
+        floor_z: FLOOR as f32,
+        cameras: vec![
+            stage::camera("front", res, [0.5, -0.3, 0.6], [0.5, 0.5, 0.3]),
+            stage::camera("oblique", res, [1.1, -0.1, 0.85], [0.5, 0.5, 0.3]),
+        ],
+        start,
+        free,
+        bounds,
+        pairs: vec![
+            (0, ParamKind::YoungsModulus, ParamKind::YieldStress),
+            (0, ParamKind::YoungsModulus, ParamKind::Density),
+        ],
+        fit,
+        profile_offsets: vec![-0.3, -0.15, -0.05, 0.05, 0.15, 0.3],
+        profile2d_offsets: vec![-0.15, -0.05, 0.05, 0.15],
+    }
+}
