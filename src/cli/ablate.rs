@@ -614,6 +614,7 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
         optimizer: None,
         best: None,
         trust: None,
+        starts: Vec::new(),
     };
     write_json(&out.join("checkpoint.json"), &state)?;
     let best = &outcome.candidates[outcome.ranking[0]];

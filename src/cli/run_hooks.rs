@@ -152,6 +152,15 @@ impl FitHooks for RunHooks {
         self.log.push(r.clone());
     }
 
+    fn on_start(&mut self, r: &resonance4d::video_fit::StartResult) {
+        eprintln!(
+            "multi-start: candidate #{} (MS-SSIM {:.4}) reached loss {:.5e}",
+            r.candidate,
+            r.score.unwrap_or(f64::NAN),
+            r.loss
+        );
+    }
+
     fn on_checkpoint(&mut self, s: &FitState) {
         let r = write_json(&self.dir.join("checkpoint.json"), s).map_err(anyhow::Error::from);
         self.keep(r);

@@ -1,11 +1,14 @@
 //! The foam block: a block of foam on the floor is squeezed by a downward push on its top
-//! layer (a force impulse, so the absolute density enters the motion), flows viscoplastically
-//! past its yield stress while the push lasts (the flow rate follows the plastic viscosity),
-//! and springs back to a permanent dent when released. Free: `E`, `nu`, yield stress,
-//! plastic viscosity, density. Two views.
+//! layer in two stages — a traction of 1.5 times the yield stress for 0.1 s, then 3 times it
+//! for another 0.1 s — and released. Above the yield stress the foam flows at a rate that
+//! grows with the excess stress over the plastic viscosity; two stress levels give two rates,
+//! which separate the yield stress from the viscosity (one level determines only their
+//! combination). The push is a force (body-force density), so the absolute density enters
+//! the motion. After the release the block springs back to a permanent dent. Free: `E`,
+//! `nu`, yield stress, plastic viscosity, density. Two views.
 
-use super::{bounds_around, sim_config, stage, with, SceneSpec, Size};
-use crate::video_fit::{FitConfig, Precision};
+use super::{bounds_around, push_force, sim_config, stage, with, SceneSpec, Size};
+use crate::video_fit::{FitConfig, OptimizerKind, Precision};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
 use r4d_optim::ParamKind;
 
@@ -32,6 +35,10 @@ pub fn spec(size: Size) -> SceneSpec {
         Size::Small => (16, 12, (96, 72)),
     };
     let top = FLOOR + 0.25;
+    // Traction sigma on the top 0.1 m: a body-force acceleration sigma / (density 0.1 m).
+    let t = truth();
+    let a = 1.5 * t.yield_stress_pa / (t.density_kg_m3 * 0.1);
+    let f = push_force([0.0, 0.0, -a], t.density_kg_m3, n_grid);
     let text = format!(
         r#"
 [domain]
@@ -54,11 +61,20 @@ normal = [0.0, 0.0, 1.0]
 surface = "sticky"
 [[boundary]]
 type = "particle_impulse"
-force = [0.0, 0.0, -0.6]
-point = [0.5, 0.5, {top}]
-size = [0.08, 0.08, 0.06]
-num_dt = 600
-"#
+force = [0.0, 0.0, {fz}]
+point = [0.5, 0.5, {mid}]
+size = [0.25, 0.2, 0.05]
+num_dt = 800
+[[boundary]]
+type = "particle_impulse"
+force = [0.0, 0.0, {fz}]
+point = [0.5, 0.5, {mid}]
+size = [0.25, 0.2, 0.05]
+num_dt = 400
+start_time = 0.1
+"#,
+        fz = f[2],
+        mid = top - 0.05
     );
     let config = sim_config(&text, vec![truth()]);
     let dx = config.domain.dx();
@@ -71,7 +87,6 @@ num_dt = 600
         }],
         dx,
     );
-    let t = truth();
     let start = vec![with(
         with(t, ParamKind::YieldStress, 2e4),
         ParamKind::PlasticViscosity,
@@ -98,7 +113,8 @@ num_dt = 600
         iters: 40,
         lr: 0.1,
         beta1: 0.6,
-        precision: Precision::F32,
+        optimizer: OptimizerKind::TrustBfgs,
+        precision: Precision::F64,
         ..Default::default()
     };
     fit.init.candidates = 24;

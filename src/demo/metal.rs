@@ -3,8 +3,8 @@
 //! it springs back, rings at its bending frequency (`E / density`) around a permanently bent
 //! shape (the yield stress). Free: `E`, `nu`, yield stress, density. Two views.
 
-use super::{bounds_around, sim_config, stage, with, SceneSpec, Size};
-use crate::video_fit::{FitConfig, Precision};
+use super::{bounds_around, push_force, sim_config, stage, with, SceneSpec, Size};
+use crate::video_fit::{FitConfig, OptimizerKind, Precision};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
 use r4d_optim::ParamKind;
 
@@ -26,6 +26,8 @@ pub fn spec(size: Size) -> SceneSpec {
         Size::Full => (24, 20, (256, 192)),
         Size::Small => (16, 12, (96, 72)),
     };
+    // 41 m/s^2 downwards on the tip for 0.08 s.
+    let f = push_force([0.0, 0.0, -41.0], truth().density_kg_m3, n_grid);
     let text = format!(
         r#"
 [domain]
@@ -48,11 +50,12 @@ size = [0.15, 0.2, 0.2]
 velocity = [0.0, 0.0, 0.0]
 [[boundary]]
 type = "particle_impulse"
-force = [0.0, 0.0, -0.3]
+force = [0.0, 0.0, {fz}]
 point = [0.75, 0.5, 0.5]
 size = [0.05, 0.1, 0.1]
 num_dt = 400
-"#
+"#,
+        fz = f[2]
     );
     let config = sim_config(&text, vec![truth()]);
     let dx = config.domain.dx();
@@ -90,6 +93,7 @@ num_dt = 400
         iters: 40,
         lr: 0.1,
         beta1: 0.6,
+        optimizer: OptimizerKind::TrustBfgs,
         precision: Precision::F32,
         ..Default::default()
     };

@@ -486,6 +486,14 @@ fn bounds_around(t: &PartParams, kinds: &[(ParamKind, f64)]) -> BTreeMap<String,
         .collect()
 }
 
+/// Force per particle (N) that gives acceleration `a` (m/s^2) to a particle of density `rho`
+/// at grid `n_grid` (2 particles per cell per axis, volume `(dx / 2)^3`): the scenes' pushes
+/// are body-force densities, so the small and full versions of a scene are loaded alike.
+fn push_force(a: [f64; 3], rho: f64, n_grid: usize) -> [f64; 3] {
+    let v = (0.5 / n_grid as f64).powi(3);
+    a.map(|x| x * rho * v)
+}
+
 /// A simulation config from TOML text with `parts` as its parts (the scene files' configs
 /// are fixed text, so a parse error is a bug).
 fn sim_config(text: &str, parts: Vec<PartParams>) -> SimConfig {

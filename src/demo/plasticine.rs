@@ -3,8 +3,8 @@
 //! impact and keeps its squashed shape. Free: `E`, `nu`, yield stress, density (softening
 //! fixed at its default). Two views.
 
-use super::{bounds_around, sim_config, stage, with, SceneSpec, Size};
-use crate::video_fit::{FitConfig, Precision};
+use super::{bounds_around, push_force, sim_config, stage, with, SceneSpec, Size};
+use crate::video_fit::{FitConfig, OptimizerKind, Precision};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
 use r4d_optim::ParamKind;
 
@@ -29,6 +29,8 @@ pub fn spec(size: Size) -> SceneSpec {
         Size::Full => (24, 20, (256, 192)),
         Size::Small => (16, 12, (96, 72)),
     };
+    // Thrown: 4.6 m/s^2 sideways and 13.8 m/s^2 down for 0.025 s, on top of gravity.
+    let f = push_force([4.6, 0.0, -13.8], truth().density_kg_m3, n_grid);
     let text = format!(
         r#"
 [domain]
@@ -52,11 +54,13 @@ surface = "friction"
 friction = 0.8
 [[boundary]]
 type = "particle_impulse"
-force = [0.05, 0.0, -0.15]
+force = [{fx}, 0.0, {fz}]
 point = [0.4, 0.5, 0.5]
 size = [0.2, 0.2, 0.2]
 num_dt = 100
-"#
+"#,
+        fx = f[0],
+        fz = f[2]
     );
     let config = sim_config(&text, vec![truth()]);
     let dx = config.domain.dx();
@@ -90,7 +94,8 @@ num_dt = 100
         iters: 40,
         lr: 0.1,
         beta1: 0.6,
-        precision: Precision::F32,
+        optimizer: OptimizerKind::TrustBfgs,
+        precision: Precision::F64,
         ..Default::default()
     };
     fit.init.candidates = 24;

@@ -5,7 +5,7 @@
 //! density. Free: `E`, `nu`, friction angle, density. Two views.
 
 use super::{bounds_around, sim_config, stage, with, SceneSpec, Size};
-use crate::video_fit::{FitConfig, Precision};
+use crate::video_fit::{FitConfig, OptimizerKind, Precision};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
 use r4d_optim::ParamKind;
 
@@ -87,6 +87,7 @@ friction = 0.5
         iters: 40,
         lr: 0.1,
         beta1: 0.6,
+        optimizer: OptimizerKind::TrustBfgs,
         precision: Precision::F32,
         ..Default::default()
     };

@@ -16,8 +16,8 @@
 //! checkpoint_every = 1    # iterations between checkpoints
 //! flat_probe = 6          # points probed along a parameter whose gradient is exactly 0
 //! optimizer = "adam"      # or "trust_bfgs" (first trust radius = lr)
-//! multi_start = 1         # top LHS candidates each given multi_start_iters iterations
-//! multi_start_iters = 4
+//! multi_start = 1         # short fits from the best K candidates (1: off)
+//! multi_start_iters = 5   # iterations of each
 //! free = ["E", "density"] # free parameters of every part (default: by material)
 //!
 //! [loss]                  # the DMS loss (r4d_loss::DmsConfig); ablations:
@@ -165,15 +165,16 @@ pub struct FitConfig {
     /// others fixed, and the parameter jumps to the best one when that lowers the loss
     /// (its Adam moments restart). 0: off. Default 6 (see `docs/fitting.md`).
     pub flat_probe: usize,
+    /// Multi-start: the best this-many initialisation candidates each get a short fit of
+    /// `multi_start_iters` iterations (extra to `iters`); the fit continues from the lowest
+    /// loss any of them reached. 1: off (the best candidate only). Part and object fits
+    /// with the initialisation only.
+    pub multi_start: usize,
+    /// Iterations of each short fit of a multi-start.
+    pub multi_start_iters: usize,
     /// The step: `adam` (AdamW, the paper's) or `trust_bfgs` (a trust-region quasi-Newton
     /// step, `r4d_optim::TrustRegionBfgs`, whose first radius is `lr`).
     pub optimizer: OptimizerKind,
-    /// Multi-start: the best this-many initialisation candidates each run
-    /// `multi_start_iters` iterations; the fit continues from the one with the lowest loss.
-    /// 1: off (the best candidate only).
-    pub multi_start: usize,
-    /// Iterations of each start in a multi-start (they count towards `iters`).
-    pub multi_start_iters: usize,
 }
 
 impl Default for FitConfig {
@@ -198,9 +199,9 @@ impl Default for FitConfig {
             init: InitConfig::default(),
             parts: Vec::new(),
             flat_probe: 6,
-            optimizer: OptimizerKind::Adam,
             multi_start: 1,
-            multi_start_iters: 4,
+            multi_start_iters: 5,
+            optimizer: OptimizerKind::Adam,
         }
     }
 }
@@ -273,17 +274,16 @@ impl FitConfig {
                 self.multi_start
             ));
         }
-        if self.multi_start > 1 && self.multi_start > self.init.candidates {
-            return bad(format!(
-                "multi_start = {} exceeds init.candidates = {}",
-                self.multi_start, self.init.candidates
-            ));
-        }
-        if self.multi_start > 1 && self.multi_start * self.multi_start_iters > self.iters {
-            return bad(format!(
-                "multi_start = {} x multi_start_iters = {} exceeds iters = {}",
-                self.multi_start, self.multi_start_iters, self.iters
-            ));
+        if self.multi_start > 1 {
+            if !self.init.enabled {
+                return bad("multi_start > 1 needs the initialisation (init.enabled)".into());
+            }
+            if self.granularity == Granularity::Particle {
+                return bad("multi_start > 1: part and object fits only".into());
+            }
+            if self.multi_start_iters == 0 {
+                return bad("multi_start_iters must be at least 1".into());
+            }
         }
         if self.init.frames < 2 {
             return bad("init.frames must be at least 2".into());

@@ -34,6 +34,102 @@ pub struct FitState {
     /// The trust-region optimiser (`optimizer = "trust_bfgs"`), like `optimizer`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub trust: Option<TrustRegionBfgs>,
+    /// The short fits of a multi-start (`multi_start > 1`), in candidate-rank order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub starts: Vec<StartResult>,
+}
+
+/// One start of a multi-start: a short fit from an initialisation candidate.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StartResult {
+    /// The candidate's index in the initialisation.
+    pub candidate: usize,
+    /// Its MS-SSIM score.
+    pub score: Option<f64>,
+    /// Lowest loss of the short fit.
+    pub loss: f64,
+    /// The parameters of that loss (the fit's free parameters).
+    pub theta: Vec<f64>,
+}
+
+/// One evaluation and step of the fit loop.
+struct Step {
+    ev: Evaluation,
+    theta: Vec<f64>,
+    gtheta: Vec<f64>,
+    slots: Vec<PartParams>,
+    grad_norm: f64,
+    lr: f64,
+    probes: Vec<FlatProbe>,
+}
+
+/// A fresh optimiser of `cfg.optimizer` at `theta`.
+fn new_stepper(cfg: &FitConfig, space: &ParamSpace, theta: Vec<f64>) -> Result<Stepper, FitError> {
+    Ok(match cfg.optimizer {
+        OptimizerKind::Adam => Stepper::Adam(LogDomainOptimizer::new(
+            theta,
+            space.bounds(),
+            cfg.adam(),
+            (cfg.clip_norm > 0.0).then_some(cfg.clip_norm),
+        )?),
+        OptimizerKind::TrustBfgs => Stepper::Trust(TrustRegionBfgs::new(
+            theta,
+            space.bounds(),
+            TrustRegion {
+                initial_radius: cfg.lr,
+                max_radius: (5.0 * cfg.lr).max(cfg.lr),
+                min_radius: (1e-2 * cfg.lr).min(cfg.lr),
+            },
+        )?),
+    })
+}
+
+/// Evaluates `opt`'s point, steps, and runs the flat-direction probes; iteration `iter` of
+/// `iters` (for the learning-rate schedule).
+fn iterate(
+    obj: &Objective,
+    space: &ParamSpace,
+    base_slots: &[PartParams],
+    opt: &mut Stepper,
+    cfg: &FitConfig,
+    (iter, iters): (usize, usize),
+) -> Result<Step, FitError> {
+    let theta = opt.theta();
+    let mut slots = base_slots.to_vec();
+    space.apply(&mut slots, &theta);
+    let (ev, g) = obj.value_and_grad(&slots)?;
+    let gtheta = space.gather(&g);
+    let lr = match cfg.lr_schedule {
+        LrSchedule::Constant => cfg.lr,
+        LrSchedule::Cosine => {
+            let p = iter as f64 / iters.max(1) as f64;
+            cfg.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * p).cos()))
+        }
+    };
+    let grad_norm = opt.step(ev.total, &gtheta, lr);
+    let probes = flat_probes(
+        obj,
+        space,
+        base_slots,
+        &theta,
+        &gtheta,
+        ev.total,
+        cfg.flat_probe,
+    )?;
+    for (i, p) in &probes {
+        if p.to != p.from {
+            opt.set_theta(*i, p.to);
+        }
+    }
+    Ok(Step {
+        ev,
+        theta,
+        gtheta,
+        slots,
+        grad_norm,
+        lr,
+        probes: probes.into_iter().map(|(_, p)| p).collect(),
+    })
 }
 
 /// The optimiser a fit steps with.
@@ -230,6 +326,8 @@ pub trait FitHooks {
     fn on_iter(&mut self, _r: &IterRecord) {}
     /// A checkpoint to persist.
     fn on_checkpoint(&mut self, _s: &FitState) {}
+    /// A start of a multi-start finished.
+    fn on_start(&mut self, _r: &StartResult) {}
 }
 
 /// Hooks that do nothing.
@@ -486,6 +584,7 @@ pub fn run_fit(
             optimizer: None,
             best: None,
             trust: None,
+            starts: Vec::new(),
         },
     };
     // Starting point: the config's parts, replaced by the initialisation's best candidate.
@@ -505,7 +604,57 @@ pub fn run_fit(
             hooks.on_checkpoint(&state);
         }
     }
-    let base_slots: Vec<PartParams> = slot_parts.iter().map(|&p| base_parts[p as usize]).collect();
+    let mut base_slots: Vec<PartParams> =
+        slot_parts.iter().map(|&p| base_parts[p as usize]).collect();
+    // Multi-start: a short fit from each of the best candidates; the main fit continues from
+    // the lowest loss any of them reached (recomputed identically on resume).
+    if let (true, Some(outcome)) = (cfg.multi_start > 1, state.init.clone()) {
+        let ispace = init_space(cfg, &problem.config.parts)?;
+        let k = cfg.multi_start.min(outcome.ranking.len());
+        while state.starts.len() < k && state.iters_done == 0 {
+            let c = &outcome.candidates[outcome.ranking[state.starts.len()]];
+            let mut parts = problem.config.parts.clone();
+            ispace.apply(&mut parts, &c.theta);
+            let slots0: Vec<PartParams> = slot_parts.iter().map(|&p| parts[p as usize]).collect();
+            let mut o = new_stepper(cfg, &space, space.values(&slots0))?;
+            let mut best: Option<(f64, Vec<f64>)> = None;
+            for it in 0..cfg.multi_start_iters {
+                let st = iterate(
+                    &obj,
+                    &space,
+                    &slots0,
+                    &mut o,
+                    cfg,
+                    (it, cfg.multi_start_iters),
+                )?;
+                if best.as_ref().is_none_or(|(l, _)| st.ev.total < *l) {
+                    best = Some((st.ev.total, st.theta));
+                }
+            }
+            let (loss, theta) = best.unwrap_or((f64::INFINITY, space.values(&slots0)));
+            let r = StartResult {
+                candidate: c.index,
+                score: c.score,
+                loss,
+                theta,
+            };
+            hooks.on_start(&r);
+            state.starts.push(r);
+            hooks.on_checkpoint(&state);
+        }
+        if let Some(b) = state
+            .starts
+            .iter()
+            .filter(|r| r.loss.is_finite())
+            .min_by(|a, b| a.loss.total_cmp(&b.loss))
+        {
+            space.apply(&mut base_slots, &b.theta);
+            base_parts = part_summary(&base_parts, &slot_parts, &base_slots);
+            if state.best.is_none() {
+                state.best = Some((b.loss, b.theta.clone()));
+            }
+        }
+    }
     let init_parts = base_parts.clone();
     let mut opt = match (cfg.optimizer, state.optimizer.take(), state.trust.take()) {
         (OptimizerKind::Adam, Some(o), _) => Stepper::Adam(o),
@@ -519,75 +668,35 @@ pub fn run_fit(
                 }
             )))
         }
-        (OptimizerKind::Adam, _, _) => Stepper::Adam(LogDomainOptimizer::new(
-            space.values(&base_slots),
-            space.bounds(),
-            cfg.adam(),
-            (cfg.clip_norm > 0.0).then_some(cfg.clip_norm),
-        )?),
-        (OptimizerKind::TrustBfgs, _, _) => Stepper::Trust(TrustRegionBfgs::new(
-            space.values(&base_slots),
-            space.bounds(),
-            TrustRegion {
-                initial_radius: cfg.lr,
-                max_radius: (5.0 * cfg.lr).max(cfg.lr),
-                min_radius: (1e-2 * cfg.lr).min(cfg.lr),
-            },
-        )?),
+        _ => new_stepper(cfg, &space, space.values(&base_slots))?,
     };
     let peak = crate::alloc::peak;
     for iter in state.iters_done..cfg.iters {
         let start = Instant::now();
-        let theta = opt.theta();
-        let mut slots = base_slots.clone();
-        space.apply(&mut slots, &theta);
-        let (ev, g) = obj.value_and_grad(&slots)?;
-        let gtheta = space.gather(&g);
+        let st = iterate(&obj, &space, &base_slots, &mut opt, cfg, (iter, cfg.iters))?;
+        let (ev, theta, gtheta) = (&st.ev, &st.theta, &st.gtheta);
         if state.best.as_ref().is_none_or(|(l, _)| ev.total < *l) {
             state.best = Some((ev.total, theta.clone()));
         }
-        let lr = match cfg.lr_schedule {
-            LrSchedule::Constant => cfg.lr,
-            LrSchedule::Cosine => {
-                let p = iter as f64 / cfg.iters.max(1) as f64;
-                cfg.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * p).cos()))
-            }
-        };
-        let grad_norm = opt.step(ev.total, &gtheta, lr);
-        let probes = flat_probes(
-            &obj,
-            &space,
-            &base_slots,
-            &theta,
-            &gtheta,
-            ev.total,
-            cfg.flat_probe,
-        )?;
-        for (i, p) in &probes {
-            if p.to != p.from {
-                opt.set_theta(*i, p.to);
-            }
-        }
-        let probes: Vec<FlatProbe> = probes.into_iter().map(|(_, p)| p).collect();
         let rec = IterRecord {
             iter,
-            loss: Terms::of(&ev),
+            loss: Terms::of(ev),
             theta: names.iter().cloned().zip(theta.iter().copied()).collect(),
             grad_log: names
                 .iter()
                 .cloned()
-                .zip(gtheta.iter().zip(&theta).map(|(g, t)| g * t))
+                .zip(gtheta.iter().zip(theta).map(|(g, t)| g * t))
                 .collect(),
-            grad_norm,
-            lr,
-            parts: part_summary(&base_parts, &slot_parts, &slots)
+            grad_norm: st.grad_norm,
+            lr: st.lr,
+            parts: part_summary(&base_parts, &slot_parts, &st.slots)
                 .iter()
                 .enumerate()
                 .map(|(i, p)| PartRecord::of(i, p))
                 .collect(),
             time_s: start.elapsed().as_secs_f64(),
             peak_host_bytes: peak(),
-            probes,
+            probes: st.probes,
         };
         hooks.on_iter(&rec);
         state.iters_done = iter + 1;

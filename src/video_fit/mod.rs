@@ -25,7 +25,7 @@ pub mod report;
 
 pub use config::{FitConfig, InitConfig, OptimizerKind};
 pub use dataset::{problem_from_dataset, problem_with_views};
-pub use fit::{run_fit, FitHooks, FitOutcome, FitState, IterRecord};
+pub use fit::{run_fit, FitHooks, FitOutcome, FitState, IterRecord, StartResult};
 pub use params::{Granularity, ParamSpace};
 pub use parts::PartLabels;
 pub use problem::{

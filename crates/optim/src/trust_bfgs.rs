@@ -10,7 +10,9 @@
 //! or the trial was rejected. Every trial, accepted or not, updates `B` with its gradient
 //! difference, so the curvature of a stiff direction (e.g. `E / density`, which sets the
 //! motion's time scale) is learned in a few iterations and the step is no longer limited by
-//! it — the zig-zag AdamW shows across such a valley.
+//! it — the zig-zag AdamW shows across such a valley. A trial rejected at the smallest
+//! radius restarts the model (scaled identity, first radius): on a loss with noise or kinks
+//! the fit keeps exploring around the best point instead of re-evaluating one trial.
 
 use crate::Error;
 use serde::{Deserialize, Serialize};
@@ -52,6 +54,8 @@ pub struct TrustRegionBfgs {
     log_bounds: Vec<(f64, f64)>,
     evaluations: u64,
     accepted: u64,
+    #[serde(default)]
+    restarts: u64,
     /// Settings.
     pub settings: TrustRegion,
 }
@@ -130,11 +134,11 @@ impl TrustRegionBfgs {
             }
         }
         let s = settings;
-        if !(s.min_radius > 0.0
+        let ordered = s.min_radius > 0.0
             && s.min_radius <= s.initial_radius
-            && s.initial_radius <= s.max_radius)
-            || !s.max_radius.is_finite()
-        {
+            && s.initial_radius <= s.max_radius
+            && s.max_radius.is_finite();
+        if !ordered {
             return Err(Error::Invalid {
                 index: 0,
                 message: format!(
@@ -158,6 +162,7 @@ impl TrustRegionBfgs {
             log_bounds,
             evaluations: 0,
             accepted: 0,
+            restarts: 0,
             settings,
         })
     }
@@ -180,6 +185,11 @@ impl TrustRegionBfgs {
     /// Evaluations taken and how many of them were accepted.
     pub fn counts(&self) -> (u64, u64) {
         (self.evaluations, self.accepted)
+    }
+
+    /// Restarts of the model after a rejection at the smallest radius.
+    pub fn restarts(&self) -> u64 {
+        self.restarts
     }
 
     /// Moves parameter `i` of the accepted point to `value` (clamped to its bounds) and
@@ -275,6 +285,17 @@ impl TrustRegionBfgs {
                     self.x = self.trial.clone();
                     self.at_x = Some((loss, g));
                     self.accepted += 1;
+                } else if self.radius <= self.settings.min_radius {
+                    // Rejected at the smallest radius: the model no longer describes the
+                    // loss near x (noise, a kink). Restart it: a scaled identity and the
+                    // first radius, so the next trials explore again instead of repeating.
+                    let c = norm(&gx).max(1e-12) / self.settings.initial_radius;
+                    self.b = (0..n * n)
+                        .map(|k| if k % (n + 1) == 0 { c } else { 0.0 })
+                        .collect();
+                    self.radius = self.settings.initial_radius;
+                    self.restarts += 1;
+                    self.at_x = Some((f, gx));
                 } else {
                     self.radius = (0.5 * step.min(self.radius)).max(self.settings.min_radius);
                     self.at_x = Some((f, gx));
