@@ -210,3 +210,68 @@ fn physgaussian_fit_jelly_arch_recovers_e_over_density() {
     );
     assert!(err.abs() < 0.1, "E/density off by {:.1}%", 100.0 * err);
 }
+
+#[test]
+fn demo_scenes_report_every_free_parameter_with_a_verdict() {
+    let d = tmp("demo-scenes");
+    let out = d.join("foam");
+    let o = r4d(&[
+        "demo",
+        "--scene",
+        "foam",
+        "--small",
+        "--quick",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    ok(&o);
+    let s = json(&out.join("summary.json"));
+    assert_eq!(s["scene"], "foam");
+    let quantities: Vec<&str> = s["recovery"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["quantity"].as_str().unwrap())
+        .collect();
+    for q in [
+        "E",
+        "nu",
+        "yield_stress",
+        "plastic_viscosity",
+        "density",
+        "E/density",
+    ] {
+        assert!(quantities.contains(&q), "{q} missing from {quantities:?}");
+    }
+    let verdicts = s["identifiability"].as_array().unwrap();
+    assert!(verdicts
+        .iter()
+        .any(|v| v["name"] == "part0.plastic_viscosity"));
+    assert!(verdicts
+        .iter()
+        .all(|v| v["identifiable"].is_boolean() && v["reason"].is_string()));
+    assert_eq!(s["profiles_2d"].as_array().unwrap().len(), 2);
+    for f in [
+        "view_0/side_by_side.gif",
+        "view_1/fitted.mp4",
+        "inputs/reference_1.npy",
+    ] {
+        assert!(out.join(f).exists(), "demo wrote no {f}");
+    }
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("plastic_viscosity"), "{stdout}");
+    // An unknown scene is a typed error naming the flag and the choices.
+    let o = r4d(&[
+        "demo",
+        "--scene",
+        "lava",
+        "--out",
+        d.join("x").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("--scene") && err.contains("plasticine"),
+        "{err}"
+    );
+}

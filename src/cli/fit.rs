@@ -484,7 +484,12 @@ pub fn run(a: FitArgs) -> Result<()> {
     }
     println!(
         "{}",
-        super::run_hooks::param_table(&outcome.init_parts, &outcome.parts, None)
+        super::run_hooks::param_table(
+            &outcome.init_parts,
+            &outcome.parts,
+            &outcome.space,
+            &hooks.log
+        )
     );
     println!("{}", metrics_line(&files.metrics));
     println!(

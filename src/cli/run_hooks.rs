@@ -4,6 +4,7 @@
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use r4d_mpm::PartParams;
+use r4d_optim::ParamKind;
 use r4d_optim::{Candidate, InitOutcome};
 use resonance4d::video_fit::report::write_json;
 use resonance4d::video_fit::{FitConfig, FitHooks, FitState, IterRecord};
@@ -167,53 +168,75 @@ impl FitHooks for RunHooks {
     }
 }
 
-/// A table of parameters per part: start and fit, and truth with relative errors when
-/// given.
+/// A table of the fit's free parameters: start and fit per part and kind (per-particle fits:
+/// geometric means per part), `E/density` where both are free, and a note on every
+/// parameter whose gradient was exactly zero at every iteration of `log` — the video carried
+/// no information about it along the fit (e.g. a yield stress no particle reached), so its
+/// value is not a measurement.
 pub fn param_table(
     init: &[PartParams],
     fit: &[PartParams],
-    truth: Option<&[PartParams]>,
+    space: &resonance4d::video_fit::ParamSpace,
+    log: &[IterRecord],
 ) -> String {
+    use resonance4d::video_fit::params::get;
     use std::fmt::Write as _;
-    let mut s = String::new();
-    type Quantity = (&'static str, fn(&PartParams) -> f64);
-    let rows: [Quantity; 3] = [
-        ("E (Pa)", |p| p.youngs_modulus_pa),
-        ("density", |p| p.density_kg_m3),
-        ("E/density", |p| p.youngs_modulus_pa / p.density_kg_m3),
-    ];
-    let _ = match truth {
-        Some(_) => writeln!(
-            s,
-            "{:<6} {:<10} {:>12} {:>12} {:>9} {:>12} {:>9}",
-            "part", "quantity", "truth", "init", "init err", "fit", "fit err"
-        ),
-        None => writeln!(
-            s,
-            "{:<6} {:<10} {:>12} {:>12}",
-            "part", "quantity", "init", "fit"
-        ),
+    let names = space.names();
+    let per_particle = space.granularity == resonance4d::video_fit::Granularity::Particle;
+    let flat = |name: &str| {
+        !per_particle
+            && !log.is_empty()
+            && log
+                .iter()
+                .all(|r| r.grad_log.get(name).is_some_and(|g| *g == 0.0))
     };
-    for (i, (a, b)) in init.iter().zip(fit).enumerate() {
-        for (name, f) in rows {
-            let _ = match truth {
-                Some(t) => {
-                    let tv = f(&t[i]);
-                    writeln!(
-                        s,
-                        "{:<6} {:<10} {:>12.4e} {:>12.4e} {:>8.1}% {:>12.4e} {:>8.2}%",
-                        i,
-                        name,
-                        tv,
-                        f(a),
-                        100.0 * (f(a) - tv) / tv,
-                        f(b),
-                        100.0 * (f(b) - tv) / tv
-                    )
-                }
-                None => writeln!(s, "{:<6} {:<10} {:>12.4e} {:>12.4e}", i, name, f(a), f(b)),
+    let mut rows: Vec<(usize, String, f64, f64, String)> = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for (e, name) in space.entries.iter().zip(&names) {
+        let parts: Vec<usize> = match e.part {
+            Some(p) => vec![p],
+            None => (0..fit.len()).collect(),
+        };
+        for p in parts {
+            if !seen.insert((p, e.kind)) {
+                continue;
+            }
+            let note = if flat(name) {
+                "not determined: zero gradient at every iteration".to_string()
+            } else {
+                String::new()
             };
+            rows.push((
+                p,
+                e.kind.name().to_string(),
+                get(&init[p], e.kind),
+                get(&fit[p], e.kind),
+                note,
+            ));
         }
+    }
+    for p in 0..fit.len() {
+        let has = |k| seen.contains(&(p, k));
+        if has(ParamKind::YoungsModulus) && has(ParamKind::Density) {
+            let r = |q: &PartParams| q.youngs_modulus_pa / q.density_kg_m3;
+            rows.push((
+                p,
+                "E/density".into(),
+                r(&init[p]),
+                r(&fit[p]),
+                String::new(),
+            ));
+        }
+    }
+    rows.sort_by_key(|r| r.0);
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{:<6} {:<18} {:>12} {:>12}",
+        "part", "quantity", "init", "fit"
+    );
+    for (p, q, i, f, note) in rows {
+        let _ = writeln!(s, "{p:<6} {q:<18} {i:>12.4e} {f:>12.4e}  {note}");
     }
     s
 }

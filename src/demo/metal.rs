@@ -120,9 +120,10 @@ num_dt = 400
         pairs: vec![
             (0, ParamKind::YoungsModulus, ParamKind::YieldStress),
             (0, ParamKind::YoungsModulus, ParamKind::Density),
+            (0, ParamKind::PoissonRatio, ParamKind::YieldStress),
         ],
         fit,
         profile_offsets: vec![-0.3, -0.15, -0.05, 0.05, 0.15, 0.3],
-        profile2d_offsets: vec![-0.15, -0.05, 0.05, 0.15],
+        profile2d_offsets: vec![-0.1, 0.1],
     }
 }

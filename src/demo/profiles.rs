@@ -8,24 +8,27 @@
 //!
 //! # 2-D profiles
 //! For the pairs that may trade off (`E` vs yield stress, friction angle vs density ...), the
-//! loss on a grid of both offsets; a least-squares quadratic `a + g.u + u^T H u / 2` gives the
-//! log-space Hessian `H` and the correlation `rho = H_ab / sqrt(H_aa H_bb)`. When the other
-//! parameter of the pair is free to compensate, a 10% error in `a` only raises the loss by
-//! `(1 - rho^2)` times its conditional rise (the *marginal rise*).
+//! loss on a grid of both offsets (the demo: factors 0.9, 1, 1.1). For each parameter of the
+//! pair, the *marginal share* is the loss rise of a 10% error when the partner takes its best
+//! grid value, over the rise with the partner at the truth: 1 when the partner cannot
+//! compensate, near 0 when it can (a valley). It is read off the grid, not from a fitted
+//! quadratic: near the truth the DMS loss is kinked (its magnitude term is an absolute
+//! difference), and a quadratic fitted to a kink reports spurious correlations. A
+//! least-squares quadratic's log-space Hessian and correlation are still reported, for
+//! information, when the quadratic is convex.
 //!
 //! # Verdicts
 //! A parameter is **identifiable** when
 //! 1. the 1-D profile has its minimum at the truth and rises on both sides, and
-//! 2. its marginal rise (the conditional one when no pair contains it) is at least
-//!    [`MIN_RELATIVE_SENSITIVITY`] of the largest conditional rise among the free
-//!    parameters.
+//! 2. its marginal rise — its conditional rise times the smallest marginal share of the
+//!    pairs that contain it — is at least [`MIN_RELATIVE_SENSITIVITY`] of the largest
+//!    conditional rise among the free parameters.
 //!
 //! The threshold is relative because the absolute scale of the loss depends on the scene:
 //! when the best-determined parameter is recovered to about 1%, one with 5% of its curvature
 //! is recovered to about `1% / sqrt(0.05) = 4.5%`, inside every target tolerance; below that
-//! the fit's number is not a measurement. A pair with `|rho|` above [`TRADE_OFF_RHO`] is
-//! reported as a trade-off: the combination along the stiff direction of `H` (for `E` and
-//! density: `E/density`) gets its own verdict.
+//! the fit's number is not a measurement. A pair with a marginal share below
+//! [`TRADE_OFF_SHARE`] is reported as a trade-off; `E/density` gets its own verdict.
 
 use crate::video_fit::params::{get, set, ParamSpace};
 use crate::video_fit::{FitConfig, FitError, Objective, VideoProblem};
@@ -38,8 +41,8 @@ use serde::{Deserialize, Serialize};
 /// identifiable.
 pub const MIN_RELATIVE_SENSITIVITY: f64 = 0.05;
 
-/// Correlation above which a 2-D profile is reported as a trade-off.
-pub const TRADE_OFF_RHO: f64 = 0.95;
+/// Marginal share below which a 2-D profile is reported as a trade-off.
+pub const TRADE_OFF_SHARE: f64 = 0.1;
 
 /// A 1-D loss profile around the truth.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -75,12 +78,11 @@ pub struct Profile2d {
     pub losses: Vec<Vec<f64>>,
     /// Log-space Hessian of the fitted quadratic `[[H_aa, H_ab], [H_ab, H_bb]]`.
     pub hessian: [[f64; 2]; 2],
-    /// `H_ab / sqrt(H_aa H_bb)` (0 when the quadratic is not convex).
-    pub correlation: f64,
-    /// The combination `a^p b^q` along the stiff direction of `H` (unit `(p, q)`, first
-    /// nonzero component positive): what the video determines best.
-    pub stiff_exponents: [f64; 2],
-    /// `|rho|` above [`TRADE_OFF_RHO`].
+    /// `H_ab / sqrt(H_aa H_bb)` of the fitted quadratic; `None` when it is not convex.
+    pub correlation: Option<f64>,
+    /// Marginal share of `a` and of `b` (see the module docs).
+    pub marginal_share: [f64; 2],
+    /// A marginal share below [`TRADE_OFF_SHARE`].
     pub trade_off: bool,
 }
 
@@ -248,27 +250,29 @@ pub fn profiles_2d(
         }
         let c = least_squares(&x, &y).unwrap_or_else(|| vec![0.0; 6]);
         let h = [[c[3], c[4]], [c[4], c[5]]];
-        let rho = if h[0][0] > 0.0 && h[1][1] > 0.0 {
-            (h[0][1] / (h[0][0] * h[1][1]).sqrt()).clamp(-1.0, 1.0)
-        } else {
-            0.0
+        let convex = h[0][0] > 0.0 && h[1][1] > 0.0 && h[0][0] * h[1][1] > h[0][1] * h[0][1];
+        let rho = convex.then(|| h[0][1] / (h[0][0] * h[1][1]).sqrt());
+        // Marginal shares on the grid: rows are a's factors, columns b's.
+        let one = f.iter().position(|&v| v == 1.0).expect("truth point");
+        let l0 = grid[one][one];
+        let share = |get: &dyn Fn(usize, usize) -> f64| {
+            let (mut cond, mut marg, mut n) = (0.0, 0.0, 0.0);
+            for i in (0..f.len()).filter(|&i| i != one) {
+                cond += get(i, one) - l0;
+                marg += (0..f.len())
+                    .map(|j| get(i, j))
+                    .fold(f64::INFINITY, f64::min)
+                    - l0;
+                n += 1.0;
+            }
+            if cond > 0.0 && n > 0.0 {
+                (marg / cond).clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
         };
-        // Stiff eigenvector of the symmetric 2x2 H.
-        let (p, q) = (h[0][0], h[1][1]);
-        let r = h[0][1];
-        let lmax = 0.5 * (p + q) + (0.25 * (p - q).powi(2) + r * r).sqrt();
-        let mut ev = if r.abs() > 1e-300 {
-            [r, lmax - p]
-        } else if p >= q {
-            [1.0, 0.0]
-        } else {
-            [0.0, 1.0]
-        };
-        let n = (ev[0] * ev[0] + ev[1] * ev[1]).sqrt();
-        ev = ev.map(|e| e / n);
-        if ev[0] < 0.0 || (ev[0] == 0.0 && ev[1] < 0.0) {
-            ev = ev.map(|e| -e);
-        }
+        let sa = share(&|i, j| grid[i][j]);
+        let sb = share(&|i, j| grid[j][i]);
         out.push(Profile2d {
             a: format!("part{part}.{}", ka.name()),
             b: format!("part{part}.{}", kb.name()),
@@ -277,8 +281,8 @@ pub fn profiles_2d(
             losses: grid,
             hessian: h,
             correlation: rho,
-            stiff_exponents: ev,
-            trade_off: rho.abs() > TRADE_OFF_RHO,
+            marginal_share: [sa, sb],
+            trade_off: sa.min(sb) < TRADE_OFF_SHARE,
         });
     }
     Ok(out)
@@ -290,11 +294,18 @@ pub fn verdicts(profiles: &mut [Profile], pairs: &[Profile2d]) -> Vec<Verdict> {
     let max_rise = profiles.iter().map(|p| p.rise_10pct).fold(0.0f64, f64::max);
     let mut out = Vec::new();
     for p in profiles.iter_mut() {
+        let mine = |q: &Profile2d| {
+            if q.a == p.name {
+                q.marginal_share[0]
+            } else {
+                q.marginal_share[1]
+            }
+        };
         let partner = pairs
             .iter()
             .filter(|q| q.a == p.name || q.b == p.name)
-            .max_by(|x, y| x.correlation.abs().total_cmp(&y.correlation.abs()));
-        let shrink = partner.map_or(1.0, |q| 1.0 - q.correlation * q.correlation);
+            .min_by(|x, y| mine(x).total_cmp(&mine(y)));
+        let shrink = partner.map_or(1.0, mine);
         p.relative_sensitivity = if max_rise > 0.0 {
             p.rise_10pct * shrink / max_rise
         } else {
@@ -311,8 +322,8 @@ pub fn verdicts(profiles: &mut [Profile], pairs: &[Profile2d]) -> Vec<Verdict> {
         } else if let Some(q) = partner.filter(|q| q.trade_off) {
             let other = if q.a == p.name { &q.b } else { &q.a };
             format!(
-                "trades off with {other} (correlation {:.3}): only their combination is determined",
-                q.correlation
+                "trades off with {other} (it compensates all but {:.0}% of a 10% error's loss rise): only their combination is determined",
+                100.0 * mine(q)
             )
         } else {
             format!(
@@ -327,8 +338,8 @@ pub fn verdicts(profiles: &mut [Profile], pairs: &[Profile2d]) -> Vec<Verdict> {
             reason,
         });
     }
-    // E/density per part: from its 2-D profile when there is one (the curvature along the
-    // direction (1, -1) of (ln E, ln density)), else determined when E or density is.
+    // E/density per part: determined when E and density both are; else from their 2-D
+    // profile when there is one, else from the more sensitive of the two 1-D profiles.
     let parts: std::collections::BTreeSet<String> = profiles
         .iter()
         .filter_map(|p| p.name.split_once('.').map(|(a, _)| a.to_string()))
@@ -342,21 +353,19 @@ pub fn verdicts(profiles: &mut [Profile], pairs: &[Profile2d]) -> Vec<Verdict> {
             continue;
         };
         let rel = match pairs.iter().find(|q| q.a == e && q.b == d) {
+            // Moving E or density alone by 10% changes the ratio by about 10%; the smaller of
+            // the two rises (conditional on the other) over the largest conditional rise.
             Some(q) => {
-                // In r = ln E - ln density, m = ln E + ln density: the marginal curvature of
-                // r (m free to compensate), then the rise of a 10% error in the ratio.
-                let h = q.hessian;
-                let hrr = 0.25 * (h[0][0] - 2.0 * h[0][1] + h[1][1]);
-                let hmm = 0.25 * (h[0][0] + 2.0 * h[0][1] + h[1][1]);
-                let hrm = 0.25 * (h[0][0] - h[1][1]);
-                let marginal = if hmm > 0.0 {
-                    hrr - hrm * hrm / hmm
-                } else {
-                    hrr
+                let one = q.factors_a.iter().position(|&v| v == 1.0).expect("truth");
+                let l0 = q.losses[one][one];
+                let n = q.factors_a.len();
+                let side = |get: &dyn Fn(usize) -> f64| {
+                    let v: Vec<f64> = (0..n).filter(|&i| i != one).map(get).collect();
+                    v.iter().sum::<f64>() / v.len().max(1) as f64 - l0
                 };
-                let rise = 0.5 * marginal.max(0.0) * 1.1f64.ln().powi(2);
+                let rise = side(&|i| q.losses[i][one]).min(side(&|j| q.losses[one][j]));
                 if max_rise > 0.0 {
-                    rise / max_rise
+                    (rise / max_rise).max(0.0)
                 } else {
                     0.0
                 }

@@ -117,6 +117,6 @@ friction = 0.5
         ],
         fit,
         profile_offsets: vec![-0.3, -0.15, -0.05, 0.05, 0.15, 0.3],
-        profile2d_offsets: vec![-0.15, -0.05, 0.05, 0.15],
+        profile2d_offsets: vec![-0.1, 0.1],
     }
 }
