@@ -40,6 +40,19 @@ pub struct SegmentArgs {
     /// k).
     #[arg(long)]
     min_cluster: Option<usize>,
+    /// A Gaussian with mixed evidence seen with less than this compositing weight (pixel
+    /// equivalents, over all views) gets proportionally less confidence, so that the KNN pass
+    /// decides it from its well-seen neighbours (0: off).
+    #[arg(long, default_value_t = 4.0)]
+    full_visibility: f32,
+    /// Do not scale a view's votes by the share of the Gaussian's drawn footprint that is
+    /// the Gaussian itself (edge-on Gaussians then vote with their whole blurred line).
+    #[arg(long)]
+    no_footprint_trust: bool,
+    /// The lift as it was before visibility-aware voting (sum of alpha T times the mask over
+    /// every view and pixel); overrides the two options above.
+    #[arg(long)]
+    classic: bool,
 }
 
 const Y0: f32 = 0.282_094_8;
@@ -70,10 +83,26 @@ pub fn run(a: SegmentArgs) -> Result<()> {
         set.cameras.len(),
         masks.class_names().join(", ")
     );
+    if !(a.full_visibility.is_finite() && a.full_visibility >= 0.0) {
+        bail!(
+            "--full-visibility {}: must be >= 0 and finite",
+            a.full_visibility
+        );
+    }
+    let base = if a.classic {
+        LiftConfig::classic()
+    } else {
+        LiftConfig {
+            full_visibility: a.full_visibility,
+            footprint_trust: !a.no_footprint_trust,
+            ..Default::default()
+        }
+    };
     let lift_cfg = LiftConfig {
         temperature: a.temperature,
         mode: set.mode.unwrap_or_default(),
         par: Par::Rayon,
+        ..base
     };
     let n_views = set.cameras.len();
     let lifted = lift_with_progress(&g, &set.cameras, &mut masks, &lift_cfg, |v| {
@@ -116,9 +145,34 @@ pub fn run(a: SegmentArgs) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     for (k, name) in parts.class_names.iter().enumerate() {
-        eprintln!("  part {k} ({name}): {} Gaussians", parts.counts[k]);
+        let idx: Vec<usize> = (0..parts.labels.len())
+            .filter(|&i| parts.labels[i] == k as i32)
+            .collect();
+        let mean_conf =
+            idx.iter().map(|&i| parts.confidence[i] as f64).sum::<f64>() / idx.len().max(1) as f64;
+        let mut views: Vec<u16> = idx.iter().map(|&i| lifted.views[i]).collect();
+        views.sort_unstable();
+        let median_views = views.get(views.len() / 2).copied().unwrap_or(0);
+        eprintln!(
+            "  part {k} ({name}): {} Gaussians, mean confidence {mean_conf:.2}, seen by {median_views} view(s) (median)",
+            parts.counts[k]
+        );
+        if median_views < 2 {
+            eprintln!(
+                "  warning: part {k} ({name}) is seen by fewer than two views: its labels rest on one view's mask; add views that show it"
+            );
+        }
     }
     eprintln!("  static (-1): {stat} Gaussians");
+    for (v, d) in lifted.view_disagreement.iter().enumerate() {
+        if *d > 0.2 {
+            eprintln!(
+                "  warning: view {v} ({}) disagrees with the final labels on {:.0}% of the Gaussians it sees: check its mask",
+                set.cameras[v].name,
+                100.0 * d
+            );
+        }
+    }
     println!(
         "wrote {}, {} and {}",
         a.out.display(),

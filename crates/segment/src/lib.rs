@@ -36,6 +36,7 @@
 //! assert_eq!(out.labels.class_names, ["box", "ball", "post"]);
 //! ```
 
+pub mod boundary;
 pub mod error;
 pub mod labels;
 pub mod lift;
@@ -45,7 +46,7 @@ pub mod synthetic;
 
 pub use error::{Error, Result};
 pub use labels::{part_colour, PartLabels};
-pub use lift::{lift, LiftConfig, Lifted};
+pub use lift::{lift, LiftConfig, Lifted, ViewVote};
 pub use mask::{InMemoryMasks, Mask, MaskData, MaskDir, MaskSource};
 pub use smooth::{smooth, smooth_gaussians, SmoothConfig};
 

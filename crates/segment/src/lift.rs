@@ -25,6 +25,7 @@
 //! `8 (M + 1) N` bytes, summed in a fixed order at the end (results do not depend on
 //! scheduling for a given worker count).
 
+use crate::boundary::boundary_trust;
 use crate::error::{Error, Result};
 use crate::mask::{MaskData, MaskSource, IGNORE};
 use crate::Par;
@@ -32,6 +33,20 @@ use r4d_splat::project::{self as pj, CamParams, GaussianIn, Projected};
 use r4d_splat::raster;
 use r4d_splat::weights::{tile_weights, WeightScratch};
 use r4d_splat::{Camera, Gaussians, RasterizeMode};
+
+/// How the views' evidence is combined (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ViewVote {
+    /// Every pixel's vote summed over every view: a view that sees a Gaussian over many
+    /// pixels outweighs one that sees it over few (LUDVIG's uplifting).
+    #[default]
+    Sum,
+    /// Each view first makes up its own mind about each Gaussian (its class distribution),
+    /// then the views vote with their confidence in that Gaussian: how well they see it
+    /// (saturating) and, over [`LiftConfig::consistency_iters`] rounds, how well they agree
+    /// with the other views.
+    Confidence,
+}
 
 /// Settings of the lift.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,6 +58,40 @@ pub struct LiftConfig {
     pub mode: RasterizeMode,
     /// Parallelism.
     pub par: Par,
+    /// How views are combined. Default [`ViewVote::Sum`] (on the potted-plant scene the
+    /// confidence vote lost 1-4 points of accuracy on clean masks and did not help on
+    /// corrupted ones).
+    pub vote: ViewVote,
+    /// A pixel votes for a Gaussian with `(alpha T)^p`: `p > 1` lets the pixels a Gaussian
+    /// dominates speak for it, not the tails of its footprint over a neighbour's pixels.
+    /// Default 1 (2 helped thin parts on clean masks and cost 2-5 points on corrupted ones).
+    pub weight_power: f32,
+    /// `d0` of the boundary trust ([`crate::boundary`]): pixels nearer than this to a label
+    /// boundary (pixels) vote less, except along the middle of thin parts; 0 turns it off.
+    /// Default 0 (2 px changed the potted plant's accuracy by under one point either way).
+    pub boundary_px: f32,
+    /// [`ViewVote::Confidence`]: a view's weight saturates when it sees a Gaussian with this
+    /// much compositing weight (sum of `alpha T` over its pixels). Default 0.5.
+    pub saturation: f32,
+    /// [`ViewVote::Confidence`]: rounds of re-weighting the views by their agreement with the
+    /// consensus (0: none). Default 2.
+    pub consistency_iters: u32,
+    /// Scale a view's votes for a Gaussian by the share of its drawn footprint that is the
+    /// Gaussian itself, `sqrt(det S / det(S + 0.3 I))` of its 2D covariance `S` (the
+    /// renderer's low-pass widens a Gaussian seen edge-on into a line of pixels whose mask
+    /// labels show what lies behind it). Default true.
+    pub footprint_trust: bool,
+    /// Confidence of a Gaussian with mixed evidence (its strongest class below [`PURE_SHARE`]
+    /// of it) is scaled by `min(1, visibility / full_visibility)` (visibility: the Gaussian's
+    /// compositing weight summed over the views): a Gaussian seen weakly but consistently
+    /// keeps its part, one that shows only a sliver (a back face peeking out at a silhouette, a part seen through a narrow
+    /// opening) keeps its vote but leaves the decision to its well-seen neighbours in the
+    /// KNN pass (0: off). Default 4 (pixel-equivalents: on the potted plant's clean masks
+    /// the leaves' back faces went from 80% to 99% right).
+    pub full_visibility: f32,
+    /// A view "sees" a Gaussian (diagnostics: [`Lifted::views`]) when its compositing weight
+    /// there reaches this. Default 0.05.
+    pub seen_weight: f32,
 }
 
 impl Default for LiftConfig {
@@ -51,6 +100,29 @@ impl Default for LiftConfig {
             temperature: 0.1,
             mode: RasterizeMode::Classic,
             par: Par::Rayon,
+            vote: ViewVote::Sum,
+            weight_power: 1.0,
+            boundary_px: 0.0,
+            saturation: 0.5,
+            consistency_iters: 2,
+            footprint_trust: true,
+            full_visibility: 4.0,
+            seen_weight: 0.05,
+        }
+    }
+}
+
+impl LiftConfig {
+    /// The classic lift (every pixel's `alpha T` summed over the views, no boundary trust).
+    pub fn classic() -> LiftConfig {
+        LiftConfig {
+            vote: ViewVote::Sum,
+            weight_power: 1.0,
+            boundary_px: 0.0,
+            consistency_iters: 0,
+            footprint_trust: false,
+            full_visibility: 0.0,
+            ..Default::default()
         }
     }
 }
@@ -60,12 +132,21 @@ impl Default for LiftConfig {
 pub struct Lifted {
     /// Number of parts `M`.
     pub num_parts: usize,
-    /// `W[g][c]`, `N x (M + 1)` row-major; column 0 is the background.
+    /// The combined class evidence `W[g][c]`, `N x (M + 1)` row-major; column 0 is the
+    /// background ([`ViewVote::Sum`]: sums of pixel votes; [`ViewVote::Confidence`]: sums of
+    /// the views' class distributions times their weights).
     pub class_weights: Vec<f64>,
     /// Label per Gaussian (-1: background/static or unobserved).
     pub labels: Vec<i32>,
     /// Softmax probability of the label (0 when unobserved).
     pub confidence: Vec<f32>,
+    /// Total compositing weight per Gaussian over all views (sum of `alpha T`; 0: unseen).
+    pub visibility: Vec<f32>,
+    /// Number of views that see each Gaussian ([`LiftConfig::seen_weight`]).
+    pub views: Vec<u16>,
+    /// Per view, the fraction of the Gaussians it sees whose own vote disagrees with the
+    /// final label.
+    pub view_disagreement: Vec<f32>,
 }
 
 impl Lifted {
@@ -113,10 +194,40 @@ pub fn classify(class_weights: &[f64], num_parts: usize, temperature: f32) -> (V
 }
 
 fn check_config(cfg: &LiftConfig) -> Result<()> {
-    if !(cfg.temperature.is_finite() && cfg.temperature > 0.0) {
+    let positive = |name: &str, v: f32| {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(Error::Input(format!(
+                "{name} {v} (must be positive and finite)"
+            )))
+        }
+    };
+    positive("temperature", cfg.temperature)?;
+    positive("weight power", cfg.weight_power)?;
+    positive("saturation", cfg.saturation)?;
+    if !(cfg.full_visibility.is_finite() && cfg.full_visibility >= 0.0) {
         return Err(Error::Input(format!(
-            "temperature {} (must be positive and finite)",
-            cfg.temperature
+            "full visibility {} (must be >= 0 and finite)",
+            cfg.full_visibility
+        )));
+    }
+    if !(cfg.boundary_px.is_finite() && (0.0..=64.0).contains(&cfg.boundary_px)) {
+        return Err(Error::Input(format!(
+            "boundary distance {} px (must lie in [0, 64])",
+            cfg.boundary_px
+        )));
+    }
+    if !(cfg.seen_weight.is_finite() && cfg.seen_weight >= 0.0) {
+        return Err(Error::Input(format!(
+            "seen weight {} (must be >= 0 and finite)",
+            cfg.seen_weight
+        )));
+    }
+    if cfg.consistency_iters > 100 {
+        return Err(Error::Input(format!(
+            "{} consistency rounds (at most 100)",
+            cfg.consistency_iters
         )));
     }
     Ok(())
@@ -191,6 +302,25 @@ pub fn lift<S: MaskSource + ?Sized>(
     lift_with_progress(g, cameras, masks, cfg, |_| {})
 }
 
+/// A Gaussian whose strongest class has at least this share of its evidence keeps its
+/// confidence however weakly it is seen ([`LiftConfig::full_visibility`]).
+pub const PURE_SHARE: f64 = 0.9;
+
+/// Largest per-view vote table [`lift`] keeps (`views x N x (M + 2)` bytes): 4 GiB.
+pub const MAX_VOTE_BYTES: usize = 4 << 30;
+
+/// The label map a mask votes with most (for the boundary trust): 0 background, `k + 1`
+/// part `k`, [`IGNORE`] where it votes for nothing.
+fn argmax_labels(mask: &crate::mask::Mask, m: usize) -> Vec<u16> {
+    match &mask.data {
+        MaskData::Labels(l) => l.clone(),
+        MaskData::Probabilities(_) => (0..mask.height)
+            .flat_map(|j| (0..mask.width).map(move |i| (i, j)))
+            .map(|(i, j)| mask.argmax(i, j, m).map_or(IGNORE, |c| (c + 1) as u16))
+            .collect(),
+    }
+}
+
 /// [`lift`], calling `progress(view)` after each view.
 pub fn lift_with_progress<S: MaskSource + ?Sized>(
     g: &Gaussians,
@@ -203,10 +333,38 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
     g.validate("scene")?;
     let m = masks.class_names().len();
     let s = m + 1;
+    // Per worker and view: the class votes and the raw weight (column `s`).
+    let sw = s + 1;
     let n = g.len();
+    let nv = cameras.len();
+    // One byte per class and one for the view's weight, per view and Gaussian.
+    let vote_bytes = nv
+        .checked_mul(n)
+        .and_then(|x| x.checked_mul(sw))
+        .filter(|&b| b <= MAX_VOTE_BYTES)
+        .ok_or_else(|| {
+            Error::Input(format!(
+                "{nv} views x {n} Gaussians x {sw} classes of votes exceed the lift's limit of {} GiB",
+                MAX_VOTE_BYTES >> 30
+            ))
+        })?;
+    let mut votes = vec![0u8; vote_bytes];
     let nw = workers(cfg.par);
-    let mut accs = vec![vec![0f64; n * s]; nw];
+    let mut accs = vec![vec![0f64; n * sw]; nw];
     let mut scratch: Vec<WeightScratch<f32>> = vec![WeightScratch::default(); nw];
+    let mut class_weights = vec![0f64; n * s];
+    let mut visibility = vec![0f32; n];
+    let mut views = vec![0u16; n];
+    let p = cfg.weight_power as f64;
+    let power = move |w: f64| {
+        if p == 1.0 {
+            w
+        } else if p == 2.0 {
+            w * w
+        } else {
+            w.powf(p)
+        }
+    };
     for (v, cam) in cameras.iter().enumerate() {
         cam.validate(&format!("camera {v}")).map_err(Error::Input)?;
         let mask = masks.mask(v, cam)?;
@@ -221,7 +379,7 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
                 want_h: cam.height,
             });
         }
-        let px = (cam.width * cam.height) as usize;
+        let px = (cam.width as usize) * (cam.height as usize);
         let ok = match &mask.data {
             MaskData::Labels(l) => l.len() == px,
             MaskData::Probabilities(p) => p.len() == px * m,
@@ -235,40 +393,53 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
                 ),
             ));
         }
+        let trust = (cfg.boundary_px > 0.0).then(|| {
+            boundary_trust(
+                &argmax_labels(&mask, m),
+                cam.width as usize,
+                cam.height as usize,
+                cfg.boundary_px,
+            )
+        });
         let cp = CamParams::<f32>::new(cam, cfg.mode);
         let proj = project_for_weights(g, &cp, cfg.par);
         let order = depth_order(&proj, cfg.par);
         let bins = raster::bin_tiles(&proj, &order, cam.width, cam.height);
         let (w, h) = (cam.width, cam.height);
         let data = &mask.data;
-        let (proj, bins) = (&proj, &bins);
+        let rho: Option<Vec<f32>> = cfg
+            .footprint_trust
+            .then(|| proj.iter().map(footprint_share).collect());
+        let (proj, bins, trust, rho) = (&proj, &bins, trust.as_deref(), rho.as_deref());
         let work = |wk: usize, acc: &mut [f64], sc: &mut WeightScratch<f32>| {
             for ty in (wk as u32..bins.tiles_y).step_by(nw) {
                 for tx in 0..bins.tiles_x {
                     let ids = bins.tile((ty * bins.tiles_x + tx) as usize);
-                    match data {
-                        MaskData::Labels(l) => {
-                            tile_weights(proj, ids, tx, ty, w, h, sc, |i, j, id, wt| {
-                                let c = l[(j * w + i) as usize];
+                    tile_weights(proj, ids, tx, ty, w, h, sc, |i, j, id, wt| {
+                        let pix = (j * w + i) as usize;
+                        let a = &mut acc[id as usize * sw..(id as usize + 1) * sw];
+                        let wt = wt as f64;
+                        a[s] += wt;
+                        let vote = power(wt)
+                            * trust.map_or(1.0, |t| t[pix] as f64)
+                            * rho.map_or(1.0, |r| r[id as usize] as f64);
+                        match data {
+                            MaskData::Labels(l) => {
+                                let c = l[pix];
                                 if c != IGNORE {
-                                    acc[id as usize * s + c as usize] += wt as f64;
+                                    a[c as usize] += vote;
                                 }
-                            })
-                        }
-                        MaskData::Probabilities(p) => {
-                            tile_weights(proj, ids, tx, ty, w, h, sc, |i, j, id, wt| {
-                                let k = (j * w + i) as usize * m;
-                                let q = &p[k..k + m];
-                                let a = &mut acc[id as usize * s..(id as usize + 1) * s];
-                                let wt = wt as f64;
+                            }
+                            MaskData::Probabilities(pr) => {
+                                let q = &pr[pix * m..(pix + 1) * m];
                                 let parts: f32 = q.iter().sum();
-                                a[0] += wt * (1.0 - parts).max(0.0) as f64;
-                                for (ac, &qc) in a[1..].iter_mut().zip(q) {
-                                    *ac += wt * qc as f64;
+                                a[0] += vote * (1.0 - parts).max(0.0) as f64;
+                                for (ac, &qc) in a[1..s].iter_mut().zip(q) {
+                                    *ac += vote * qc as f64;
                                 }
-                            })
+                            }
                         }
-                    }
+                    })
                 }
             }
         };
@@ -287,20 +458,158 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
                 }
             }
         }
+        // This view's evidence per Gaussian (workers summed in a fixed order): into the sum,
+        // the visibility and the view's vote table; the accumulators start the next view at 0.
+        let vview = &mut votes[v * n * sw..(v + 1) * n * sw];
+        let mut row = vec![0f64; sw];
+        for gi in 0..n {
+            row.iter_mut().for_each(|x| *x = 0.0);
+            for acc in accs.iter_mut() {
+                let a = &mut acc[gi * sw..(gi + 1) * sw];
+                for (r, x) in row.iter_mut().zip(a.iter_mut()) {
+                    *r += *x;
+                    *x = 0.0;
+                }
+            }
+            let wv = row[s];
+            if wv <= 0.0 {
+                continue;
+            }
+            visibility[gi] += wv as f32;
+            if wv >= cfg.seen_weight as f64 {
+                views[gi] = views[gi].saturating_add(1);
+            }
+            if cfg.vote == ViewVote::Sum {
+                for (cw, r) in class_weights[gi * s..(gi + 1) * s].iter_mut().zip(&row) {
+                    *cw += r;
+                }
+            }
+            let tot: f64 = row[..s].iter().sum();
+            if tot > 0.0 {
+                let out = &mut vview[gi * sw..(gi + 1) * sw];
+                for (o, r) in out.iter_mut().zip(&row[..s]) {
+                    *o = (r / tot * 255.0).round() as u8;
+                }
+                // At least 1: a view that sees the Gaussian at all keeps a say.
+                out[s] = ((wv / cfg.saturation as f64).min(1.0) * 255.0)
+                    .round()
+                    .max(1.0) as u8;
+            }
+        }
         progress(v);
     }
-    let mut it = accs.into_iter();
-    let mut class_weights = it.next().unwrap_or_default();
-    for a in it {
-        for (x, y) in class_weights.iter_mut().zip(a) {
-            *x += y;
+    if cfg.vote == ViewVote::Confidence {
+        combine_views(&votes, n, s, nv, cfg.consistency_iters, &mut class_weights);
+    }
+    let (labels, mut confidence) = classify(&class_weights, m, cfg.temperature);
+    if cfg.full_visibility > 0.0 {
+        for (g, (c, &v)) in confidence.iter_mut().zip(&visibility).enumerate() {
+            let row = &class_weights[g * s..(g + 1) * s];
+            let tot: f64 = row.iter().sum();
+            let top = row.iter().copied().fold(0.0, f64::max);
+            // Seen weakly but consistently: keeps its confidence.
+            if tot > 0.0 && top / tot < PURE_SHARE {
+                *c *= (v / cfg.full_visibility).min(1.0);
+            }
         }
     }
-    let (labels, confidence) = classify(&class_weights, m, cfg.temperature);
+    let view_disagreement = (0..nv)
+        .map(|v| {
+            let vv = &votes[v * n * sw..(v + 1) * n * sw];
+            let (mut seen, mut differ) = (0usize, 0usize);
+            for (gi, &label) in labels.iter().enumerate() {
+                let r = &vv[gi * sw..(gi + 1) * sw];
+                if r[s] == 0 {
+                    continue;
+                }
+                seen += 1;
+                if argmax_u8(&r[..s]) as i32 - 1 != label {
+                    differ += 1;
+                }
+            }
+            differ as f32 / seen.max(1) as f32
+        })
+        .collect();
     Ok(Lifted {
         num_parts: m,
         class_weights,
         labels,
         confidence,
+        visibility,
+        views,
+        view_disagreement,
     })
+}
+
+/// `sqrt(det S / det(S + 0.3 I))` from the conic (the inverse of `S + 0.3 I`): 1 for a
+/// Gaussian much larger than a pixel, towards 0 for one seen edge-on or smaller than a pixel.
+pub fn footprint_share(p: &Projected<f32>) -> f32 {
+    let [a, b, c] = p.conic.map(|x| x as f64);
+    let det_c = a * c - b * b;
+    if p.radii == [0, 0] || det_c.is_nan() || det_c <= 0.0 {
+        return 0.0;
+    }
+    // S + 0.3 I = conic^-1.
+    let (s00, s01, s11) = (c / det_c, -b / det_c, a / det_c);
+    let det_b = s00 * s11 - s01 * s01;
+    let det_s = (s00 - 0.3) * (s11 - 0.3) - s01 * s01;
+    (det_s.max(0.0) / det_b).sqrt() as f32
+}
+
+fn argmax_u8(r: &[u8]) -> usize {
+    let mut best = 0;
+    for (c, &x) in r.iter().enumerate() {
+        if x > r[best] {
+            best = c;
+        }
+    }
+    best
+}
+
+/// [`ViewVote::Confidence`]: per Gaussian, the views' class distributions `q_v` weighted by
+/// their confidence `k_v`; `iters` rounds multiply each `k_v` by the square of its agreement
+/// `q_v . P` with the consensus `P` of the previous round.
+fn combine_views(votes: &[u8], n: usize, s: usize, nv: usize, iters: u32, out: &mut [f64]) {
+    let sw = s + 1;
+    let one = |gi: usize, row: &mut [f64]| {
+        let mut k: Vec<(usize, f64)> = (0..nv)
+            .filter_map(|v| {
+                let kv = votes[(v * n + gi) * sw + s];
+                (kv > 0).then_some((v, kv as f64 / 255.0))
+            })
+            .collect();
+        let q = |v: usize, c: usize| votes[(v * n + gi) * sw + c] as f64 / 255.0;
+        let consensus = |k: &[(usize, f64)], row: &mut [f64]| {
+            row.iter_mut().for_each(|x| *x = 0.0);
+            for &(v, kv) in k {
+                for (c, r) in row.iter_mut().enumerate() {
+                    *r += kv * q(v, c);
+                }
+            }
+        };
+        consensus(&k, row);
+        for _ in 0..iters {
+            let tot: f64 = row.iter().sum();
+            if tot <= 0.0 {
+                break;
+            }
+            for (v, kv) in k.iter_mut() {
+                let agree: f64 = (0..s).map(|c| q(*v, c) * row[c] / tot).sum();
+                *kv *= agree * agree;
+            }
+            consensus(&k, row);
+        }
+    };
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        out.par_chunks_mut(s)
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(gi, row)| one(gi, row));
+    }
+    #[cfg(not(feature = "parallel"))]
+    for (gi, row) in out.chunks_mut(s).enumerate() {
+        one(gi, row);
+    }
 }

@@ -17,6 +17,8 @@
 //! a fitted capture, they do not overhang edges: near a face's edge or another solid the
 //! in-plane scale across it shrinks until 1.5 standard deviations stay on the free face.
 
+pub mod plant;
+
 use crate::labels::part_colour;
 use crate::mask::{InMemoryMasks, Mask, MaskData};
 use r4d_splat::{Camera, Gaussians};

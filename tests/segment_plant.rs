@@ -1,0 +1,127 @@
+//! Part lifting on the harder potted-plant scene (`r4d_segment::synthetic::plant`: a pot with a
+//! rim, soil seen only through the opening, a thin curved stem, thin drooping leaves, petals;
+//! anisotropic Gaussians with non-unit quaternions in shuffled order; masks ray-cast from the
+//! analytic primitives). Accuracy is per part, over the Gaussians some view sees
+//! (compositing weight >= 0.05 pixel-equivalents), after the KNN pass.
+//!
+//! The targets (>= 99.5% with clean masks; >= 97% and no part below 93% with
+//! corrupted ones) are not reached yet; these tests hold the measured state: visibility-aware
+//! lifting beats the classic lift on every seed with clean masks, and on average with
+//! corrupted ones.
+
+use r4d_segment::mask::MaskData;
+use r4d_segment::synthetic::plant::{self, corrupt_parts, mislabel_part, per_part, PlantScene};
+use r4d_segment::{segment, InMemoryMasks, LiftConfig, SegmentConfig, SmoothConfig};
+use r4d_splat::Camera;
+
+const PARTS: [&str; 5] = ["pot", "soil", "stem", "leaves", "petals"];
+
+fn setup(seed: u64) -> (PlantScene, Vec<Camera>, InMemoryMasks) {
+    let scene = plant::potted_plant(30_000, 100 + seed);
+    let cams = plant::plant_cameras(8, 256, 256);
+    let masks = scene.masks(&cams);
+    (scene, cams, masks)
+}
+
+/// Every part's mask moved by 2-4 px (eroded or dilated at random), 5% of the pixels
+/// flipped, and in one view one part labelled as another.
+fn corrupted(masks: &InMemoryMasks, seed: u64) -> InMemoryMasks {
+    let mut bad = masks.clone();
+    for (v, m) in bad.masks.iter_mut().enumerate() {
+        let (w, h) = (m.width, m.height);
+        if let MaskData::Labels(l) = &mut m.data {
+            corrupt_parts(l, w, h, 5, [2, 4], 0.05, seed * 31 + v as u64);
+            if v == seed as usize % 8 {
+                mislabel_part(l, 4 + (seed % 2) as u16, 3 - (seed % 2) as u16);
+            }
+        }
+    }
+    bad
+}
+
+/// Per part (floor first) accuracy over seen Gaussians, and the accuracy over all seen part
+/// Gaussians.
+fn score(
+    scene: &PlantScene,
+    cams: &[Camera],
+    masks: &InMemoryMasks,
+    lift: LiftConfig,
+) -> (Vec<f64>, f64) {
+    let cfg = SegmentConfig {
+        lift,
+        smooth: Some(SmoothConfig::default()),
+    };
+    let out = segment(&scene.gaussians, cams, &mut masks.clone(), &cfg).unwrap();
+    let seen = |i: usize| out.lifted.visibility[i] >= 0.05;
+    let pp = per_part(&out.labels.labels, &scene.truth, 5, seen);
+    let (r, t) = pp[1..].iter().fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    (
+        pp.iter()
+            .map(|(r, t)| *r as f64 / (*t).max(1) as f64)
+            .collect(),
+        r as f64 / t as f64,
+    )
+}
+
+fn row(name: &str, (per, all): &(Vec<f64>, f64)) -> String {
+    let cells: Vec<String> = per[1..]
+        .iter()
+        .zip(PARTS)
+        .map(|(a, p)| format!("{p} {:.1}", 100.0 * a))
+        .collect();
+    format!("{name:8} all {:.1} | {}", 100.0 * all, cells.join(", "))
+}
+
+#[test]
+fn visibility_aware_lift_beats_the_classic_one_on_clean_masks() {
+    for seed in 0..3 {
+        let (scene, cams, masks) = setup(seed);
+        let classic = score(&scene, &cams, &masks, LiftConfig::classic());
+        let new = score(&scene, &cams, &masks, LiftConfig::default());
+        println!("seed {seed} clean: {}", row("classic", &classic));
+        println!("seed {seed} clean: {}", row("default", &new));
+        assert!(
+            new.1 > classic.1 + 0.04,
+            "seed {seed}: {} vs {}",
+            new.1,
+            classic.1
+        );
+        assert!(new.1 >= 0.95, "seed {seed}: {}", new.1);
+        // pot, soil, stem, leaves, petals
+        for (k, floor) in [0.99, 0.98, 0.85, 0.95, 0.83].into_iter().enumerate() {
+            assert!(
+                new.0[k + 1] >= floor,
+                "seed {seed}, {}: {}",
+                PARTS[k],
+                new.0[k + 1]
+            );
+        }
+        // The floor (static) stays right.
+        assert!(new.0[0] >= 0.999, "seed {seed}, floor: {}", new.0[0]);
+    }
+}
+
+#[test]
+fn corrupted_masks_per_part_table() {
+    let (mut sum_classic, mut sum_new) = (0.0, 0.0);
+    let seeds = 3;
+    for seed in 0..seeds {
+        let (scene, cams, masks) = setup(seed);
+        let bad = corrupted(&masks, seed);
+        let classic = score(&scene, &cams, &bad, LiftConfig::classic());
+        let new = score(&scene, &cams, &bad, LiftConfig::default());
+        println!("seed {seed} corrupted: {}", row("classic", &classic));
+        println!("seed {seed} corrupted: {}", row("default", &new));
+        sum_classic += classic.1;
+        sum_new += new.1;
+        assert!(new.1 >= 0.75, "seed {seed}: {}", new.1);
+        // The static floor survives the corruption.
+        assert!(new.0[0] >= 0.98, "seed {seed}, floor: {}", new.0[0]);
+    }
+    assert!(
+        sum_new >= sum_classic,
+        "mean {} vs {}",
+        sum_new / 3.0,
+        sum_classic / 3.0
+    );
+}
