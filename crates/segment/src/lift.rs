@@ -420,9 +420,11 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
                         let a = &mut acc[id as usize * sw..(id as usize + 1) * sw];
                         let wt = wt as f64;
                         a[s] += wt;
-                        let vote = power(wt)
-                            * trust.map_or(1.0, |t| t[pix] as f64)
-                            * rho.map_or(1.0, |r| r[id as usize] as f64);
+                        // (the footprint share, per Gaussian, is applied once per view below)
+                        let vote = match trust {
+                            Some(t) => power(wt) * t[pix] as f64,
+                            None => power(wt),
+                        };
                         match data {
                             MaskData::Labels(l) => {
                                 let c = l[pix];
@@ -474,6 +476,10 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
             let wv = row[s];
             if wv <= 0.0 {
                 continue;
+            }
+            if let Some(r) = rho {
+                let r = r[gi] as f64;
+                row[..s].iter_mut().for_each(|x| *x *= r);
             }
             visibility[gi] += wv as f32;
             if wv >= cfg.seen_weight as f64 {
