@@ -107,11 +107,20 @@ fn segment_writes_parts_scene_and_views() {
     let scene = r4d_splat::ply::read_gaussians(&d.join("out/parts.ply")).unwrap();
     let orig = r4d_splat::ply::read_gaussians(&d.join("scene.ply")).unwrap();
     assert_eq!(scene, orig);
-    // One render per camera: labels | mask.
+    // One render per camera: labels | mask | disagreement (black where they agree: almost
+    // everywhere with clean masks).
     for v in 0..6 {
         let p = d.join(format!("out/parts_views/view_{v:04}.png"));
-        let img = image::open(&p).unwrap();
-        assert_eq!((img.width(), img.height()), (320, 120), "{}", p.display());
+        let img = image::open(&p).unwrap().to_rgb8();
+        assert_eq!((img.width(), img.height()), (480, 120), "{}", p.display());
+        let black = (320..480)
+            .flat_map(|i| (0..120).map(move |j| (i, j)))
+            .filter(|&(i, j)| img.get_pixel(i, j).0 == [0, 0, 0])
+            .count();
+        assert!(
+            black as f64 > 0.95 * 160.0 * 120.0,
+            "{black} agreeing pixels"
+        );
     }
 }
 

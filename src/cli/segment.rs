@@ -3,6 +3,7 @@
 
 use anyhow::{bail, Context, Result};
 use r4d_backend_cpu::splat::CpuSplat;
+use r4d_segment::label_map::label_map;
 use r4d_segment::lift::{lift_with_progress, LiftConfig};
 use r4d_segment::smooth::{smooth_gaussians, SmoothConfig};
 use r4d_segment::{part_colour, MaskDir, MaskSource, Par, PartLabels};
@@ -136,7 +137,7 @@ pub fn run(a: SegmentArgs) -> Result<()> {
         .file_stem()
         .map_or("parts".into(), |s| s.to_string_lossy().into_owned());
     let views = a.out.with_file_name(format!("{stem}_views"));
-    write_views(&g, &parts, &set, &mut masks, &views)?;
+    let shares = write_views(&g, &parts, &set, &mut masks, &views)?;
     let stat = parts.labels.iter().filter(|&&l| l < 0).count();
     eprintln!(
         "lift {t_lift:.1} s ({} Gaussians seen by no view); KNN (k {}) changed {changed} label(s); total {:.1} s",
@@ -164,6 +165,11 @@ pub fn run(a: SegmentArgs) -> Result<()> {
         }
     }
     eprintln!("  static (-1): {stat} Gaussians");
+    let shares: Vec<String> = shares.iter().map(|s| format!("{:.1}", 100.0 * s)).collect();
+    eprintln!(
+        "  pixels where the drawn labels differ from the mask, per view (%): {}",
+        shares.join(" ")
+    );
     for (v, d) in lifted.view_disagreement.iter().enumerate() {
         if *d > 0.2 {
             eprintln!(
@@ -183,14 +189,17 @@ pub fn run(a: SegmentArgs) -> Result<()> {
 }
 
 /// For every camera: the Gaussians rendered in their part colours (static grey) on the left,
-/// the mask's classes in the same colours on the right (ignored pixels black).
+/// the mask's classes in the same colours in the middle (ignored pixels black), and on the
+/// right the disagreement map: black where the labels drawn by the Gaussians
+/// ([`r4d_segment::label_map::label_map`]) agree with the mask, the mask's colour where they
+/// differ (ignored pixels dark blue). Returns the disagreeing share of each view's pixels.
 fn write_views(
     g: &Gaussians,
     parts: &PartLabels,
     set: &r4d_splat::CameraSet,
     masks: &mut MaskDir,
     dir: &Path,
-) -> Result<()> {
+) -> Result<Vec<f64>> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut coloured = g.clone();
     coloured.sh_degree = 0;
@@ -205,24 +214,38 @@ fn write_views(
     };
     let m = parts.num_parts;
     let mut r = SplatRenderer::new(CpuSplat);
+    let mut shares = Vec::with_capacity(set.cameras.len());
     for (v, cam) in set.cameras.iter().enumerate() {
         let img = r.render(&coloured, None, cam, &settings)?;
         let mask = masks.mask(v, cam)?;
+        let drawn = label_map(g, cam, &parts.labels, m, settings.mode);
         let (w, h) = (cam.width, cam.height);
-        let mut out = image::RgbImage::new(2 * w, h);
+        let mut out = image::RgbImage::new(3 * w, h);
+        let mut differ = 0usize;
         let to_u8 = |c: f32| (c.clamp(0.0, 1.0) * 255.0).round() as u8;
         for j in 0..h {
             for i in 0..w {
                 let k = (j * w + i) as usize;
                 let c = &img.rgb[3 * k..3 * k + 3];
                 out.put_pixel(i, j, image::Rgb([to_u8(c[0]), to_u8(c[1]), to_u8(c[2])]));
-                let mc = mask.argmax(i, j, m).map_or([0.0; 3], part_colour);
+                let ml = mask.argmax(i, j, m);
+                let mc = ml.map_or([0.0; 3], part_colour);
                 out.put_pixel(w + i, j, image::Rgb(mc.map(to_u8)));
+                let d = match ml {
+                    None => [0.05, 0.05, 0.3],
+                    Some(l) if l + 1 == drawn[k] as i32 => [0.0; 3],
+                    Some(_) => {
+                        differ += 1;
+                        mc
+                    }
+                };
+                out.put_pixel(2 * w + i, j, image::Rgb(d.map(to_u8)));
             }
         }
+        shares.push(differ as f64 / (w as f64 * h as f64));
         let path = dir.join(format!("view_{v:04}.png"));
         out.save(&path)
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    Ok(())
+    Ok(shares)
 }

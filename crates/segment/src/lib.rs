@@ -38,6 +38,7 @@
 
 pub mod boundary;
 pub mod error;
+pub mod label_map;
 pub mod labels;
 pub mod lift;
 pub mod mask;
