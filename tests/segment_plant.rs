@@ -5,9 +5,9 @@
 //! (compositing weight >= 0.05 pixel-equivalents), after the KNN pass.
 //!
 //! The targets (>= 99.5% with clean masks; >= 97% and no part below 93% with
-//! corrupted ones) are not reached yet; these tests hold the measured state: visibility-aware
-//! lifting beats the classic lift on every seed with clean masks, and on average with
-//! corrupted ones.
+//! corrupted ones) are not reached yet; these tests hold the measured state: the default lift
+//! (footprint share, visibility-scaled confidence, background-verdict views discounted) beats
+//! the classic lift on every seed, with clean and with corrupted masks.
 
 use r4d_segment::mask::MaskData;
 use r4d_segment::synthetic::plant::{self, corrupt_parts, mislabel_part, per_part, PlantScene};
@@ -81,14 +81,14 @@ fn visibility_aware_lift_beats_the_classic_one_on_clean_masks() {
         println!("seed {seed} clean: {}", row("classic", &classic));
         println!("seed {seed} clean: {}", row("default", &new));
         assert!(
-            new.1 > classic.1 + 0.04,
+            new.1 > classic.1 + 0.08,
             "seed {seed}: {} vs {}",
             new.1,
             classic.1
         );
-        assert!(new.1 >= 0.95, "seed {seed}: {}", new.1);
+        assert!(new.1 >= 0.975, "seed {seed}: {}", new.1);
         // pot, soil, stem, leaves, petals
-        for (k, floor) in [0.99, 0.98, 0.85, 0.95, 0.83].into_iter().enumerate() {
+        for (k, floor) in [0.99, 0.99, 0.90, 0.99, 0.88].into_iter().enumerate() {
             assert!(
                 new.0[k + 1] >= floor,
                 "seed {seed}, {}: {}",
@@ -114,14 +114,63 @@ fn corrupted_masks_per_part_table() {
         println!("seed {seed} corrupted: {}", row("default", &new));
         sum_classic += classic.1;
         sum_new += new.1;
-        assert!(new.1 >= 0.75, "seed {seed}: {}", new.1);
+        assert!(new.1 >= 0.82, "seed {seed}: {}", new.1);
+        assert!(new.1 > classic.1, "seed {seed}: {} vs {}", new.1, classic.1);
         // The static floor survives the corruption.
-        assert!(new.0[0] >= 0.98, "seed {seed}, floor: {}", new.0[0]);
+        assert!(new.0[0] >= 0.97, "seed {seed}, floor: {}", new.0[0]);
     }
     assert!(
-        sum_new >= sum_classic,
+        sum_new >= sum_classic + 0.06,
         "mean {} vs {}",
         sum_new / 3.0,
         sum_classic / 3.0
     );
+}
+
+/// The per-view disagreement diagnostic (leave-one-out) points at a view that labelled a
+/// whole part as another; the cross-view consistency option runs and stays within a point of
+/// the default with corrupted masks.
+#[test]
+fn disagreement_points_at_the_mislabelled_view() {
+    let (scene, cams, masks) = setup(0);
+    for bad_view in [3usize, 5] {
+        let mut m = masks.clone();
+        if let MaskData::Labels(l) = &mut m.masks[bad_view].data {
+            mislabel_part(l, 4, 3); // leaves -> stem
+        }
+        let cfg = SegmentConfig {
+            lift: LiftConfig::default(),
+            smooth: Some(SmoothConfig::default()),
+        };
+        let out = segment(&scene.gaussians, &cams, &mut m, &cfg).unwrap();
+        let d = &out.lifted.view_disagreement;
+        println!("view {bad_view} mislabelled: disagreement per view {d:?}");
+        let mut sorted = d.clone();
+        sorted.sort_by(f32::total_cmp);
+        let median = sorted[d.len() / 2];
+        let worst = (0..d.len()).max_by(|&a, &b| d[a].total_cmp(&d[b])).unwrap();
+        assert_eq!(worst, bad_view, "{d:?}");
+        assert!(d[bad_view] > 3.0 * median, "{d:?}");
+    }
+    for seed in 0..2 {
+        let (scene, cams, masks) = setup(seed);
+        let bad = corrupted(&masks, seed);
+        let plain = score(&scene, &cams, &bad, LiftConfig::default());
+        let checked = score(
+            &scene,
+            &cams,
+            &bad,
+            LiftConfig {
+                view_consistency_iters: 1,
+                ..Default::default()
+            },
+        );
+        println!("seed {seed} corrupted: {}", row("checked", &checked));
+        assert!(
+            checked.1 > plain.1 - 0.01,
+            "seed {seed}: {} vs {}",
+            checked.1,
+            plain.1
+        );
+    }
 }

@@ -46,12 +46,17 @@ pub struct SegmentArgs {
     /// decides it from its well-seen neighbours (0: off).
     #[arg(long, default_value_t = 4.0)]
     full_visibility: f32,
+    /// Weight, in [0, 1], of a view whose own verdict on a Gaussian is background, relative
+    /// to views that see a part there (a view whose mask misses part of a part outvotes less
+    /// of the views that show it; where all views agree nothing changes).
+    #[arg(long, default_value_t = 0.25)]
+    background_weight: f32,
     /// Do not scale a view's votes by the share of the Gaussian's drawn footprint that is
     /// the Gaussian itself (edge-on Gaussians then vote with their whole blurred line).
     #[arg(long)]
     no_footprint_trust: bool,
     /// The lift as it was before visibility-aware voting (sum of alpha T times the mask over
-    /// every view and pixel); overrides the two options above.
+    /// every view and pixel); overrides the three options above.
     #[arg(long)]
     classic: bool,
 }
@@ -96,6 +101,7 @@ pub fn run(a: SegmentArgs) -> Result<()> {
         LiftConfig {
             full_visibility: a.full_visibility,
             footprint_trust: !a.no_footprint_trust,
+            background_weight: a.background_weight,
             ..Default::default()
         }
     };
@@ -170,12 +176,16 @@ pub fn run(a: SegmentArgs) -> Result<()> {
         "  pixels where the drawn labels differ from the mask, per view (%): {}",
         shares.join(" ")
     );
+    let mut sorted = lifted.view_disagreement.clone();
+    sorted.sort_by(f32::total_cmp);
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
     for (v, d) in lifted.view_disagreement.iter().enumerate() {
-        if *d > 0.2 {
+        if *d > 0.05 && *d > 3.0 * median {
             eprintln!(
-                "  warning: view {v} ({}) disagrees with the final labels on {:.0}% of the Gaussians it sees: check its mask",
+                "  warning: view {v} ({}) disagrees with the other views on {:.0}% of the Gaussians it sees clearly (median of the views {:.0}%): check its mask",
                 set.cameras[v].name,
-                100.0 * d
+                100.0 * d,
+                100.0 * median
             );
         }
     }

@@ -89,6 +89,23 @@ pub struct LiftConfig {
     /// KNN pass (0: off). Default 4 (pixel-equivalents: on the potted plant's clean masks
     /// the leaves' back faces went from 80% to 99% right).
     pub full_visibility: f32,
+    /// Weight of a view whose own verdict on a Gaussian is background (its strongest class
+    /// there), relative to views that see a part there (1: equal). Below 1, a view in which
+    /// a part's mask misses a region (an eroded boundary, a thin part the segmenter lost)
+    /// outvotes less of the views that do show the part; where all views agree nothing
+    /// changes. Default 0.25 (on the
+    /// potted plant, mean of five seeds: clean masks 97.9% -> 98.3% of part Gaussians right,
+    /// corrupted masks 84.3% -> 87.5%; the static floor stays 100% with clean masks and
+    /// >= 97.6% with corrupted ones).
+    pub background_weight: f32,
+    /// [`ViewVote::Sum`]: rounds of the cross-view consistency check: for every view and
+    /// label, the share of the view's votes for that label that land on Gaussians the *other*
+    /// views (leave-one-out) call so; a view whose share falls below the median of the views
+    /// for that label has its votes for it scaled by `(share / median)^2`. A view that labels a
+    /// whole part as another, or dilates a part over its neighbours, loses its say on that
+    /// label only (0: off). Default 0 (one round on the potted plant: +0.7 points with
+    /// corrupted masks, -0.35 with clean ones, the stem losing most).
+    pub view_consistency_iters: u32,
     /// A view "sees" a Gaussian (diagnostics: [`Lifted::views`]) when its compositing weight
     /// there reaches this. Default 0.05.
     pub seen_weight: f32,
@@ -107,6 +124,8 @@ impl Default for LiftConfig {
             consistency_iters: 2,
             footprint_trust: true,
             full_visibility: 4.0,
+            background_weight: 0.25,
+            view_consistency_iters: 0,
             seen_weight: 0.05,
         }
     }
@@ -122,6 +141,7 @@ impl LiftConfig {
             consistency_iters: 0,
             footprint_trust: false,
             full_visibility: 0.0,
+            background_weight: 1.0,
             ..Default::default()
         }
     }
@@ -144,8 +164,10 @@ pub struct Lifted {
     pub visibility: Vec<f32>,
     /// Number of views that see each Gaussian ([`LiftConfig::seen_weight`]).
     pub views: Vec<u16>,
-    /// Per view, the fraction of the Gaussians it sees whose own vote disagrees with the
-    /// final label.
+    /// Per view ([`ViewVote::Sum`]; 0 otherwise), over the Gaussians it sees fully and is
+    /// sure about (90% of its own votes on one class), the share of its votes on which it
+    /// disagrees with the other views combined (leave-one-out): a view that labels a part as
+    /// another, or misses it, stands out.
     pub view_disagreement: Vec<f32>,
 }
 
@@ -206,6 +228,12 @@ fn check_config(cfg: &LiftConfig) -> Result<()> {
     positive("temperature", cfg.temperature)?;
     positive("weight power", cfg.weight_power)?;
     positive("saturation", cfg.saturation)?;
+    if !(cfg.background_weight.is_finite() && (0.0..=1.0).contains(&cfg.background_weight)) {
+        return Err(Error::Input(format!(
+            "background weight {} (must lie in [0, 1])",
+            cfg.background_weight
+        )));
+    }
     if !(cfg.full_visibility.is_finite() && cfg.full_visibility >= 0.0) {
         return Err(Error::Input(format!(
             "full visibility {} (must be >= 0 and finite)",
@@ -349,6 +377,8 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
             ))
         })?;
     let mut votes = vec![0u8; vote_bytes];
+    // Each view's total vote per Gaussian (for the consistency check).
+    let mut view_totals = vec![0f32; nv * n];
     let nw = workers(cfg.par);
     let mut accs = vec![vec![0f64; n * sw]; nw];
     let mut scratch: Vec<WeightScratch<f32>> = vec![WeightScratch::default(); nw];
@@ -481,6 +511,11 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
                 let r = r[gi] as f64;
                 row[..s].iter_mut().for_each(|x| *x *= r);
             }
+            // A view whose own verdict on the Gaussian is background counts less.
+            if cfg.background_weight != 1.0 && row[1..s].iter().all(|&x| x < row[0]) {
+                let b = cfg.background_weight as f64;
+                row[..s].iter_mut().for_each(|x| *x *= b);
+            }
             visibility[gi] += wv as f32;
             if wv >= cfg.seen_weight as f64 {
                 views[gi] = views[gi].saturating_add(1);
@@ -491,6 +526,9 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
                 }
             }
             let tot: f64 = row[..s].iter().sum();
+            if let Some(t) = view_totals.get_mut(v * n + gi) {
+                *t = tot as f32;
+            }
             if tot > 0.0 {
                 let out = &mut vview[gi * sw..(gi + 1) * sw];
                 for (o, r) in out.iter_mut().zip(&row[..s]) {
@@ -507,10 +545,28 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
     if cfg.vote == ViewVote::Confidence {
         combine_views(&votes, n, s, nv, cfg.consistency_iters, &mut class_weights);
     }
+    let check = cfg.vote == ViewVote::Sum && cfg.view_consistency_iters > 0;
+    let sums = check.then(|| class_weights.clone());
+    if check {
+        let sums = sums.as_deref().unwrap_or_default();
+        let mut w = vec![1f64; nv * s];
+        for _ in 0..cfg.view_consistency_iters {
+            w = view_label_weights(&votes, &view_totals, &class_weights, n, s, nv);
+            reweigh(&votes, &view_totals, &w, n, s, nv, &mut class_weights);
+        }
+        // Gaussians whose views all carry no weight any more keep their plain sums.
+        for (g, row) in class_weights.chunks_exact_mut(s).enumerate() {
+            if row.iter().all(|&x| x <= 0.0) {
+                row.copy_from_slice(&sums[g * s..(g + 1) * s]);
+            }
+        }
+        let _ = w;
+    }
+    let sums = sums.as_deref().unwrap_or(&class_weights);
     let (labels, mut confidence) = classify(&class_weights, m, cfg.temperature);
     if cfg.full_visibility > 0.0 {
         for (g, (c, &v)) in confidence.iter_mut().zip(&visibility).enumerate() {
-            let row = &class_weights[g * s..(g + 1) * s];
+            let row = &sums[g * s..(g + 1) * s];
             let tot: f64 = row.iter().sum();
             let top = row.iter().copied().fold(0.0, f64::max);
             // Seen weakly but consistently: keeps its confidence.
@@ -519,23 +575,11 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
             }
         }
     }
-    let view_disagreement = (0..nv)
-        .map(|v| {
-            let vv = &votes[v * n * sw..(v + 1) * n * sw];
-            let (mut seen, mut differ) = (0usize, 0usize);
-            for (gi, &label) in labels.iter().enumerate() {
-                let r = &vv[gi * sw..(gi + 1) * sw];
-                if r[s] == 0 {
-                    continue;
-                }
-                seen += 1;
-                if argmax_u8(&r[..s]) as i32 - 1 != label {
-                    differ += 1;
-                }
-            }
-            differ as f32 / seen.max(1) as f32
-        })
-        .collect();
+    let view_disagreement = if cfg.vote == ViewVote::Sum {
+        leave_one_out_disagreement(&votes, &view_totals, &class_weights, n, s, nv)
+    } else {
+        vec![0.0; nv]
+    };
     Ok(Lifted {
         num_parts: m,
         class_weights,
@@ -570,6 +614,166 @@ fn argmax_u8(r: &[u8]) -> usize {
         }
     }
     best
+}
+
+/// View `v`'s vote for class `l` on Gaussian `g`: its total times its class share.
+fn view_vote<'a>(
+    votes: &'a [u8],
+    totals: &[f32],
+    n: usize,
+    s: usize,
+    v: usize,
+    g: usize,
+) -> Option<(f64, &'a [u8])> {
+    let t = totals[v * n + g] as f64;
+    (t > 0.0).then(|| {
+        (
+            t / 255.0,
+            &votes[(v * n + g) * (s + 1)..(v * n + g) * (s + 1) + s],
+        )
+    })
+}
+
+/// The consistency weights `w[v][l]` ([`LiftConfig::view_consistency_iters`]) from the current
+/// combined evidence `cw` (which contains every view's votes; each view is compared with the
+/// rest).
+fn view_label_weights(
+    votes: &[u8],
+    totals: &[f32],
+    cw: &[f64],
+    n: usize,
+    s: usize,
+    nv: usize,
+) -> Vec<f64> {
+    let mut hit = vec![0f64; nv * s];
+    let mut all = vec![0f64; nv * s];
+    let mut rest = vec![0f64; s];
+    for g in 0..n {
+        let row = &cw[g * s..(g + 1) * s];
+        for v in 0..nv {
+            let Some((t, q)) = view_vote(votes, totals, n, s, v, g) else {
+                continue;
+            };
+            // Leave-one-out consensus.
+            for (r, (&c, &ql)) in rest.iter_mut().zip(row.iter().zip(q)) {
+                *r = c - t * ql as f64;
+            }
+            let mut best = 0;
+            for (c, &x) in rest.iter().enumerate() {
+                if x > rest[best] {
+                    best = c;
+                }
+            }
+            if rest[best] <= 0.0 {
+                continue;
+            }
+            for (l, &ql) in q.iter().enumerate() {
+                let e = t * ql as f64;
+                all[v * s + l] += e;
+                if l == best {
+                    hit[v * s + l] += e;
+                }
+            }
+        }
+    }
+    let share: Vec<Option<f64>> = hit
+        .iter()
+        .zip(&all)
+        .map(|(h, a)| (*a > 0.0).then(|| h / a))
+        .collect();
+    let mut w = vec![1f64; nv * s];
+    for l in 0..s {
+        let mut col: Vec<f64> = (0..nv).filter_map(|v| share[v * s + l]).collect();
+        if col.is_empty() {
+            continue;
+        }
+        col.sort_by(f64::total_cmp);
+        let median = col[col.len() / 2];
+        if median <= 0.0 {
+            continue;
+        }
+        for v in 0..nv {
+            if let Some(p) = share[v * s + l] {
+                w[v * s + l] = (p / median).min(1.0).powi(2);
+            }
+        }
+    }
+    w
+}
+
+/// Per view, over the Gaussians it sees fully (weight >= the saturation) and is sure about
+/// (90% of its own votes on one class), the share (weighted by its votes) on which its verdict
+/// differs from the other views' combined one ([`Lifted::view_disagreement`]).
+fn leave_one_out_disagreement(
+    votes: &[u8],
+    totals: &[f32],
+    cw: &[f64],
+    n: usize,
+    s: usize,
+    nv: usize,
+) -> Vec<f32> {
+    let sw = s + 1;
+    let mut rest = vec![0f64; s];
+    (0..nv)
+        .map(|v| {
+            let (mut seen, mut differ) = (0f64, 0f64);
+            for g in 0..n {
+                let r = &votes[(v * n + g) * sw..(v * n + g + 1) * sw];
+                let Some((t, q)) = view_vote(votes, totals, n, s, v, g) else {
+                    continue;
+                };
+                let top = argmax_u8(q);
+                if r[s] < 255 || (q[top] as f64) < 0.9 * 255.0 {
+                    continue;
+                }
+                let row = &cw[g * s..(g + 1) * s];
+                for (x, (&c, &ql)) in rest.iter_mut().zip(row.iter().zip(q)) {
+                    *x = c - t * ql as f64;
+                }
+                if rest.iter().all(|&x| x <= 1e-12) {
+                    continue;
+                }
+                let other = argmax_f64(&rest);
+                seen += t;
+                if other != top {
+                    differ += t;
+                }
+            }
+            (differ / seen.max(1e-300)) as f32
+        })
+        .collect()
+}
+
+fn argmax_f64(r: &[f64]) -> usize {
+    let mut best = 0;
+    for (c, &x) in r.iter().enumerate() {
+        if x > r[best] {
+            best = c;
+        }
+    }
+    best
+}
+
+/// `out[g][l] = sum_v vote_v(g, l) w[v][l]`.
+fn reweigh(
+    votes: &[u8],
+    totals: &[f32],
+    w: &[f64],
+    n: usize,
+    s: usize,
+    nv: usize,
+    out: &mut [f64],
+) {
+    for (g, row) in out.chunks_exact_mut(s).enumerate() {
+        row.iter_mut().for_each(|x| *x = 0.0);
+        for v in 0..nv {
+            if let Some((t, q)) = view_vote(votes, totals, n, s, v, g) {
+                for (l, (o, &ql)) in row.iter_mut().zip(q).enumerate() {
+                    *o += t * ql as f64 * w[v * s + l];
+                }
+            }
+        }
+    }
 }
 
 /// [`ViewVote::Confidence`]: per Gaussian, the views' class distributions `q_v` weighted by
