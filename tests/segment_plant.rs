@@ -5,9 +5,11 @@
 //! (compositing weight >= 0.05 pixel-equivalents), after the KNN pass.
 //!
 //! The targets (>= 99.5% with clean masks; >= 97% and no part below 93% with
-//! corrupted ones) are not reached yet; these tests hold the measured state: the default lift
-//! (footprint share, visibility-scaled confidence, background-verdict views discounted) beats
-//! the classic lift on every seed, with clean and with corrupted masks.
+//! corrupted ones) are reached with clean masks, not with corrupted ones; these tests hold
+//! the measured state: with clean masks >= 99% on every seed (>= 99.5% on average) and every
+//! stage (label propagation, then the visibility-aware lift) helps on every seed; with
+//! corrupted masks the defaults beat the pipeline as it was on every seed and the classic
+//! lift on average.
 
 use r4d_segment::mask::MaskData;
 use r4d_segment::synthetic::plant::{self, corrupt_parts, mislabel_part, per_part, PlantScene};
@@ -51,6 +53,27 @@ fn score(
         lift,
         smooth: Some(SmoothConfig::default()),
     };
+    score_with(scene, cams, masks, cfg)
+}
+
+/// The lift and the KNN pass as they were before visibility-aware lifting and label
+/// propagation (one vote round).
+fn before() -> SegmentConfig {
+    SegmentConfig {
+        lift: LiftConfig::classic(),
+        smooth: Some(SmoothConfig {
+            rounds: 1,
+            ..Default::default()
+        }),
+    }
+}
+
+fn score_with(
+    scene: &PlantScene,
+    cams: &[Camera],
+    masks: &InMemoryMasks,
+    cfg: SegmentConfig,
+) -> (Vec<f64>, f64) {
     let out = segment(&scene.gaussians, cams, &mut masks.clone(), &cfg).unwrap();
     let seen = |i: usize| out.lifted.visibility[i] >= 0.05;
     let pp = per_part(&out.labels.labels, &scene.truth, 5, seen);
@@ -73,22 +96,33 @@ fn row(name: &str, (per, all): &(Vec<f64>, f64)) -> String {
 }
 
 #[test]
-fn visibility_aware_lift_beats_the_classic_one_on_clean_masks() {
+fn clean_masks_per_part_and_every_stage_helps() {
+    let mut sum = 0.0;
     for seed in 0..3 {
         let (scene, cams, masks) = setup(seed);
+        let old = score_with(&scene, &cams, &masks, before());
         let classic = score(&scene, &cams, &masks, LiftConfig::classic());
         let new = score(&scene, &cams, &masks, LiftConfig::default());
+        println!("seed {seed} clean: {}", row("before", &old));
         println!("seed {seed} clean: {}", row("classic", &classic));
         println!("seed {seed} clean: {}", row("default", &new));
+        // Propagation helps the classic lift; the visibility-aware lift helps further.
         assert!(
-            new.1 > classic.1 + 0.08,
+            classic.1 > old.1 + 0.05,
+            "seed {seed}: {} vs {}",
+            classic.1,
+            old.1
+        );
+        assert!(
+            new.1 > classic.1 + 0.02,
             "seed {seed}: {} vs {}",
             new.1,
             classic.1
         );
-        assert!(new.1 >= 0.975, "seed {seed}: {}", new.1);
+        assert!(new.1 >= 0.99, "seed {seed}: {}", new.1);
+        sum += new.1;
         // pot, soil, stem, leaves, petals
-        for (k, floor) in [0.99, 0.99, 0.90, 0.99, 0.88].into_iter().enumerate() {
+        for (k, floor) in [0.999, 0.999, 0.97, 0.995, 0.95].into_iter().enumerate() {
             assert!(
                 new.0[k + 1] >= floor,
                 "seed {seed}, {}: {}",
@@ -99,6 +133,7 @@ fn visibility_aware_lift_beats_the_classic_one_on_clean_masks() {
         // The floor (static) stays right.
         assert!(new.0[0] >= 0.999, "seed {seed}, floor: {}", new.0[0]);
     }
+    assert!(sum / 3.0 >= 0.995, "mean {}", sum / 3.0);
 }
 
 #[test]
@@ -108,19 +143,21 @@ fn corrupted_masks_per_part_table() {
     for seed in 0..seeds {
         let (scene, cams, masks) = setup(seed);
         let bad = corrupted(&masks, seed);
+        let old = score_with(&scene, &cams, &bad, before());
         let classic = score(&scene, &cams, &bad, LiftConfig::classic());
         let new = score(&scene, &cams, &bad, LiftConfig::default());
+        println!("seed {seed} corrupted: {}", row("before", &old));
         println!("seed {seed} corrupted: {}", row("classic", &classic));
         println!("seed {seed} corrupted: {}", row("default", &new));
         sum_classic += classic.1;
         sum_new += new.1;
-        assert!(new.1 >= 0.82, "seed {seed}: {}", new.1);
-        assert!(new.1 > classic.1, "seed {seed}: {} vs {}", new.1, classic.1);
+        assert!(new.1 >= 0.87, "seed {seed}: {}", new.1);
+        assert!(new.1 > old.1 + 0.01, "seed {seed}: {} vs {}", new.1, old.1);
         // The static floor survives the corruption.
         assert!(new.0[0] >= 0.97, "seed {seed}, floor: {}", new.0[0]);
     }
     assert!(
-        sum_new >= sum_classic + 0.06,
+        sum_new >= sum_classic + 0.045,
         "mean {} vs {}",
         sum_new / 3.0,
         sum_classic / 3.0

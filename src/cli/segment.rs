@@ -41,6 +41,10 @@ pub struct SegmentArgs {
     /// k).
     #[arg(long)]
     min_cluster: Option<usize>,
+    /// Rounds of label propagation over the KNN graph (1: one plain vote; more fill larger
+    /// holes in the lift but let big parts creep into thin ones).
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=100))]
+    rounds: u32,
     /// A Gaussian with mixed evidence seen with less than this compositing weight (pixel
     /// equivalents, over all views) gets proportionally less confidence, so that the KNN pass
     /// decides it from its well-seen neighbours (0: off).
@@ -120,6 +124,7 @@ pub fn run(a: SegmentArgs) -> Result<()> {
         let cfg = SmoothConfig {
             k: a.k,
             min_cluster: a.min_cluster.unwrap_or(a.k),
+            rounds: a.rounds,
             ..Default::default()
         };
         smooth_gaussians(&g, &lifted.labels, &lifted.confidence, m, &cfg)?

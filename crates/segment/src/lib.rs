@@ -13,9 +13,9 @@
 //!    [`r4d_splat::weights`]) times the mask value; normalised, softmax over classes at a
 //!    temperature, argmax label and its confidence; background (-1, static) for Gaussians
 //!    that fall in no moving-part mask.
-//! 3. [`mod@smooth`]: KNN in 3D (kd-tree): confidence-weighted majority vote over the `k`
-//!    nearest Gaussians (neighbours across a crease count less), labels for unobserved
-//!    regions, suppression of isolated clusters.
+//! 3. [`mod@smooth`]: KNN in 3D (kd-tree): confidence-weighted label propagation over the
+//!    graph of the `k` nearest Gaussians (neighbours across a crease count less), labels for
+//!    unobserved regions, suppression of isolated clusters.
 //! 4. [`labels`]: the part labels file (`{"num_parts", "class_names", "labels",
 //!    "confidence", "counts"}`) that `r4d fit --parts` reads, and the transfer of labels onto
 //!    simulation particles (filling particles take the label of their nearest labelled

@@ -14,13 +14,13 @@
 //!
 //! The Gaussians are surfels on the free surface of the union (as in
 //! [`three_parts`](super::three_parts)), anisotropic up to 15:1 in the surface plane (along
-//! the stem and the leaves), with **non-unit quaternions** (random norm in [0.3, 3]) and in a
+//! the stem and the leaves), in natural colours (the stem and the leaves share a green, pot and
+//! soil are two browns), with **non-unit quaternions** (random norm in [0.3, 3]) and in a
 //! **shuffled order**. Masks are ray-cast from the same primitives
 //! ([`PlantScene::label_mask`]); [`corrupt_parts`] and [`mislabel_part`] degrade them like a
 //! real segmenter.
 
 use super::{cross, dot, normalize, quat_from_axes, sub, Rng};
-use crate::labels::part_colour;
 use crate::mask::{InMemoryMasks, Mask, MaskData};
 use r4d_splat::{Camera, Gaussians};
 
@@ -596,8 +596,17 @@ pub fn potted_plant(n: usize, seed: u64) -> PlantScene {
         let norm = r.range(0.3, 3.0) as f32;
         g.quats.push(q.map(|v| v * norm));
         g.opacity_logits.push(r.range(2.5, 5.0) as f32);
-        let c = part_colour(smp.label);
-        let shade = 0.8 + 0.2 * r.next_f64() as f32;
+        // Natural colours, not part colours: the stem and the leaves share a green, the pot
+        // and the soil are two browns, so colour alone does not give the parts away.
+        let c = match smp.label {
+            0 => [0.72, 0.40, 0.24],
+            1 => [0.32, 0.22, 0.14],
+            2 => [0.26, 0.52, 0.20],
+            3 => [0.24, 0.50, 0.19],
+            4 => [0.88, 0.52, 0.70],
+            _ => [0.5, 0.5, 0.5],
+        };
+        let shade = 0.8 + 0.3 * r.next_f64() as f32;
         g.sh.extend(c.map(|x| (x * shade - 0.5) / Y0));
         truth.push(smp.label);
     }
