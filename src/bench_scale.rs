@@ -454,11 +454,11 @@ pub fn run(s: &BenchScale, gpu: Option<GpuHandle>) -> Result<(BenchScene, BenchR
     obj.checkpointing = s.checkpointing;
     obj.set_band_rows(s.band_rows)?;
     let held = crate::alloc::LIVE.load(std::sync::atomic::Ordering::Relaxed);
-    let base = crate::alloc::reset_peak();
+    let watch = crate::alloc::Watch::start();
     let t = Instant::now();
     let (ev, _grad) = obj.value_and_grad(&scene.start)?;
     let total_s = t.elapsed().as_secs_f64();
-    let peak = crate::alloc::peak().max(base);
+    let peak = watch.peak().max(held);
     let profile = obj.profile();
     let n = p.particles.x.len();
     let plan = memory_plan(

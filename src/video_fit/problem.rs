@@ -259,18 +259,15 @@ fn first_err(slot: &RefCell<Option<FitError>>, e: FitError) {
     }
 }
 
-/// Starts a stage's heap peak; returns the peak so far, to be restored by [`stage_end`].
-fn stage_begin() -> usize {
-    let saved = crate::alloc::peak();
-    crate::alloc::reset_peak();
-    saved
+/// Starts measuring a stage's heap peak (a [`crate::alloc::Watch`]: no global counter is
+/// reset, so concurrent evaluations each get their own figures).
+fn stage_begin() -> crate::alloc::Watch {
+    crate::alloc::Watch::start()
 }
 
-/// The stage's peak (absolute live bytes); the overall peak is restored.
-fn stage_end(saved: usize) -> usize {
-    let p = crate::alloc::peak();
-    crate::alloc::PEAK.fetch_max(saved, std::sync::atomic::Ordering::Relaxed);
-    p
+/// The stage's peak (absolute live bytes).
+fn stage_end(watch: crate::alloc::Watch) -> usize {
+    watch.peak()
 }
 
 impl<'a> Objective<'a> {
@@ -847,14 +844,18 @@ impl<'a> Objective<'a> {
         // the reverse sweep adds them frame by frame.
         let frame_grads: RefCell<Option<Vec<Option<FrameGrad>>>> = RefCell::new(None);
         let eval_out: RefCell<Option<Evaluation>> = RefCell::new(None);
-        let stage: RefCell<(usize, Instant)> = RefCell::new((saved, t_start));
+        let stage: RefCell<(Option<crate::alloc::Watch>, Instant)> =
+            RefCell::new((Some(saved), t_start));
         let loss_stage = || {
             if frame_grads.borrow().is_some() || error.borrow().is_some() {
                 return;
             }
             let mut p = prof.borrow_mut();
-            let (saved, t0) = *stage.borrow();
-            p.forward_peak_bytes = stage_end(saved);
+            let (saved, t0) = {
+                let mut st = stage.borrow_mut();
+                (st.0.take(), st.1)
+            };
+            p.forward_peak_bytes = saved.map_or(0, stage_end);
             p.forward_s = t0.elapsed().as_secs_f64() - *read_time.borrow();
             let saved = stage_begin();
             let frames = std::mem::take(&mut *stored.borrow_mut());
@@ -862,7 +863,7 @@ impl<'a> Objective<'a> {
             let r = self.banded_loss(&frames, None, Some(&mut gs), &mut p);
             drop(frames);
             p.loss_peak_bytes = stage_end(saved);
-            *stage.borrow_mut() = (stage_begin(), Instant::now());
+            *stage.borrow_mut() = (Some(stage_begin()), Instant::now());
             match r {
                 Ok(ev) => {
                     *eval_out.borrow_mut() = Some(ev);
@@ -904,8 +905,11 @@ impl<'a> Objective<'a> {
         );
         {
             let mut p = prof.borrow_mut();
-            let (saved, t0) = *stage.borrow();
-            p.backward_peak_bytes = stage_end(saved);
+            let (saved, t0) = {
+                let mut st = stage.borrow_mut();
+                (st.0.take(), st.1)
+            };
+            p.backward_peak_bytes = saved.map_or(0, stage_end);
             p.backward_s = t0.elapsed().as_secs_f64();
             self.save_profile(&p);
         }

@@ -92,7 +92,7 @@ mod tests {
             let same = drawn.iter().zip(&mask).filter(|(a, b)| a == b).count();
             let frac = same as f64 / mask.len() as f64;
             assert!(frac > 0.97, "{frac}");
-            assert!(drawn.iter().any(|&l| l == 3));
+            assert!(drawn.contains(&3));
         }
     }
 }
