@@ -73,6 +73,7 @@ pub fn peak() -> usize {
 #[derive(Debug)]
 pub struct Watch {
     slot: Option<usize>,
+    base: usize,
 }
 
 impl Watch {
@@ -83,10 +84,11 @@ impl Watch {
         let mut cur = ACTIVE.load(Ordering::Relaxed);
         loop {
             let free = (!cur).trailing_zeros() as usize;
+            let base = LIVE.load(Ordering::Relaxed);
             if free >= WATCHES {
-                return Watch { slot: None };
+                return Watch { slot: None, base };
             }
-            WATCH_PEAK[free].store(LIVE.load(Ordering::Relaxed), Ordering::Relaxed);
+            WATCH_PEAK[free].store(base, Ordering::Relaxed);
             match ACTIVE.compare_exchange_weak(
                 cur,
                 cur | (1 << free),
@@ -96,11 +98,19 @@ impl Watch {
                 Ok(_) => {
                     // Allocations between the store and the claim are covered by this max.
                     WATCH_PEAK[free].fetch_max(LIVE.load(Ordering::Relaxed), Ordering::Relaxed);
-                    return Watch { slot: Some(free) };
+                    return Watch {
+                        slot: Some(free),
+                        base,
+                    };
                 }
                 Err(now) => cur = now,
             }
         }
+    }
+
+    /// The live heap bytes when the watch started.
+    pub fn base(&self) -> usize {
+        self.base
     }
 
     /// The highest live heap bytes (absolute, not relative to the start) since
@@ -108,6 +118,26 @@ impl Watch {
     pub fn peak(&self) -> usize {
         self.slot
             .map_or(0, |i| WATCH_PEAK[i].load(Ordering::Relaxed))
+    }
+}
+
+impl r4d_optim::HeapSpan for Watch {
+    fn base(&self) -> usize {
+        self.base
+    }
+    fn peak(&self) -> usize {
+        Watch::peak(self)
+    }
+}
+
+/// The [`r4d_optim::HeapProbe`] of the counting allocator: each measurement is a [`Watch`]
+/// (0 when the allocator is not installed).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CountingProbe;
+
+impl r4d_optim::HeapProbe for CountingProbe {
+    fn start(&self) -> Box<dyn r4d_optim::HeapSpan> {
+        Box::new(Watch::start())
     }
 }
 

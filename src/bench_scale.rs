@@ -445,7 +445,13 @@ pub struct BenchReport {
 }
 
 /// Runs one iteration (f32 simulation) and measures it.
-pub fn run(s: &BenchScale, gpu: Option<GpuHandle>) -> Result<(BenchScene, BenchReport), FitError> {
+/// Heap peaks come from `heap` (the `r4d` binary passes its counting allocator's
+/// [`crate::alloc::CountingProbe`]; `None`: 0).
+pub fn run(
+    s: &BenchScale,
+    gpu: Option<GpuHandle>,
+    heap: Option<std::sync::Arc<dyn r4d_optim::HeapProbe>>,
+) -> Result<(BenchScene, BenchReport), FitError> {
     let backend = if gpu.is_some() { "wgpu" } else { "cpu" };
     let scene = BenchScene::build(s, gpu)?;
     let p = &scene.problem;
@@ -453,12 +459,12 @@ pub fn run(s: &BenchScale, gpu: Option<GpuHandle>) -> Result<(BenchScene, BenchR
     obj.precision = crate::video_fit::Precision::F32;
     obj.checkpointing = s.checkpointing;
     obj.set_band_rows(s.band_rows)?;
-    let held = crate::alloc::LIVE.load(std::sync::atomic::Ordering::Relaxed);
-    let watch = crate::alloc::Watch::start();
+    obj.heap = heap.clone();
+    let span = heap.as_ref().map(|h| h.start());
     let t = Instant::now();
     let (ev, _grad) = obj.value_and_grad(&scene.start)?;
     let total_s = t.elapsed().as_secs_f64();
-    let peak = watch.peak().max(held);
+    let peak = span.as_ref().map_or(0, |s| s.peak());
     let profile = obj.profile();
     let n = p.particles.x.len();
     let plan = memory_plan(
@@ -486,11 +492,11 @@ pub fn run(s: &BenchScale, gpu: Option<GpuHandle>) -> Result<(BenchScene, BenchR
         profile,
         total_s,
         peak_bytes: peak,
-        held_bytes: held,
+        held_bytes: span.as_ref().map_or(0, |s| s.base()),
         reference_bytes: p.views[0].video.bytes(),
         memory_plan_bytes: plan.peak_bytes,
         reference_s: scene.reference_s,
-        heap_measured: crate::alloc::installed(),
+        heap_measured: peak > 0,
     };
     Ok((scene, report))
 }

@@ -87,7 +87,9 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
         "bench-scale: building the scene and the reference video ({}) ...",
         a.reference
     );
-    let (_, report) = run(&scale, gpu)?;
+    let heap: std::sync::Arc<dyn r4d_optim::HeapProbe> =
+        std::sync::Arc::new(resonance4d::alloc::CountingProbe);
+    let (_, report) = run(&scale, gpu, Some(heap))?;
     println!("{}", table(&report));
     if let Some(path) = &a.json {
         let text = serde_json::to_string_pretty(&report)?;

@@ -90,6 +90,10 @@ impl RunHooks {
 }
 
 impl FitHooks for RunHooks {
+    fn heap(&self) -> Option<std::sync::Arc<dyn r4d_optim::HeapProbe>> {
+        Some(std::sync::Arc::new(resonance4d::alloc::CountingProbe))
+    }
+
     fn on_candidate(&mut self, c: &Candidate) {
         self.init_bar.inc(1);
         match (c.score, &c.error) {

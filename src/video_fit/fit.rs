@@ -220,8 +220,8 @@ pub struct IterRecord {
     pub parts: Vec<PartRecord>,
     /// Wall time of the iteration (s).
     pub time_s: f64,
-    /// Peak heap bytes of the process so far (0 when the counting allocator is not
-    /// installed).
+    /// Peak heap bytes of the process since the fit started, as measured by
+    /// [`FitHooks::heap`] (0 without one; the `r4d` binary's counting allocator).
     pub peak_host_bytes: usize,
     /// Flat-direction probes run after this evaluation (see [`FitConfig::flat_probe`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -328,6 +328,11 @@ pub trait FitHooks {
     fn on_checkpoint(&mut self, _s: &FitState) {}
     /// A start of a multi-start finished.
     fn on_start(&mut self, _r: &StartResult) {}
+    /// Measures heap peaks (the stage profile, [`IterRecord::peak_host_bytes`]); `None`:
+    /// they are reported as 0.
+    fn heap(&self) -> Option<std::sync::Arc<dyn r4d_optim::HeapProbe>> {
+        None
+    }
 }
 
 /// Hooks that do nothing.
@@ -552,8 +557,10 @@ pub fn run_fit(
     hooks: &mut dyn FitHooks,
 ) -> Result<FitOutcome, FitError> {
     cfg.validate()?;
+    let fit_span = hooks.heap().map(|h| h.start());
     let per_particle = cfg.granularity == Granularity::Particle;
     let mut obj = Objective::new(problem, cfg.frames, &cfg.loss, per_particle)?;
+    obj.heap = hooks.heap();
     obj.checkpointing = cfg.checkpointing()?;
     obj.precision = cfg.precision;
     obj.set_band_rows(cfg.band_rows)?;
@@ -670,7 +677,7 @@ pub fn run_fit(
         }
         _ => new_stepper(cfg, &space, space.values(&base_slots))?,
     };
-    let peak = crate::alloc::peak;
+    let peak = || fit_span.as_ref().map_or(0, |s| s.peak());
     for iter in state.iters_done..cfg.iters {
         let start = Instant::now();
         let st = iterate(&obj, &space, &base_slots, &mut opt, cfg, (iter, cfg.iters))?;

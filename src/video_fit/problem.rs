@@ -20,6 +20,7 @@ use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
 use r4d_mpm::math::Real;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
+use r4d_optim::{HeapProbe, HeapSpan};
 use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SimLink, SplatRenderer};
 use serde::{Deserialize, Serialize};
 use std::cell::RefCell;
@@ -250,6 +251,10 @@ pub struct Objective<'a> {
     pub render_on_gpu: bool,
     gpu_renderer: Mutex<Option<SplatRenderer<WgpuSplat>>>,
     profile: Mutex<StageProfile>,
+    /// Measures the heap peaks of [`Objective::profile`] (`None`: peaks are 0). The caller
+    /// supplies it (the `r4d` binary: its counting allocator,
+    /// [`crate::alloc::CountingProbe`]); the objective never touches a global counter.
+    pub heap: Option<Arc<dyn HeapProbe>>,
 }
 
 fn first_err(slot: &RefCell<Option<FitError>>, e: FitError) {
@@ -259,18 +264,20 @@ fn first_err(slot: &RefCell<Option<FitError>>, e: FitError) {
     }
 }
 
-/// Starts measuring a stage's heap peak (a [`crate::alloc::Watch`]: no global counter is
-/// reset, so concurrent evaluations each get their own figures).
-fn stage_begin() -> crate::alloc::Watch {
-    crate::alloc::Watch::start()
-}
+/// A stage's heap measurement ([`Objective::heap`]; `None`: not measured).
+type Stage = Option<Box<dyn HeapSpan>>;
 
-/// The stage's peak (absolute live bytes).
-fn stage_end(watch: crate::alloc::Watch) -> usize {
-    watch.peak()
+/// The stage's peak (absolute live bytes; 0 when not measured).
+fn stage_end(span: Stage) -> usize {
+    span.map_or(0, |s| s.peak())
 }
 
 impl<'a> Objective<'a> {
+    /// Starts measuring a stage's heap peak with [`Objective::heap`].
+    fn stage_begin(&self) -> Stage {
+        self.heap.as_ref().map(|h| h.start())
+    }
+
     /// The objective of `problem` on its first `frames` video frames (all when `None`), with
     /// per-particle parameter slots when `per_particle`.
     pub fn new(
@@ -304,6 +311,7 @@ impl<'a> Objective<'a> {
             gpu,
             gpu_renderer: Mutex::new(None),
             profile: Mutex::new(StageProfile::default()),
+            heap: None,
         };
         obj.set_band_rows(DEFAULT_BAND_ROWS)?;
         Ok(obj)
@@ -798,7 +806,7 @@ impl<'a> Objective<'a> {
             }
         };
         let t_start = Instant::now();
-        let saved = stage_begin();
+        let saved = self.stage_begin();
         store(0, init);
         if mode != Mode::Grad {
             let mut s = init.clone();
@@ -816,7 +824,7 @@ impl<'a> Objective<'a> {
             let mut p = prof.borrow_mut();
             p.forward_peak_bytes = stage_end(saved);
             p.forward_s = t_start.elapsed().as_secs_f64() - *read_time.borrow();
-            let saved = stage_begin();
+            let saved = self.stage_begin();
             let frames = std::mem::take(&mut *stored.borrow_mut());
             let r = if mode != Mode::Value {
                 let t = Instant::now();
@@ -844,8 +852,7 @@ impl<'a> Objective<'a> {
         // the reverse sweep adds them frame by frame.
         let frame_grads: RefCell<Option<Vec<Option<FrameGrad>>>> = RefCell::new(None);
         let eval_out: RefCell<Option<Evaluation>> = RefCell::new(None);
-        let stage: RefCell<(Option<crate::alloc::Watch>, Instant)> =
-            RefCell::new((Some(saved), t_start));
+        let stage: RefCell<(Stage, Instant)> = RefCell::new((saved, t_start));
         let loss_stage = || {
             if frame_grads.borrow().is_some() || error.borrow().is_some() {
                 return;
@@ -855,15 +862,15 @@ impl<'a> Objective<'a> {
                 let mut st = stage.borrow_mut();
                 (st.0.take(), st.1)
             };
-            p.forward_peak_bytes = saved.map_or(0, stage_end);
+            p.forward_peak_bytes = stage_end(saved);
             p.forward_s = t0.elapsed().as_secs_f64() - *read_time.borrow();
-            let saved = stage_begin();
+            let saved = self.stage_begin();
             let frames = std::mem::take(&mut *stored.borrow_mut());
             let mut gs: Vec<Option<FrameGrad>> = (0..frames.len()).map(|_| None).collect();
             let r = self.banded_loss(&frames, None, Some(&mut gs), &mut p);
             drop(frames);
             p.loss_peak_bytes = stage_end(saved);
-            *stage.borrow_mut() = (Some(stage_begin()), Instant::now());
+            *stage.borrow_mut() = (self.stage_begin(), Instant::now());
             match r {
                 Ok(ev) => {
                     *eval_out.borrow_mut() = Some(ev);
@@ -909,7 +916,7 @@ impl<'a> Objective<'a> {
                 let mut st = stage.borrow_mut();
                 (st.0.take(), st.1)
             };
-            p.backward_peak_bytes = saved.map_or(0, stage_end);
+            p.backward_peak_bytes = stage_end(saved);
             p.backward_s = t0.elapsed().as_secs_f64();
             self.save_profile(&p);
         }

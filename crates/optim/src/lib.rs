@@ -49,10 +49,12 @@
 
 use serde::{Deserialize, Serialize};
 
+mod heap;
 mod init;
 mod lhs;
 mod trust_bfgs;
 
+pub use heap::{HeapProbe, HeapSpan};
 pub use init::{Candidate, Evaluate, InitOutcome, Initializer, LatinHypercubeInit, SearchSpace};
 pub use lhs::{latin_hypercube, log_space};
 pub use trust_bfgs::{TrustRegion, TrustRegionBfgs};
