@@ -115,12 +115,9 @@ fn video<T: Real>(c: &Case, key: &str) -> Video<T> {
     };
     assert_eq!(ch, 3);
     let vals: Vec<T> = if c.uint8 {
-        a.data
-            .iter()
-            .map(|&k| T::cast(k) / T::cast(255.0))
-            .collect()
+        a.data.iter().map(|&k| T::c(k) / T::c(255.0)).collect()
     } else {
-        a.data.iter().map(|&v| T::cast(v)).collect()
+        a.data.iter().map(|&v| T::c(v)).collect()
     };
     Video::from_tchw(t, h, w, &vals).unwrap()
 }

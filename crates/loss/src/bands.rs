@@ -193,12 +193,12 @@ impl ReferenceVideo {
                 ReferenceVideo::F32(v) => data.extend(
                     v.data()[t * flen + a..t * flen + b]
                         .iter()
-                        .map(|&x| T::cast(x as f64)),
+                        .map(|&x| T::c(x as f64)),
                 ),
                 ReferenceVideo::U8(v) => data.extend(
                     v.data[t * flen + a..t * flen + b]
                         .iter()
-                        .map(|&k| T::cast(k as f64 / 255.0)),
+                        .map(|&k| T::c(k as f64 / 255.0)),
                 ),
             }
         }
@@ -448,7 +448,7 @@ impl<'r> BandedDms<'r> {
                             let d = a.f64() - bb.f64();
                             s += d.abs();
                             if d != 0.0 {
-                                *gv += T::cast(c * d.signum());
+                                *gv += T::c(c * d.signum());
                             }
                         }
                     }

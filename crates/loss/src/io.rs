@@ -153,8 +153,8 @@ fn push_rgb<T: Real>(
     out: &mut Vec<T>,
 ) -> Result<(), VideoIoError> {
     use image::DynamicImage as D;
-    let q8 = |k: u8| T::cast(k as f64 / 255.0);
-    let q16 = |k: u16| T::cast(k as f64 / 65535.0);
+    let q8 = |k: u8| T::c(k as f64 / 255.0);
+    let q16 = |k: u16| T::c(k as f64 / 65535.0);
     match img {
         D::ImageRgb8(b) => out.extend(b.as_raw().iter().map(|&k| q8(k))),
         D::ImageRgba8(b) => {
@@ -259,7 +259,7 @@ fn read_npy<T: Real>(path: &Path) -> Result<Video<T>, VideoIoError> {
             }
             body.chunks_exact(4)
                 .take(n)
-                .map(|c| T::cast(f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64))
+                .map(|c| T::c(f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64))
                 .collect()
         }
         "<f8" => {
@@ -271,7 +271,7 @@ fn read_npy<T: Real>(path: &Path) -> Result<Video<T>, VideoIoError> {
             }
             body.chunks_exact(8)
                 .take(n)
-                .map(|c| T::cast(f64::from_le_bytes(c.try_into().expect("8 bytes"))))
+                .map(|c| T::c(f64::from_le_bytes(c.try_into().expect("8 bytes"))))
                 .collect()
         }
         d => {

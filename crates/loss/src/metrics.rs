@@ -36,7 +36,7 @@ pub(crate) fn l1_grad_into<T: Real>(x: &Video<T>, y: &Video<T>, scale: f64, grad
             let d = a.f64() - b.f64();
             s += d.abs();
             if d != 0.0 {
-                *gv += T::cast(c * d.signum());
+                *gv += T::c(c * d.signum());
             }
         }
         s

@@ -435,9 +435,9 @@ impl Spectral {
                         let o = (jj * nt + t) * pl + h * pw;
                         let px = &mut frame[row + jj * pw * 3..row + (jj + 1) * pw * 3];
                         for (p, &v) in px.chunks_exact_mut(3).zip(&ws.gy[o..o + pw]) {
-                            p[0] += T::cast(0.299 * v);
-                            p[1] += T::cast(0.587 * v);
-                            p[2] += T::cast(0.114 * v);
+                            p[0] += T::c(0.299 * v);
+                            p[1] += T::c(0.587 * v);
+                            p[2] += T::c(0.114 * v);
                         }
                     }
                 }

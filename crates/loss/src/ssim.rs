@@ -260,13 +260,13 @@ fn ssim_video<T: Real, S: Real>(
     // cancellation, so it is applied as a correction. In f32 it is below round-off.
     let residual =
         (cfg.padding == Padding::Same && S::NAME == "f64").then(|| window_residual(&window));
-    let taps: Vec<S> = window.iter().map(|&g| S::cast(g as f64)).collect();
+    let taps: Vec<S> = window.iter().map(|&g| S::c(g as f64)).collect();
     let filter = Filter {
         isa: Isa::detect(),
         taps: &taps,
         residual: residual.as_deref(),
-        c1: S::cast(cfg.k1 * cfg.k1),
-        c2: S::cast(cfg.k2 * cfg.k2),
+        c1: S::c(cfg.k1 * cfg.k1),
+        c2: S::c(cfg.k2 * cfg.k2),
         want_cs: false,
     };
     let (nt, h, w) = (x.frames(), x.height(), x.width());
@@ -278,7 +278,7 @@ fn ssim_video<T: Real, S: Real>(
         Some((s, g)) => (s, Some(g)),
         None => (0.0, None),
     };
-    let u = S::cast(scale / (nt * ch * ho * wo) as f64);
+    let u = S::c(scale / (nt * ch * ho * wo) as f64);
     let items: Vec<(usize, Option<&mut [T]>)> = match grad {
         Some(g) => g.chunks_mut(flen).map(Some).enumerate().collect(),
         None => (0..nt).map(|t| (t, None)).collect(),
@@ -295,9 +295,9 @@ fn ssim_video<T: Real, S: Real>(
                     let s = ssim_plane(&filter, &gx, &gy, plane, Some((u, &mut gg[..])));
                     for (px, &v) in g.chunks_exact_mut(3).zip(&gg) {
                         let v = v.f64();
-                        px[0] += T::cast(0.299 * v);
-                        px[1] += T::cast(0.587 * v);
-                        px[2] += T::cast(0.114 * v);
+                        px[0] += T::c(0.299 * v);
+                        px[1] += T::c(0.587 * v);
+                        px[2] += T::c(0.114 * v);
                     }
                     s
                 }
@@ -332,7 +332,7 @@ fn window_residual<S: Real>(g: &[f32]) -> Vec<S> {
     for &a in g {
         for &b in g {
             let exact = a as f64 * b as f64;
-            r.push(S::cast((a * b) as f64 - exact));
+            r.push(S::c((a * b) as f64 - exact));
         }
     }
     r
@@ -341,7 +341,7 @@ fn window_residual<S: Real>(g: &[f32]) -> Vec<S> {
 /// BT.601 luma of a `(H, W, 3)` frame, computed in f64 and rounded to `S`.
 pub(crate) fn gray_plane<T: Real, S: Real>(f: &[T]) -> Vec<S> {
     f.chunks_exact(3)
-        .map(|p| S::cast(0.299 * p[0].f64() + 0.587 * p[1].f64() + 0.114 * p[2].f64()))
+        .map(|p| S::c(0.299 * p[0].f64() + 0.587 * p[1].f64() + 0.114 * p[2].f64()))
         .collect()
 }
 
@@ -485,7 +485,7 @@ fn ssim_tile<T: Real, S: Real>(
                     .iter_mut()
                     .zip(&src[r * rl + span.0..r * rl + span.1])
                 {
-                    *d = S::cast(s.f64());
+                    *d = S::c(s.f64());
                 }
             }
         }
@@ -709,7 +709,7 @@ fn write_grad_row<T: Real, S: Real>(
             .iter_mut()
             .zip(&row[off..off + (b - a)])
         {
-            *d += T::cast(s.f64());
+            *d += T::c(s.f64());
         }
     }
 }

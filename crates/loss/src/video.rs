@@ -151,7 +151,7 @@ impl<T: Real> Video<T> {
             frames: self.frames,
             height: self.height,
             width: self.width,
-            data: self.data.iter().map(|v| U::cast(v.f64())).collect(),
+            data: self.data.iter().map(|v| U::c(v.f64())).collect(),
         }
     }
 

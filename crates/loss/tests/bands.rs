@@ -26,7 +26,7 @@ fn video<T: Real>(frames: usize, h: usize, w: usize, seed: u64, speed: f64) -> V
                 let disc = if d < 9.0 { 0.6 } else { 0.0 };
                 for c in 0..3 {
                     let bg = 0.2 + 0.1 * ((x * (c + 1) + 3 * y) as f64 * 0.37).sin();
-                    data.push(T::cast((bg + disc + 0.05 * rnd()).clamp(0.0, 1.0)));
+                    data.push(T::c((bg + disc + 0.05 * rnd()).clamp(0.0, 1.0)));
                 }
             }
         }

@@ -265,7 +265,7 @@ pub fn grid_node_update<T: Real>(
     if c.grid_v_damping < 1.0 {
         let d = k::<T>(c.grid_v_damping);
         for x in v.iter_mut() {
-            *x = *x * d;
+            *x *= d;
         }
     }
     apply_grid_bcs(ijk, &mut v, bcs, c);
@@ -342,19 +342,19 @@ pub fn apply_grid_bcs<T: Real>(ijk: [usize; 3], v: &mut [T; 3], bcs: &[GridBc], 
                     0 => *v = [z; 3],
                     1 => {
                         for a in 0..3 {
-                            v[a] = v[a] - vn * nrm[a];
+                            v[a] -= vn * nrm[a];
                         }
                     }
                     _ => {
                         if vn < z {
                             for a in 0..3 {
-                                v[a] = v[a] - vn * nrm[a];
+                                v[a] -= vn * nrm[a];
                             }
                             let vt = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
                             if vt > T::c(1e-20) {
                                 let f = (vt + vn * k(bc.friction)).max(z) / vt;
                                 for x in v.iter_mut() {
-                                    *x = *x * f;
+                                    *x *= f;
                                 }
                             }
                         }
@@ -421,13 +421,13 @@ pub fn gather<T: Real>(nodes: &[[T; 4]], n: usize, st: &Stencil<T>, c: &StepCons
     let inv_dx = k::<T>(c.inv_dx);
     let kc = T::c(4.0) * inv_dx;
     for e in cm.iter_mut() {
-        *e = *e * kc;
+        *e *= kc;
     }
     if c.force_form == FORCE_MLS {
         gv = cm;
     } else {
         for e in gv.iter_mut() {
-            *e = *e * inv_dx;
+            *e *= inv_dx;
         }
     }
     Gathered {

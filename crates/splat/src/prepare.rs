@@ -470,8 +470,7 @@ fn fill_interior(
 /// Inverse of a symmetric 3x3 matrix with eigenvalues clamped to `>= 1e-8`, and the largest
 /// eigenvalue.
 fn clamped_inverse(c: &[[f64; 3]; 3]) -> ([[f64; 3]; 3], f64) {
-    // Jacobi eigen-decomposition (same as the polar decomposition's).
-    let (lam, v) = crate::covariance::sym_eigen(*c);
+    let (lam, v) = r4d_math::sym_eigen(*c);
     let l = lam.map(|x| x.max(1e-8));
     let mut inv = [[0.0; 3]; 3];
     for i in 0..3 {

@@ -59,8 +59,8 @@ impl<T: Real> CamParams<T> {
         CamParams {
             lims,
             rot: cast3(&cam.rotation()),
-            trans: castv(&cam.translation()),
-            campos: castv(&cam.position()),
+            trans: castv(cam.translation()),
+            campos: castv(cam.position()),
             fx: T::c(cam.fx),
             fy: T::c(cam.fy),
             cx: T::c(cam.cx),

@@ -2,7 +2,6 @@
 //! checks of the polar decomposition.
 
 use crate::camera::{Camera, RasterizeMode, RenderSettings};
-use crate::covariance::*;
 use crate::project::CamParams;
 use crate::real::*;
 use crate::reference::{render, render_vjp, Scene};
@@ -162,60 +161,6 @@ fn every_gradient_matches_finite_differences_in_f64() {
 fn deformation_gradient_matches_finite_differences_in_f64() {
     fd_check(true, RasterizeMode::Classic, 3);
     fd_check(true, RasterizeMode::Antialiased, 1);
-}
-
-#[test]
-fn polar_rotation_is_a_rotation_and_its_vjp_matches_fd() {
-    let mut r = Lcg(3);
-    for case in 0..20 {
-        let mut f = eye3::<f64>();
-        for row in f.iter_mut() {
-            for v in row.iter_mut() {
-                *v = r.range(-1.0, 1.0) + *v * 0.5;
-            }
-        }
-        if case == 0 {
-            f = [[2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 0.5]]; // repeated singular values
-        }
-        let rot = polar_rotation(&f);
-        assert!((det(&rot) - 1.0).abs() < 1e-12, "det R");
-        let s = mul_at(&rot, &f);
-        for i in 0..3 {
-            for j in 0..3 {
-                assert!((s[i][j] - s[j][i]).abs() < 1e-10, "S symmetric");
-            }
-        }
-        if det(&f) <= 0.0 {
-            continue; // sign convention: S has a negative eigenvalue, still a valid factor
-        }
-        let mut g = zero3::<f64>();
-        for row in g.iter_mut() {
-            for v in row.iter_mut() {
-                *v = r.range(-1.0, 1.0);
-            }
-        }
-        let an = polar_rotation_vjp(&f, &rot, &g);
-        let l = |f: &M3<f64>| {
-            let r = polar_rotation(f);
-            (0..9)
-                .map(|k| r[k / 3][k % 3] * g[k / 3][k % 3])
-                .sum::<f64>()
-        };
-        for a in 0..3 {
-            for b in 0..3 {
-                let mut p = f;
-                p[a][b] += 1e-6;
-                let mut m = f;
-                m[a][b] -= 1e-6;
-                let fd = (l(&p) - l(&m)) / 2e-6;
-                assert!(
-                    (fd - an[a][b]).abs() < 1e-6 * (1.0 + fd.abs()),
-                    "{fd} vs {}",
-                    an[a][b]
-                );
-            }
-        }
-    }
 }
 
 /// A camera cropped to bands of rows starting on tile rows renders the full image's rows (up

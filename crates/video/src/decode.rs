@@ -408,7 +408,7 @@ pub fn read_mp4<T: Real>(path: &Path, select: Option<&[usize]>) -> Result<Video<
     let size = std::mem::size_of::<T>() as u64;
     let lut = byte_to_unit();
     let info = decode_selected(path, select, size, |f| {
-        data.extend(f.iter().map(|&k| T::cast(f64::from(lut[k as usize]))))
+        data.extend(f.iter().map(|&k| T::c(f64::from(lut[k as usize]))))
     })?;
     let n = data.len() / (info.width as usize * info.height as usize * 3);
     Ok(

@@ -40,7 +40,7 @@ pub fn particle_bcs_vjp<T: Real>(
             PBC_IMPULSE => {
                 // v += f / m dt  =>  m_bar -= (f . v_bar) dt / m^2
                 let fv: T = (0..3).fold(T::zero(), |s, a| s + k::<T>(bc.vector[a]) * v_bar[a]);
-                *mass_bar = *mass_bar - fv * k(c.dt) / (mass * mass);
+                *mass_bar -= fv * k(c.dt) / (mass * mass);
             }
             PBC_VELOCITY => *v_bar = [T::zero(); 3],
             _ => {}
@@ -172,7 +172,7 @@ pub fn scatter_vjp<T: Real>(
                     f_bar[ax] += dw[ax] * (p_dot + mass * m_bar);
                     let col = mc.col(ax);
                     let cd = (0..3).fold(T::zero(), |acc, q| acc + col[q] * mom_bar[q]);
-                    f_bar[ax] = f_bar[ax] - w * cd * dx;
+                    f_bar[ax] -= w * cd * dx;
                 }
                 if !mls {
                     let (g, dg) = grad_and_hessian(st, off);
