@@ -3,20 +3,24 @@
 //!
 //! `cargo bench --bench adjoint [-- PARTICLES FRAMES SUBSTEPS_PER_FRAME]` (defaults: 10 000
 //! particles, 2 frames of 50 substeps, n_grid 64, f32), for the single-threaded host
-//! simulator (the f64/f32 reference) and the parallel CPU adjoint (`ParallelHost`, all cores).
+//! reference backend and the parallel CPU backend (`CpuBackend`, all cores), both through the
+//! generic stepper `KernelAdjoint`.
 //! The paper's scale (16 frames x 400 substeps, 10k and 100k particles) takes an hour on a
 //! 2-core machine: `cargo bench --bench adjoint -- 100000 16 400 --parallel-only`.
 //! `--parallel-only` skips the single-threaded host stepper, `--only store-all|per-frame|every-n|nested`
 //! measures one strategy; a strategy whose
 //! `memory_plan` exceeds 60% of the machine's memory is skipped (its plan is still printed).
 
-use r4d_backend_cpu::adjoint::ParallelHost;
+use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_mpm::adjoint::checkpoint::{memory_plan, value_and_grad, Checkpointing, Differentiable};
-use r4d_mpm::adjoint::host::{HostSim, HostStepper, PhysParams};
+use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, MpmAdjointKernels};
+use r4d_mpm::adjoint::host::{HostSim, PhysParams};
+use r4d_mpm::reference::ReferenceBackend;
 use r4d_mpm::{
     BoundaryCondition, Domain, PartParams, ParticleSet, Shape, SimConfig, Surface, TimeConfig,
 };
 use resonance4d::alloc::{peak_since, reset_peak, Counting};
+use std::convert::Infallible;
 use std::time::Instant;
 
 #[global_allocator]
@@ -75,11 +79,9 @@ fn main() {
     println!("| stepper | strategy | forward (s) | forward+backward (s) | backward/forward | peak measured (MiB) | memory_plan (MiB) |");
     println!("|---|---|---|---|---|---|---|");
     if !parallel_only {
-        let host = HostStepper::<f32>::new(&sim);
         measure(
             "host (1 thread)",
-            &host,
-            &sim,
+            &|| infallible(KernelAdjoint::new(ReferenceBackend::new(), &sim)),
             &params,
             substeps,
             spf,
@@ -88,11 +90,9 @@ fn main() {
             only.as_deref(),
         );
     }
-    let parallel = ParallelHost::<f32>::new(&sim);
     measure(
         "parallel CPU",
-        &parallel,
-        &sim,
+        &|| infallible(KernelAdjoint::new(CpuBackend::new(Par::Rayon), &sim)),
         &params,
         substeps,
         spf,
@@ -103,10 +103,9 @@ fn main() {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn measure<D>(
+fn measure<'a, B>(
     label: &str,
-    stepper: &D,
-    sim: &HostSim,
+    make: &dyn Fn() -> KernelAdjoint<'a, B>,
     params: &Vec<PhysParams<f32>>,
     substeps: u64,
     spf: u32,
@@ -114,11 +113,7 @@ fn measure<D>(
     n: usize,
     only: Option<&str>,
 ) where
-    D: Differentiable<
-        State = r4d_mpm::adjoint::host::HostState<f32>,
-        Params = Vec<PhysParams<f32>>,
-        Grad = Vec<PhysParams<f32>>,
-    >,
+    B: MpmAdjointKernels<Scalar = f32, Error = Infallible>,
 {
     for strategy in [
         Checkpointing::StoreAll,
@@ -141,30 +136,41 @@ fn measure<D>(
             println!("| {label} | {strategy:?} | - | - | - | skipped | {plan:.1} |");
             continue;
         }
-        let init = sim.init(params, &vec![[0.0f32; 3]; np]);
+        // The stepper's working buffers (grids, tape, adjoint scratch) count in the peak.
+        let base = reset_peak();
+        let stepper = &make();
+        let init = infallible(stepper.init(params, &vec![[0.0f32; 3]; np]));
         // Forward only, for the ratio.
         let t0 = Instant::now();
-        let mut s = init.clone();
+        let mut s = infallible(stepper.clone_state(&init));
         for k in 0..substeps {
-            stepper.step(&mut s, params, k);
+            infallible(stepper.step(&mut s, params, k));
         }
         let fwd = t0.elapsed().as_secs_f64();
         drop(s);
-        let base = reset_peak();
         let t1 = Instant::now();
-        let (_, _, g) = value_and_grad(
+        let b = stepper.backend();
+        let (_, _, g) = infallible(value_and_grad(
             stepper,
             &init,
             params,
             substeps,
             spf,
             strategy,
-            vec![PhysParams::default()],
-            |_, s| s.x.iter().map(|p| p[2] as f64).sum::<f64>(),
-            |_, _, adj| adj.x.iter_mut().for_each(|a| a[2] += 1.0),
-        );
+            infallible(stepper.zero_grad()),
+            |_, s| {
+                let x = infallible(b.download(&s.x));
+                x.iter().map(|p| p[2] as f64).sum::<f64>()
+            },
+            |_, _, adj| {
+                let mut x = infallible(b.download(&adj.x));
+                x.iter_mut().for_each(|a| a[2] += 1.0);
+                infallible(b.write(&mut adj.x, &x));
+            },
+        ));
         let total = t1.elapsed().as_secs_f64();
         let peak = peak_since(base) as f64 / 1048576.0;
+        let g = infallible(stepper.grad_to_host(&g, params));
         assert!(g[0].youngs_modulus.is_finite());
         println!(
             "| {label} | {strategy:?} | {fwd:.2} | {total:.2} | {:.2} | {peak:.1} | {plan:.1} |",

@@ -4,7 +4,7 @@
 //! f32, slip bounding box, on
 //!
 //! * `adjoint_substep/cpu/{forward,backward}/N`: the parallel CPU adjoint
-//!   (`r4d_backend_cpu::adjoint::ParallelHost<f32>`, all cores);
+//!   (`KernelAdjoint<CpuBackend<f32>>`, all cores);
 //! * `adjoint_substep/wgpu/{forward,backward}/N`: the device adjoint
 //!   (`r4d_backend_wgpu::adjoint::WgpuAdjoint`) when a wgpu adapter exists; every call waits
 //!   for the device, so times are execution times.
@@ -37,10 +37,11 @@
 )]
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use r4d_backend_cpu::adjoint::ParallelHost;
+use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_backend_wgpu::adjoint::{DeviceState, WgpuAdjoint};
 use r4d_backend_wgpu::WgpuContext;
 use r4d_mpm::adjoint::checkpoint::Differentiable;
+use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
 use r4d_mpm::{
     BoundaryCondition, Domain, PartParams, ParticleSet, Shape, SimConfig, Surface, TimeConfig,
@@ -138,13 +139,17 @@ impl Case {
         let sim = HostSim::new(&cfg, &scene).expect("bench scene");
         let params = vec![PhysParams::<f32>::of(&cfg.parts[0])];
         let np = sim.len();
-        let mut before = sim.init(&params, &vec![[0.0f32; 3]; np]);
-        {
-            let warm = ParallelHost::<f32>::new(&sim);
+        let before = {
+            let warm = infallible(KernelAdjoint::new(
+                CpuBackend::<f32>::with_par(Par::Rayon),
+                &sim,
+            ));
+            let mut s = infallible(warm.init(&params, &vec![[0.0f32; 3]; np]));
             for k in 0..WARMUP {
-                warm.step(&mut before, &params, k);
+                infallible(warm.step(&mut s, &params, k));
             }
-        }
+            infallible(s.download(warm.backend()))
+        };
         let mut adj = HostState::<f32>::zeros(np);
         for p in 0..np {
             adj.x[p][2] = 1.0;
@@ -177,20 +182,27 @@ fn bench_cpu(c: &mut Criterion, cases: &[Case]) {
     group.sample_size(10);
     for case in cases {
         let np = case.sim.len();
-        let stepper = ParallelHost::<f32>::new(&case.sim);
+        let stepper = infallible(KernelAdjoint::new(
+            CpuBackend::<f32>::with_par(Par::Rayon),
+            &case.sim,
+        ));
+        let b = stepper.backend();
+        let up = |h: &HostState<f32>| infallible(StateBufs::upload(b, h));
+        let before = up(&case.before);
         let k = WARMUP;
         // First calls, measured: peak above what is live before each.
-        let mut s = case.before.clone();
+        let mut s = up(&case.before);
         let base = reset_peak();
-        stepper.step(&mut s, &case.params, k);
+        infallible(stepper.step(&mut s, &case.params, k));
         let fwd_peak = peak_since(base) as u64;
-        let mut adj = case.adj.clone();
-        let mut grad = vec![PhysParams::<f32>::default(); case.params.len()];
+        let mut adj = up(&case.adj);
+        let mut grad = infallible(stepper.zero_grad());
         let held = live();
         let base = reset_peak();
-        stepper.step_vjp(&case.before, &case.params, k, &mut adj, &mut grad);
+        infallible(stepper.step_vjp(&before, &case.params, k, &mut adj, &mut grad));
         let bwd_peak = peak_since(base) as u64;
-        assert!(grad[0].youngs_modulus.is_finite(), "non-finite gradient");
+        let g = infallible(stepper.grad_to_host(&grad, &case.params));
+        assert!(g[0].youngs_modulus.is_finite(), "non-finite gradient");
         drop((s, adj));
         for (what, peak) in [("forward", fwd_peak), ("backward", bwd_peak)] {
             println!(
@@ -207,8 +219,8 @@ fn bench_cpu(c: &mut Criterion, cases: &[Case]) {
             b.iter_custom(|iters| {
                 time_calls(
                     iters,
-                    || case.before.clone(),
-                    |mut s| stepper.step(&mut s, &case.params, k),
+                    || up(&case.before),
+                    |mut s| infallible(stepper.step(&mut s, &case.params, k)),
                 )
             })
         });
@@ -216,8 +228,10 @@ fn bench_cpu(c: &mut Criterion, cases: &[Case]) {
             b.iter_custom(|iters| {
                 time_calls(
                     iters,
-                    || case.adj.clone(),
-                    |mut adj| stepper.step_vjp(&case.before, &case.params, k, &mut adj, &mut grad),
+                    || up(&case.adj),
+                    |mut adj| {
+                        infallible(stepper.step_vjp(&before, &case.params, k, &mut adj, &mut grad))
+                    },
                 )
             })
         });
@@ -261,22 +275,26 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
         let mut grad = stepper.zero_grad().expect("device gradient");
         let k = WARMUP;
         // First calls build the pipelines; the measured ones are the second.
-        let mut s = before.clone();
-        stepper.step(&mut s, &case.params, k);
-        let mut adj = adj0.clone();
-        stepper.step_vjp(&before, &case.params, k, &mut adj, &mut grad);
+        let mut s = before.try_clone().unwrap();
+        stepper.step(&mut s, &case.params, k).unwrap();
+        let mut adj = adj0.try_clone().unwrap();
+        stepper
+            .step_vjp(&before, &case.params, k, &mut adj, &mut grad)
+            .unwrap();
         wait();
         let mut peaks = Vec::new();
         for backward in [false, true] {
-            let mut s = before.clone();
-            let mut adj = adj0.clone();
+            let mut s = before.try_clone().unwrap();
+            let mut adj = adj0.try_clone().unwrap();
             wait();
             ctx.reset_peak();
             let base = reset_peak();
             if backward {
-                stepper.step_vjp(&before, &case.params, k, &mut adj, &mut grad);
+                stepper
+                    .step_vjp(&before, &case.params, k, &mut adj, &mut grad)
+                    .unwrap();
             } else {
-                stepper.step(&mut s, &case.params, k);
+                stepper.step(&mut s, &case.params, k).unwrap();
             }
             wait();
             peaks.push((peak_since(base) as u64, ctx.peak_bytes()));
@@ -302,12 +320,12 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
                 time_calls(
                     iters,
                     || {
-                        let s = before.clone();
+                        let s = before.try_clone().unwrap();
                         wait();
                         s
                     },
                     |mut s| {
-                        stepper.step(&mut s, &case.params, k);
+                        stepper.step(&mut s, &case.params, k).unwrap();
                         wait();
                     },
                 )
@@ -318,12 +336,14 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
                 time_calls(
                     iters,
                     || {
-                        let a = adj0.clone();
+                        let a = adj0.try_clone().unwrap();
                         wait();
                         a
                     },
                     |mut adj| {
-                        stepper.step_vjp(&before, &case.params, k, &mut adj, &mut grad);
+                        stepper
+                            .step_vjp(&before, &case.params, k, &mut adj, &mut grad)
+                            .unwrap();
                         wait();
                     },
                 )

@@ -5,15 +5,16 @@
 //! [`TrajectoryLoss`] at every frame against the targets, sweeps backward through every
 //! substep ([`r4d_mpm::adjoint`]) and updates the free parameters with AdamW in the log
 //! domain ([`r4d_optim`]). The simulation and its reverse sweep run in f64 on the CPU
-//! (`r4d_backend_cpu::adjoint::ParallelHost`, all cores) by default, or in f32 on a GPU
+//! (`KernelAdjoint<CpuBackend<f64>>`, all cores) by default, or in f32 on a GPU
 //! (`r4d_backend_wgpu::adjoint::WgpuAdjoint`) with [`FitBackend::Wgpu`]: there the states stay
 //! on the device, only the positions of each frame come back for the loss and its gradient
 //! goes back to the position adjoint on the device.
 
-use r4d_backend_cpu::adjoint::ParallelHost;
+use r4d_backend_cpu::CpuBackend;
 use r4d_backend_wgpu::adjoint::{AdjointError, DeviceState, WgpuAdjoint};
 use r4d_backend_wgpu::{WgpuContext, WgpuError};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing};
+use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
@@ -58,7 +59,7 @@ impl From<AdjointError> for FitError {
 /// Where the simulation and its reverse sweep run.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum FitBackend {
-    /// f64 on the CPU, all cores (`ParallelHost<f64>`).
+    /// f64 on the CPU, all cores (`KernelAdjoint<CpuBackend<f64>>`).
     #[default]
     Cpu,
     /// f32 on a GPU through wgpu (`WgpuAdjoint`); the adapter is chosen as by
@@ -240,7 +241,10 @@ pub fn fit_trajectory_resumable(
         HostSim::new(config, scene)?
     };
     let stepper = match opts.backend {
-        FitBackend::Cpu => Stepper::Cpu(ParallelHost::<f64>::new(&sim)),
+        FitBackend::Cpu => Stepper::Cpu(Box::new(infallible(KernelAdjoint::new(
+            CpuBackend::<f64>::with_par(r4d_backend_cpu::Par::Rayon),
+            &sim,
+        )))),
         FitBackend::Wgpu => Stepper::Wgpu(Box::new(WgpuAdjoint::new(
             Arc::new(WgpuContext::new()?),
             &sim,
@@ -367,7 +371,7 @@ pub fn fit_trajectory_resumable(
 
 /// The simulator of a fit.
 enum Stepper<'a> {
-    Cpu(ParallelHost<'a, f64>),
+    Cpu(Box<KernelAdjoint<'a, CpuBackend<f64>>>),
     Wgpu(Box<WgpuAdjoint<'a>>),
 }
 
@@ -386,14 +390,14 @@ struct Sweep<'a> {
 
 impl Sweep<'_> {
     /// In f64 on the CPU.
-    fn cpu(&self, stepper: &ParallelHost<f64>) -> (f64, Vec<PhysParams<f64>>) {
+    fn cpu(&self, stepper: &KernelAdjoint<CpuBackend<f64>>) -> (f64, Vec<PhysParams<f64>>) {
         let (sim, targets, opts_loss) = (self.sim, self.targets, self.loss);
         let phys: Vec<PhysParams<f64>> = self.parts.iter().map(PhysParams::of).collect();
         let v0 = vec![[0.0; 3]; sim.len()];
-        let init = sim.init(&phys, &v0);
-        let grad0 = vec![PhysParams::default(); self.parts.len()];
+        let init = infallible(stepper.init(&phys, &v0));
+        let grad0 = infallible(stepper.zero_grad());
         let scale = 1.0 / self.frames as f64;
-        let (loss, adj0, mut grad) = value_and_grad(
+        let (loss, adj0, grad) = infallible(value_and_grad(
             stepper,
             &init,
             &phys,
@@ -414,8 +418,9 @@ impl Sweep<'_> {
                     }
                 }
             },
-        );
-        sim.init_vjp(&adj0, &mut grad);
+        ));
+        let mut grad = infallible(stepper.grad_to_host(&grad, &phys));
+        infallible(stepper.init_vjp(&adj0, &mut grad));
         (loss, grad)
     }
 
@@ -473,7 +478,7 @@ impl Sweep<'_> {
                     error.borrow_mut().get_or_insert(e);
                 }
             },
-        );
+        )?;
         if let Some(e) = error.into_inner() {
             return Err(e.into());
         }

@@ -1,14 +1,17 @@
-//! The parallel CPU adjoint (`r4d_backend_cpu::adjoint::ParallelHost`) against the f64
-//! reference reverse sweep of the single-threaded host simulator.
+//! The parallel CPU backend's reverse stages (`CpuBackend`, through the generic
+//! `KernelAdjoint`) against the f64 reference backend's (the gradient oracle).
 
-use r4d_backend_cpu::adjoint::ParallelHost;
+use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
-use r4d_mpm::adjoint::host::{HostSim, HostState, HostStepper, PhysParams};
+use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, MpmAdjointKernels};
+use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::math::Real;
+use r4d_mpm::reference::ReferenceBackend;
 use r4d_mpm::{
     BoundaryCondition, Domain, ForceForm, Material, PartParams, ParticleSet, Shape, SimConfig,
     SolverConfig, Surface, TimeConfig,
 };
+use std::convert::Infallible;
 
 fn scene(part: PartParams) -> (SimConfig, ParticleSet) {
     let n = 16;
@@ -66,35 +69,37 @@ fn scene(part: PartParams) -> (SimConfig, ParticleSet) {
     (cfg, scene)
 }
 
-fn grad<
-    T: Real,
-    D: Differentiable<State = HostState<T>, Params = Vec<PhysParams<T>>, Grad = Vec<PhysParams<T>>>,
->(
-    d: &D,
+/// The gradient of a fixed weighted sum of positions on backend `b`.
+fn grad<B: MpmAdjointKernels<Error = Infallible>>(
+    b: B,
     sim: &HostSim,
     part: &PartParams,
 ) -> [f64; 6] {
-    let params = vec![PhysParams::<T>::of(part)];
-    let init = sim.init(&params, &vec![[T::zero(); 3]; sim.len()]);
-    let (_, adj0, mut g) = value_and_grad(
-        d,
+    let d = infallible(KernelAdjoint::new(b, sim));
+    let params = vec![PhysParams::<B::Scalar>::of(part)];
+    let init = infallible(d.init(&params, &vec![[B::Scalar::c(0.0); 3]; sim.len()]));
+    let (_, adj0, g) = infallible(value_and_grad(
+        &d,
         &init,
         &params,
         60,
         20,
         Checkpointing::PerFrame,
-        vec![PhysParams::default()],
+        infallible(d.zero_grad()),
         |_, _| 0.0,
         |f, _, adj| {
-            for (p, a) in adj.x.iter_mut().enumerate() {
+            let mut x = infallible(d.backend().download(&adj.x));
+            for (p, a) in x.iter_mut().enumerate() {
                 // A fixed, particle-dependent weight per frame.
                 let w = ((p * 7 + f * 3) % 11) as f64 / 11.0 - 0.5;
-                a[0] += T::c(w);
-                a[2] += T::c(0.5 - w);
+                a[0] += B::Scalar::c(w);
+                a[2] += B::Scalar::c(0.5 - w);
             }
+            infallible(d.backend().write(&mut adj.x, &x));
         },
-    );
-    sim.init_vjp(&adj0, &mut g);
+    ));
+    let mut g = infallible(d.grad_to_host(&g, &params));
+    infallible(d.init_vjp(&adj0, &mut g));
     let g = g[0];
     [
         g.youngs_modulus,
@@ -181,8 +186,8 @@ fn parallel_adjoint_in_f64_matches_the_reference_sweep() {
     for (name, part) in materials() {
         let (cfg, sc) = scene(part);
         let sim = HostSim::new(&cfg, &sc).unwrap();
-        let reference = grad::<f64, _>(&HostStepper::<f64>::new(&sim), &sim, &cfg.parts[0]);
-        let parallel = grad::<f64, _>(&ParallelHost::<f64>::new(&sim), &sim, &cfg.parts[0]);
+        let reference = grad(ReferenceBackend::<f64>::in_scalar(), &sim, &cfg.parts[0]);
+        let parallel = grad(cpu::<f64>(Par::Rayon), &sim, &cfg.parts[0]);
         for i in 0..6 {
             let r = rel(reference[i], parallel[i]);
             assert!(
@@ -201,8 +206,8 @@ fn parallel_adjoint_in_f32_matches_the_f64_reference_gradient() {
     for (name, part) in materials() {
         let (cfg, sc) = scene(part);
         let sim = HostSim::new(&cfg, &sc).unwrap();
-        let reference = grad::<f64, _>(&HostStepper::<f64>::new(&sim), &sim, &cfg.parts[0]);
-        let f32_grad = grad::<f32, _>(&ParallelHost::<f32>::new(&sim), &sim, &cfg.parts[0]);
+        let reference = grad(ReferenceBackend::<f64>::in_scalar(), &sim, &cfg.parts[0]);
+        let f32_grad = grad(cpu::<f32>(Par::Rayon), &sim, &cfg.parts[0]);
         for i in 0..6 {
             let r = rel(reference[i], f32_grad[i]);
             eprintln!(
@@ -223,13 +228,7 @@ fn parallel_adjoint_does_not_depend_on_the_thread_count() {
         ..Default::default()
     });
     let sim = HostSim::new(&cfg, &sc).unwrap();
-    let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| grad::<f32, _>(&ParallelHost::<f32>::new(&sim), &sim, &cfg.parts[0]))
-    };
+    let run = |threads: usize| grad(cpu::<f32>(Par::Threads(threads)), &sim, &cfg.parts[0]);
     assert_eq!(run(1), run(2));
     assert_eq!(run(1), run(3));
 }
@@ -248,16 +247,20 @@ fn particles_leaving_the_grid_do_not_crash_the_adjoint() {
     let sim = HostSim::new(&cfg, &sc).unwrap();
     // The block falls through the floor of the grid within the run.
     let params = vec![PhysParams::<f64>::of(&cfg.parts[0])];
-    let mut st = sim.init(&params, &vec![[0.0; 3]; sim.len()]);
+    let oracle = infallible(KernelAdjoint::new(
+        ReferenceBackend::<f64>::in_scalar(),
+        &sim,
+    ));
+    let mut st = infallible(oracle.init(&params, &vec![[0.0; 3]; sim.len()]));
     for k in 0..60 {
-        sim.substep(&mut st, &params, k);
+        infallible(oracle.step(&mut st, &params, k));
     }
     assert!(
         st.x.iter().any(|p| p[2] < 0.5 / 16.0),
         "the test must push particles out of the grid"
     );
-    let _ = grad::<f64, _>(&HostStepper::<f64>::new(&sim), &sim, &cfg.parts[0]);
-    let _ = grad::<f32, _>(&ParallelHost::<f32>::new(&sim), &sim, &cfg.parts[0]);
+    let _ = grad(ReferenceBackend::<f64>::in_scalar(), &sim, &cfg.parts[0]);
+    let _ = grad(cpu::<f32>(Par::Rayon), &sim, &cfg.parts[0]);
 }
 
 /// Per-particle gradients (the paper's ablation): they sum to the per-part gradient, and one
@@ -275,15 +278,16 @@ fn per_particle_gradients_sum_to_the_part_gradient_and_match_finite_differences(
     assert_eq!(sim.slots(), sim.len());
     let loss_weights = |f: usize, p: usize| ((p * 7 + f * 3) % 11) as f64 / 11.0 - 0.5;
     let run = |sim: &HostSim, params: &Vec<PhysParams<f64>>| {
-        let init = sim.init(params, &vec![[0.0; 3]; sim.len()]);
-        let (l, adj0, mut g) = value_and_grad(
-            &ParallelHost::<f64>::new(sim),
+        let d = infallible(KernelAdjoint::new(cpu::<f64>(Par::Rayon), sim));
+        let init = infallible(d.init(params, &vec![[0.0; 3]; sim.len()]));
+        let (l, adj0, g) = infallible(value_and_grad(
+            &d,
             &init,
             params,
             60,
             20,
             Checkpointing::PerFrame,
-            vec![PhysParams::default(); params.len()],
+            infallible(d.zero_grad()),
             |f, s| {
                 s.x.iter()
                     .enumerate()
@@ -296,8 +300,9 @@ fn per_particle_gradients_sum_to_the_part_gradient_and_match_finite_differences(
                     .enumerate()
                     .for_each(|(p, a)| a[0] += loss_weights(f, p))
             },
-        );
-        sim.init_vjp(&adj0, &mut g);
+        ));
+        let mut g = infallible(d.grad_to_host(&g, params));
+        infallible(d.init_vjp(&adj0, &mut g));
         (l, g)
     };
     let one = PhysParams::<f64>::of(&cfg.parts[0]);
@@ -335,4 +340,9 @@ fn per_particle_gradients_sum_to_the_part_gradient_and_match_finite_differences(
         g_per[p].youngs_modulus
     );
     assert!(r < 1e-4, "rel {r}");
+}
+
+/// The CPU backend in scalar type `T`.
+fn cpu<T: Real>(par: Par) -> CpuBackend<T> {
+    CpuBackend::with_par(par)
 }

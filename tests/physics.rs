@@ -185,7 +185,7 @@ fn parallel_cpu_backend_is_bitwise_equal_to_a_single_threaded_run() {
 
 #[test]
 fn cpu_backend_matches_the_reference_kernels() {
-    let reference = trajectory(ReferenceBackend, 5);
+    let reference = trajectory(ReferenceBackend::new(), 5);
     let cpu = trajectory(CpuBackend::default(), 5);
     let dx = 1.0 / 32.0;
     for (k, (a, b)) in reference.iter().zip(&cpu).enumerate() {

@@ -47,7 +47,14 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     let (scene, source, warnings) = (loaded.scene, loaded.source, loaded.warnings);
     match a.backend {
         BackendKind::Cpu => simulate(CpuBackend::default(), &a, config, scene, &source, &warnings),
-        BackendKind::Reference => simulate(ReferenceBackend, &a, config, scene, &source, &warnings),
+        BackendKind::Reference => simulate(
+            ReferenceBackend::new(),
+            &a,
+            config,
+            scene,
+            &source,
+            &warnings,
+        ),
         BackendKind::Wgpu => {
             let ctx = r4d_backend_wgpu::WgpuContext::new()?;
             eprintln!("wgpu adapter: {} ({:?})", ctx.info.name, ctx.info.backend);

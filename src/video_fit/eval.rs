@@ -10,7 +10,7 @@
 //!   means over views.
 //! * **Trajectories** (Table 3), where the dataset has ground-truth point clouds (PhysFlow's
 //!   `pcd/<k>.ply` = frame `k - 1`, in world coordinates): the fitted parameters are simulated
-//!   with the fit's own simulator (`ParallelHost`, f64); ground-truth frame `j` is at
+//!   with the fit's own simulator (`KernelAdjoint<CpuBackend<f64>>`); ground-truth frame `j` is at
 //!   `j / fps_fit` (the video's frame rate; the positions are linear in time between simulated
 //!   frames when the grids differ); every particle is mapped to world coordinates by the
 //!   simulation link; then Chamfer distance (`cd_sq_sum`), HD95 (`hd95_max_of_directed`) and
@@ -20,12 +20,13 @@
 use super::problem::{Objective, VideoProblem};
 use super::report::video_metrics;
 use super::{FitConfig, FitError, View};
-use r4d_backend_cpu::adjoint::ParallelHost;
+use r4d_backend_cpu::CpuBackend;
 use r4d_loss::bands::{ReferenceVideo, Video8};
 use r4d_loss::lpips::Lpips;
 use r4d_loss::trajectory::{trajectory_metrics, TrajectoryMetrics, DEFAULT_TAU};
 use r4d_loss::Video;
 use r4d_mpm::adjoint::checkpoint::Differentiable;
+use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::PartParams;
 use std::path::PathBuf;
@@ -184,8 +185,11 @@ pub fn evaluate_trajectory(
     }
     let last = last_f as usize;
     let phys: Vec<PhysParams<f64>> = slots.iter().map(PhysParams::of).collect();
-    let mut s = sim.init(&phys, &vec![[0.0; 3]; sim.len()]);
-    let stepper = ParallelHost::<f64>::new(&sim);
+    let stepper = infallible(KernelAdjoint::new(
+        CpuBackend::<f64>::with_par(r4d_backend_cpu::Par::Rayon),
+        &sim,
+    ));
+    let mut s = infallible(stepper.init(&phys, &vec![[0.0; 3]; sim.len()]));
     let spf = sim.setup.substeps_per_frame as u64;
     // World coordinates, rounded to f32 as the exported PLY frames hold them (so
     // `r4d metrics-trajectory` on those files gives the same numbers).
@@ -198,7 +202,7 @@ pub fn evaluate_trajectory(
     let mut k = 0u64;
     for _ in 0..last {
         for _ in 0..spf {
-            stepper.step(&mut s, &phys, k);
+            infallible(stepper.step(&mut s, &phys, k));
             k += 1;
         }
         if s.x.iter().flatten().any(|c| !c.is_finite()) {

@@ -8,7 +8,7 @@
 //! * [`config`]: the fit's settings (`FIT.toml`).
 //! * [`fit`]: the loop: initialisation, iterations, logs, checkpoints and resume.
 //!
-//! The simulation and its reverse sweep run on the CPU (`ParallelHost`, all cores, f64 by
+//! The simulation and its reverse sweep run on the CPU (`KernelAdjoint<CpuBackend<T>>`, all cores, f64 by
 //! default) or, with [`VideoProblem::gpu`], on a GPU (`r4d_backend_wgpu::adjoint::WgpuAdjoint`,
 //! f32, state and gradients on the device; positions and F are read back once per frame);
 //! rendering, its VJP and the loss run on the CPU (the GPU renderer's backward exists but is

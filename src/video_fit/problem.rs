@@ -9,15 +9,16 @@
 //! ([`TimeMap`]), and the gradient is split back with the same weights.
 
 use super::FitError;
-use r4d_backend_cpu::adjoint::ParallelHost;
 use r4d_backend_cpu::splat::CpuSplat;
+use r4d_backend_cpu::CpuBackend;
 use r4d_backend_wgpu::adjoint::{DeviceState, WgpuAdjoint};
 use r4d_backend_wgpu::context::WgpuContext;
 use r4d_backend_wgpu::splat::WgpuSplat;
 use r4d_loss::bands::{BandedDms, ReferenceVideo};
 use r4d_loss::{DmsConfig, DmsTerms, Video};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
-use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
+use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, StateBufs};
+use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::math::Real;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
 use r4d_optim::{HeapProbe, HeapSpan};
@@ -399,7 +400,7 @@ impl<'a> Objective<'a> {
         Ok((r.0, r.1.expect("gradient requested")))
     }
 
-    /// Runs on the chosen simulator: the CPU (`ParallelHost` in f32 or f64) or the GPU
+    /// Runs on the chosen simulator: the CPU (`KernelAdjoint<CpuBackend<T>>`, f32 or f64) or the GPU
     /// (`WgpuAdjoint`, f32).
     fn dispatch(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
         for (i, p) in slots.iter().enumerate() {
@@ -421,16 +422,19 @@ impl<'a> Objective<'a> {
 
     fn run_cpu<T: Real>(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
         let phys: Vec<PhysParams<T>> = slots.iter().map(PhysParams::of).collect();
-        let init = self.sim.init(&phys, &vec![[T::zero(); 3]; self.sim.len()]);
-        let stepper = ParallelHost::<T>::new(&self.sim);
-        let grad0 = vec![PhysParams::<T>::default(); self.sim.slots()];
-        let read = |s: &HostState<T>| -> Result<Frame, FitError> {
+        let stepper = infallible(KernelAdjoint::new(
+            CpuBackend::<T>::with_par(r4d_backend_cpu::Par::Rayon),
+            &self.sim,
+        ));
+        let init = infallible(stepper.init(&phys, &vec![[T::zero(); 3]; self.sim.len()]));
+        let grad0 = infallible(stepper.zero_grad());
+        let read = |s: &StateBufs<CpuBackend<T>>| -> Result<Frame, FitError> {
             Ok(Frame {
                 x: s.x.iter().map(|p| p.map(|c| c.f64() as f32)).collect(),
                 f: s.f.iter().map(|m| m.map(|c| c.f64() as f32)).collect(),
             })
         };
-        let add = |adj: &mut HostState<T>, d: &FrameGrad| -> Result<(), FitError> {
+        let add = |adj: &mut StateBufs<CpuBackend<T>>, d: &FrameGrad| -> Result<(), FitError> {
             for (a, g) in adj.x.iter_mut().zip(&d.x) {
                 for q in 0..3 {
                     a[q] += T::c(g[q] as f64);
@@ -444,8 +448,9 @@ impl<'a> Objective<'a> {
             Ok(())
         };
         let (ev, back, videos) = self.run_with(&stepper, &init, &phys, grad0, mode, &read, &add)?;
-        let g = back.map(|(adj0, mut g)| {
-            self.sim.init_vjp(&adj0, &mut g);
+        let g = back.map(|(adj0, g)| {
+            let mut g = infallible(stepper.grad_to_host(&g, &phys));
+            infallible(stepper.init_vjp(&adj0, &mut g));
             g.iter().map(to_f64).collect::<Vec<_>>()
         });
         Ok((ev, check_grad(g)?, videos))
@@ -808,10 +813,11 @@ impl<'a> Objective<'a> {
         let t_start = Instant::now();
         let saved = self.stage_begin();
         store(0, init);
+        let sim_err = |e: D::Error| FitError::Gpu(e.to_string());
         if mode != Mode::Grad {
-            let mut s = init.clone();
+            let mut s = d.clone_state(init).map_err(sim_err)?;
             for j in 0..substeps {
-                d.step(&mut s, params, j);
+                d.step(&mut s, params, j).map_err(sim_err)?;
                 if (j + 1) % spf as u64 == 0 {
                     store(((j + 1) / spf as u64) as usize, &s);
                     if let Some(e) = error.borrow_mut().take() {
@@ -909,7 +915,8 @@ impl<'a> Objective<'a> {
                     }
                 }
             },
-        );
+        )
+        .map_err(sim_err)?;
         {
             let mut p = prof.borrow_mut();
             let (saved, t0) = {

@@ -22,13 +22,15 @@ use r4d_mpm::kernels::{
     blocks_per_axis, Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts,
     BLOCK, HEALTH_OUT_OF_DOMAIN,
 };
+use r4d_mpm::math::Real;
 use r4d_mpm::transfer::{
-    damped_affine, g2p_finish, gather, grid_node_update, in_domain, particle_bcs, particle_stress,
-    record, scatter, stencil,
+    damped_affine, g2p_finish, gather, grid_node_update, in_domain, k, out_of_domain_coordinate,
+    particle_bcs, particle_stress, record, scatter, stencil,
 };
 use r4d_mpm::PartConsts;
 use rayon::prelude::*;
 use std::convert::Infallible;
+use std::marker::PhantomData;
 use std::sync::Arc;
 
 pub mod adjoint;
@@ -49,22 +51,31 @@ pub enum Par {
     Threads(usize),
 }
 
-/// The CPU backend.
+/// The CPU backend, in scalar type `T` (`f32` by default; `f64` for the fits' reverse sweeps
+/// and finite-difference checks).
 #[derive(Clone, Debug)]
-pub struct CpuBackend {
+pub struct CpuBackend<T = f32> {
     pool: Option<Arc<rayon::ThreadPool>>,
     par: Par,
+    _t: PhantomData<T>,
 }
 
-impl Default for CpuBackend {
+impl Default for CpuBackend<f32> {
     fn default() -> Self {
         Self::new(Par::Rayon)
     }
 }
 
-impl CpuBackend {
-    /// A backend with the given parallelism.
+impl CpuBackend<f32> {
+    /// An f32 backend with the given parallelism.
     pub fn new(par: Par) -> Self {
+        Self::with_par(par)
+    }
+}
+
+impl<T> CpuBackend<T> {
+    /// A backend in scalar type `T` with the given parallelism.
+    pub fn with_par(par: Par) -> Self {
         let threads = match par {
             Par::Seq => Some(1),
             Par::Threads(n) => Some(n.max(1)),
@@ -78,7 +89,11 @@ impl CpuBackend {
                     .expect("thread pool creation"),
             )
         });
-        CpuBackend { pool, par }
+        CpuBackend {
+            pool,
+            par,
+            _t: PhantomData,
+        }
     }
     /// The parallelism.
     pub fn par(&self) -> Par {
@@ -93,11 +108,11 @@ impl CpuBackend {
 }
 
 /// Calls `f(bx, by, bz, block_nodes)` for each active block of an x-block slab.
-fn for_active_blocks(
-    nodes: &mut [[f32; 4]],
+fn for_active_blocks<T: Send>(
+    nodes: &mut [[T; 4]],
     active: &[u32],
     n: usize,
-    f: impl Fn([usize; 3], &mut [f32; 4]) + Sync,
+    f: impl Fn([usize; 3], &mut [T; 4]) + Sync,
 ) {
     let nb = blocks_per_axis(n);
     let plane = BLOCK * n * n;
@@ -127,7 +142,8 @@ fn for_active_blocks(
         });
 }
 
-impl MpmKernels for CpuBackend {
+impl<T: Real> MpmKernels for CpuBackend<T> {
+    type Scalar = T;
     r4d_mpm::host_vec_buffers!();
 
     fn name(&self) -> &'static str {
@@ -153,11 +169,13 @@ impl MpmKernels for CpuBackend {
         &self,
         p: &mut Particles<Self>,
         parts: &Vec<PartConsts>,
+        mats: &Vec<[T; 4]>,
         g: &mut Grid<Self>,
         c: &StepConsts,
     ) -> Result<(), Infallible> {
         let n = g.n;
         let np = p.count;
+        let inv_dx = k::<T>(c.inv_dx);
         let nb = blocks_per_axis(n);
         let n_slabs = slabs::slab_count(n);
         if g.scratch.len() != 2 * np + n_slabs + 1 {
@@ -165,7 +183,7 @@ impl MpmKernels for CpuBackend {
         }
         self.run(|| {
             // 1. Clear the blocks touched last substep (every other node is zero).
-            for_active_blocks(&mut g.nodes, &g.active, n, |_, node| *node = [0.0; 4]);
+            for_active_blocks(&mut g.nodes, &g.active, n, |_, node| *node = [T::zero(); 4]);
 
             // 2. Particle stage: return mapping + stress; key = stencil base cell.
             let (keys, rest) = g.scratch.split_at_mut(np);
@@ -177,10 +195,10 @@ impl MpmKernels for CpuBackend {
                 .zip(keys.par_iter_mut())
                 .enumerate()
                 .for_each(|(i, (((f, pl), s), key))| {
-                    let pc = &parts[part[i] as usize];
-                    *s = particle_stress(f, pl, &cm[i], vol0[i], pc, c);
-                    *key = if in_domain(x[i], c.inv_dx, n) {
-                        let b = stencil(x[i], c.inv_dx).base;
+                    let slot = part[i] as usize;
+                    *s = particle_stress(f, pl, &cm[i], vol0[i], &parts[slot], &mats[slot], c);
+                    *key = if in_domain(x[i], inv_dx, n) {
+                        let b = stencil(x[i], inv_dx).base;
                         ((b[0] as usize * n + b[1] as usize) * n + b[2] as usize) as u32
                     } else {
                         u32::MAX
@@ -214,7 +232,7 @@ impl MpmKernels for CpuBackend {
             slabs::scatter_by_slab(&mut g.nodes, n * n, n, order, starts, |lo, ids, nodes| {
                 for &i in ids {
                     let i = i as usize;
-                    let st = stencil(x[i], c.inv_dx);
+                    let st = stencil(x[i], inv_dx);
                     let a = damped_affine(&cm[i], c.rpic_damping);
                     scatter(nodes, lo, n, &st, v[i], &a, mass[i], &stress[i], c);
                 }
@@ -247,6 +265,7 @@ impl MpmKernels for CpuBackend {
     ) -> Result<(), Infallible> {
         let n = g.n;
         let nodes = &g.nodes;
+        let inv_dx = k::<T>(c.inv_dx);
         let worst = self.run(|| {
             p.x.par_iter_mut()
                 .zip(p.v.par_iter_mut())
@@ -254,10 +273,11 @@ impl MpmKernels for CpuBackend {
                 .zip(p.f.par_iter_mut())
                 .enumerate()
                 .map(|(i, (((x, v), cm), f))| {
-                    if !in_domain(*x, c.inv_dx, n) {
-                        return Some((HEALTH_OUT_OF_DOMAIN, i as u32, x[0]));
+                    if !in_domain(*x, inv_dx, n) {
+                        let worst = out_of_domain_coordinate(*x, inv_dx, n);
+                        return Some((HEALTH_OUT_OF_DOMAIN, i as u32, worst));
                     }
-                    let st = stencil(*x, c.inv_dx);
+                    let st = stencil(*x, inv_dx);
                     let gathered = gather(nodes, n, &st, c);
                     let (code, val) = g2p_finish(&gathered, x, v, cm, f, c);
                     (code != 0).then_some((code, i as u32, val))

@@ -7,7 +7,7 @@
 //! `p2g_stress`, `p2g`, `grid_update`, `g2p`; the health record is not kept). A substep's
 //! reverse sweep re-runs its first half forward from the checkpoint (velocities after the
 //! particle conditions, stress, the scattered and the updated grid), then, mirroring
-//! `r4d_mpm::adjoint::host::HostSim::substep_vjp`:
+//! the reverse order of `r4d_mpm::substep::reverse`:
 //!
 //! * `g2p_vjp`: one thread per particle; node velocity adjoints scattered with float atomics
 //!   (native or compare-exchange, as `p2g`);
@@ -33,7 +33,7 @@
 //!
 //! Gradients reach E, nu, yield stress (through the initial plastic state: call
 //! [`HostSim::init_vjp`] on the downloaded initial adjoint, as on the CPU), plastic viscosity,
-//! friction angle and density. Measured against `ParallelHost<f32>` (tests/adjoint.rs, 2142
+//! friction angle and density. Measured against the CPU backend in f32 (`KernelAdjoint<CpuBackend<f32>>`) (tests/adjoint.rs, 2142
 //! particles, 3 frames x 20 substeps, every boundary condition kind): jelly within 1.2e-4
 //! relative; metal, sand, foam, plasticine within 5e-4, snow 1.1e-3 (6e-3 on a nearly
 //! cancelled gradient); the initial F adjoint within 1.4e-4 except sand's 1.2e-2 (f32 near the
@@ -196,7 +196,8 @@ impl DeviceState {
         Ok(())
     }
 
-    fn try_clone(&self) -> Result<Self, WgpuError> {
+    /// A copy on the device.
+    pub fn try_clone(&self) -> Result<Self, WgpuError> {
         let copy = |b: &GpuBuffer<f32>| -> Result<GpuBuffer<f32>, WgpuError> {
             self.ctx.zeros(b.label, b.len)
         };
@@ -220,17 +221,6 @@ impl DeviceState {
         }
         self.ctx.submit(enc);
         Ok(out)
-    }
-}
-
-impl Clone for DeviceState {
-    /// Copies the buffers on the device.
-    ///
-    /// # Panics
-    /// When the device cannot allocate the copy (`Differentiable` has no error path; the
-    /// sizes were checked when the first state was made).
-    fn clone(&self) -> Self {
-        self.try_clone().expect("copying a device state")
     }
 }
 
@@ -711,9 +701,10 @@ impl Differentiable for WgpuAdjoint<'_> {
     type State = DeviceState;
     type Params = Vec<PhysParams<f32>>;
     type Grad = DeviceGrad;
+    type Error = WgpuError;
 
-    fn step(&self, s: &mut DeviceState, p: &Vec<PhysParams<f32>>, k: u64) {
-        self.try_step(s, p, k).expect("device substep");
+    fn step(&self, s: &mut DeviceState, p: &Vec<PhysParams<f32>>, k: u64) -> Result<(), WgpuError> {
+        self.try_step(s, p, k)
     }
 
     fn step_vjp(
@@ -723,12 +714,15 @@ impl Differentiable for WgpuAdjoint<'_> {
         k: u64,
         adj: &mut DeviceState,
         grad: &mut DeviceGrad,
-    ) {
+    ) -> Result<(), WgpuError> {
         self.try_step_vjp(before, p, k, adj, grad)
-            .expect("device substep VJP");
     }
 
-    fn zero_adjoint(&self, s: &DeviceState) -> DeviceState {
-        DeviceState::zeros(&self.ctx, s.len()).expect("allocating a device adjoint")
+    fn zero_adjoint(&self, s: &DeviceState) -> Result<DeviceState, WgpuError> {
+        DeviceState::zeros(&self.ctx, s.len())
+    }
+
+    fn clone_state(&self, s: &DeviceState) -> Result<DeviceState, WgpuError> {
+        s.try_clone()
     }
 }

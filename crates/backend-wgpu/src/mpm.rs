@@ -72,6 +72,7 @@ impl WgpuMpm {
 }
 
 impl MpmKernels for WgpuMpm {
+    type Scalar = f32;
     type Buf<T: Pod + Send + Sync> = GpuBuffer<T>;
     type Error = WgpuError;
 
@@ -98,6 +99,20 @@ impl MpmKernels for WgpuMpm {
     ) -> Result<(), WgpuError> {
         assert_eq!(buf.len, data.len(), "write: same length");
         self.ctx.write(buf, data);
+        Ok(())
+    }
+
+    fn copy<T: Pod + Send + Sync>(
+        &self,
+        src: &GpuBuffer<T>,
+        dst: &mut GpuBuffer<T>,
+    ) -> Result<(), WgpuError> {
+        let bytes = src.bytes().min(dst.bytes());
+        if bytes > 0 {
+            let mut enc = self.ctx.encoder();
+            enc.copy_buffer_to_buffer(&src.buffer, 0, &dst.buffer, 0, bytes);
+            self.ctx.submit(enc);
+        }
         Ok(())
     }
 
@@ -134,6 +149,8 @@ impl MpmKernels for WgpuMpm {
         &self,
         p: &mut Particles<Self>,
         parts: &GpuBuffer<PartConsts>,
+        // The f32 kernels read the material constants from `parts` (the same values).
+        _mats: &GpuBuffer<[f32; 4]>,
         g: &mut Grid<Self>,
         c: &StepConsts,
     ) -> Result<(), WgpuError> {

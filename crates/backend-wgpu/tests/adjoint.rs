@@ -1,11 +1,12 @@
-//! The device adjoint (`WgpuAdjoint`) against the parallel CPU adjoint (`ParallelHost<f32>`),
+//! The device adjoint (`WgpuAdjoint`) against the parallel CPU adjoint (`KernelAdjoint<CpuBackend<f32>>`),
 //! both driven by the same checkpointing driver: parameter gradients (issue 9's bound for
 //! elastic scenes: 1e-3 relative) and the adjoint of the initial state.
 
-use r4d_backend_cpu::adjoint::ParallelHost;
+use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_backend_wgpu::adjoint::{AdjointError, WgpuAdjoint};
 use r4d_backend_wgpu::testing::gpu_or_skip;
-use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing};
+use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
+use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
 use r4d_mpm::{
     BoundaryCondition, Domain, ForceForm, Material, PartParams, ParticleSet, Shape, SimConfig,
@@ -126,16 +127,19 @@ fn initial_velocity(n: usize) -> Vec<[f32; 3]> {
 }
 
 fn cpu(sim: &HostSim, params: &[PhysParams<f32>]) -> (Vec<PhysParams<f32>>, HostState<f32>) {
-    let d = ParallelHost::<f32>::new(sim);
-    let init = sim.init(params, &initial_velocity(sim.len()));
-    let (_, adj0, g) = value_and_grad(
+    let d = infallible(KernelAdjoint::new(
+        CpuBackend::<f32>::with_par(Par::Rayon),
+        sim,
+    ));
+    let init = infallible(d.init(params, &initial_velocity(sim.len())));
+    let (_, adj0, g) = infallible(value_and_grad(
         &d,
         &init,
         &params.to_vec(),
         60,
         20,
         Checkpointing::PerFrame,
-        vec![PhysParams::default(); params.len()],
+        infallible(d.zero_grad()),
         |_, _| 0.0,
         |f, _, adj| {
             for (a, w) in adj.x.iter_mut().zip(weights(f, sim.len())) {
@@ -144,8 +148,11 @@ fn cpu(sim: &HostSim, params: &[PhysParams<f32>]) -> (Vec<PhysParams<f32>>, Host
                 }
             }
         },
-    );
-    (g, adj0)
+    ));
+    (
+        infallible(d.grad_to_host(&g, params)),
+        infallible(adj0.download(d.backend())),
+    )
 }
 
 fn gpu(
@@ -164,7 +171,8 @@ fn gpu(
         d.zero_grad().unwrap(),
         |_, _| 0.0,
         |f, _, adj| adj.add_to_x(&weights(f, sim.len())).unwrap(),
-    );
+    )
+    .unwrap();
     (
         d.grad_to_host(&g, params).unwrap(),
         adj0.download().unwrap(),
@@ -438,9 +446,13 @@ fn particles_leaving_the_grid_match_the_cpu_adjoint() {
     let d = WgpuAdjoint::new(Arc::new(ctx), &sim).unwrap();
     let (gc, ac) = cpu(&sim, &params);
     let (gg, ag) = gpu(&d, &sim, &params);
-    let mut st = sim.init(&params, &initial_velocity(sim.len()));
+    let host = infallible(KernelAdjoint::new(
+        CpuBackend::<f32>::with_par(Par::Rayon),
+        &sim,
+    ));
+    let mut st = infallible(host.init(&params, &initial_velocity(sim.len())));
     for k in 0..60 {
-        sim.substep(&mut st, &params, k);
+        infallible(host.step(&mut st, &params, k));
     }
     let left = st.x.iter().filter(|p| p[2] < 0.5 / 24.0).count();
     eprintln!("{left} particles left the grid");

@@ -12,9 +12,10 @@ mod sealed {
 
 /// A floating-point scalar: `f32` (simulation state, frames, device data) or `f64`
 /// (finite-difference checks, reference computations). Sealed: implemented for exactly
-/// these two types.
+/// these two types; `Pod`, so buffers of it can be uploaded to a device.
 pub trait Real:
     Float
+    + bytemuck::Pod
     + Default
     + Debug
     + Display

@@ -10,6 +10,7 @@
 //! All structs uploaded to a device are `#[repr(C)]` + [`bytemuck::Pod`] and defined here once.
 
 use crate::material::PartConsts;
+use crate::math::Real;
 use bytemuck::{Pod, Zeroable};
 
 /// Memory a backend has allocated, in bytes (for benches and `memory_plan` checks).
@@ -133,30 +134,34 @@ pub const HEALTH_SPEED: u32 = 2;
 /// A particle outside the grid's interior.
 pub const HEALTH_OUT_OF_DOMAIN: u32 = 3;
 
-/// Particle state on a backend: a struct of buffers, defined once for every backend.
+/// Particle state on a backend: a struct of buffers, defined once for every backend. Floating
+/// point fields are in the backend's scalar type `S` ([`MpmKernels::Scalar`]: `f32` on a GPU,
+/// `f32` or `f64` on the host backends).
 pub struct Particles<B: MpmKernels> {
     /// Number of particles.
     pub count: usize,
     /// Positions (m).
-    pub x: B::Buf<[f32; 3]>,
+    pub x: B::Buf<[B::Scalar; 3]>,
     /// Velocities (m/s).
-    pub v: B::Buf<[f32; 3]>,
+    pub v: B::Buf<[B::Scalar; 3]>,
     /// APIC affine matrices C (row-major, 1/s).
-    pub c: B::Buf<[f32; 9]>,
+    pub c: B::Buf<[B::Scalar; 9]>,
     /// Deformation gradients: F_trial after `g2p`, F_elastic after `p2g` (row-major).
-    pub f: B::Buf<[f32; 9]>,
-    /// Initial positions (particle boundary conditions select by them).
+    pub f: B::Buf<[B::Scalar; 9]>,
+    /// Initial positions (f32: particle boundary conditions select by them, in f32 as
+    /// PhysGaussian does).
     pub x0: B::Buf<[f32; 3]>,
     /// Initial volumes V0 (m^3), never updated.
-    pub vol0: B::Buf<f32>,
+    pub vol0: B::Buf<B::Scalar>,
     /// Masses (kg).
-    pub mass: B::Buf<f32>,
-    /// Part index of each particle.
+    pub mass: B::Buf<B::Scalar>,
+    /// Parameter slot of each particle: its part (the default) or its own index (the
+    /// per-particle ablation); indexes the `parts` and `mats` tables of [`MpmKernels::p2g`].
     pub part: B::Buf<u32>,
     /// Plastic state `[yield stress, J_p]`.
-    pub plastic: B::Buf<[f32; 2]>,
+    pub plastic: B::Buf<[B::Scalar; 2]>,
     /// Scratch: the stress term of each particle between the particle stage and the scatter.
-    pub stress: B::Buf<[f32; 9]>,
+    pub stress: B::Buf<[B::Scalar; 9]>,
 }
 
 /// Grid state on a backend.
@@ -164,7 +169,7 @@ pub struct Grid<B: MpmKernels> {
     /// Nodes per axis.
     pub n: usize,
     /// Per node `[momentum or velocity (3), mass]`, index `(i n + j) n + k`.
-    pub nodes: B::Buf<[f32; 4]>,
+    pub nodes: B::Buf<[B::Scalar; 4]>,
     /// One flag per block of [`BLOCK`]^3 nodes: 1 if a particle touched it this substep.
     pub active: B::Buf<u32>,
     /// Backend scratch (the CPU backend keeps its particle ordering here).
@@ -183,7 +188,7 @@ pub fn blocks_per_axis(n: usize) -> usize {
 
 /// The stages of one MPM substep, implemented by each backend.
 ///
-/// The substep, as [`crate::sim::MpmSim`] drives it:
+/// The substep, in the order [`crate::substep::forward`] runs it (written once there):
 /// 1. [`particle_bcs`](Self::particle_bcs): impulses and velocity overrides;
 /// 2. [`p2g`](Self::p2g): clear the grid, return mapping + Kirchhoff stress per particle, then
 ///    scatter mass, APIC momentum and stress force to the 27-node stencil;
@@ -195,6 +200,9 @@ pub fn blocks_per_axis(n: usize) -> usize {
 /// Every backend must compute what the reference kernels in [`crate::reference`] compute,
 /// up to floating-point summation order.
 pub trait MpmKernels: Sized + Send + Sync + 'static {
+    /// The scalar type of the particle and grid state (`f32` on a GPU; the host backends are
+    /// generic, `f64` being the gradient oracle).
+    type Scalar: Real;
     /// A typed buffer owned by the backend.
     type Buf<T: Pod + Send + Sync>: Send + Sync;
     /// Errors the backend can't prevent (device lost, out of memory).
@@ -215,6 +223,13 @@ pub trait MpmKernels: Sized + Send + Sync + 'static {
         data: &[T],
     ) -> Result<(), Self::Error>;
 
+    /// Copies `src` into `dst` (same length), on the backend.
+    fn copy<T: Pod + Send + Sync>(
+        &self,
+        src: &Self::Buf<T>,
+        dst: &mut Self::Buf<T>,
+    ) -> Result<(), Self::Error>;
+
     /// Impulses and velocity overrides (particle boundary conditions) of this substep.
     fn particle_bcs(
         &self,
@@ -223,10 +238,18 @@ pub trait MpmKernels: Sized + Send + Sync + 'static {
         c: &StepConsts,
     ) -> Result<(), Self::Error>;
     /// Return mapping, stress and particle-to-grid transfer (clears the grid first).
+    ///
+    /// `parts` and `mats` are indexed by the particle's slot ([`Particles::part`]): `parts`
+    /// holds the material id and the fixed constants, `mats` the differentiable material
+    /// constants `[mu, lambda, plastic viscosity, Drucker-Prager alpha]` in the backend's
+    /// scalar type ([`crate::constitutive::MaterialParams`]). Both are written by the same
+    /// host function ([`crate::params::SlotTables`]), so `parts[s].mu == mats[s][0] as f32`;
+    /// a GPU backend in f32 may read either.
     fn p2g(
         &self,
         p: &mut Particles<Self>,
         parts: &Self::Buf<PartConsts>,
+        mats: &Self::Buf<[Self::Scalar; 4]>,
         g: &mut Grid<Self>,
         c: &StepConsts,
     ) -> Result<(), Self::Error>;
@@ -254,33 +277,41 @@ pub trait MpmKernels: Sized + Send + Sync + 'static {
 #[macro_export]
 macro_rules! host_vec_buffers {
     () => {
-        type Buf<T: bytemuck::Pod + Send + Sync> = Vec<T>;
+        type Buf<E: bytemuck::Pod + Send + Sync> = Vec<E>;
         type Error = std::convert::Infallible;
 
-        fn upload<T: bytemuck::Pod + Send + Sync>(
+        fn upload<E: bytemuck::Pod + Send + Sync>(
             &self,
-            data: &[T],
-        ) -> Result<Vec<T>, std::convert::Infallible> {
+            data: &[E],
+        ) -> Result<Vec<E>, std::convert::Infallible> {
             Ok(data.to_vec())
         }
-        fn zeros<T: bytemuck::Pod + Send + Sync>(
+        fn zeros<E: bytemuck::Pod + Send + Sync>(
             &self,
             len: usize,
-        ) -> Result<Vec<T>, std::convert::Infallible> {
-            Ok(vec![T::zeroed(); len])
+        ) -> Result<Vec<E>, std::convert::Infallible> {
+            Ok(vec![E::zeroed(); len])
         }
-        fn download<T: bytemuck::Pod + Send + Sync>(
+        fn download<E: bytemuck::Pod + Send + Sync>(
             &self,
-            buf: &Vec<T>,
-        ) -> Result<Vec<T>, std::convert::Infallible> {
+            buf: &Vec<E>,
+        ) -> Result<Vec<E>, std::convert::Infallible> {
             Ok(buf.clone())
         }
-        fn write<T: bytemuck::Pod + Send + Sync>(
+        fn write<E: bytemuck::Pod + Send + Sync>(
             &self,
-            buf: &mut Vec<T>,
-            data: &[T],
+            buf: &mut Vec<E>,
+            data: &[E],
         ) -> Result<(), std::convert::Infallible> {
             buf.copy_from_slice(data);
+            Ok(())
+        }
+        fn copy<E: bytemuck::Pod + Send + Sync>(
+            &self,
+            src: &Vec<E>,
+            dst: &mut Vec<E>,
+        ) -> Result<(), std::convert::Infallible> {
+            dst.copy_from_slice(src);
             Ok(())
         }
     };

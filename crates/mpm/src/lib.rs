@@ -32,7 +32,7 @@
 //! "#).unwrap();
 //! cfg.validate("example").unwrap();
 //! let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
-//! let mut sim = MpmSim::new(ReferenceBackend, &cfg, scene, "example").unwrap();
+//! let mut sim = MpmSim::new(ReferenceBackend::new(), &cfg, scene, "example").unwrap();
 //! let mut state = sim.init_state(&cfg.parts).unwrap();
 //! sim.step_frame(&mut state, &cfg.parts).unwrap();
 //! let x = sim.positions(&state).unwrap();
@@ -47,12 +47,14 @@ pub mod error;
 pub mod kernels;
 pub mod material;
 pub mod math;
+pub mod params;
 pub mod physgaussian;
 pub mod ply;
 pub mod reference;
 pub mod scene;
 pub mod sim;
 pub mod snapshot;
+pub mod substep;
 pub mod transfer;
 
 pub use boundary::{BoundaryCondition, Surface};

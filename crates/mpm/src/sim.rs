@@ -8,7 +8,10 @@ use crate::kernels::{
     HEALTH_OUT_OF_DOMAIN, HEALTH_SPEED,
 };
 use crate::material::{PartConsts, PartParams};
+use crate::math::Real;
+use crate::params::{phys_params, SlotTables};
 use crate::scene::ParticleSet;
+use crate::substep::{self, SubstepTables};
 
 /// A simulator that advances a state frame by frame under given material parameters.
 ///
@@ -38,7 +41,7 @@ pub trait Simulator {
 pub struct SimState<B: MpmKernels> {
     /// Particle buffers.
     pub particles: Particles<B>,
-    /// Time at the end of the last substep (s), accumulated in f64.
+    /// Time at the end of the last substep (s): `substep x dt`.
     pub time_s: f64,
     /// Substeps done.
     pub substep: u64,
@@ -81,6 +84,12 @@ impl SimSetup {
                 .collect(),
             config: config.clone(),
         }
+    }
+
+    /// Constants of substep `k` (global index), which starts at time `k dt`: every
+    /// simulation (`r4d simulate`, the fits' forward and reverse passes) times substeps so.
+    pub fn consts_at(&self, k: u64) -> StepConsts {
+        self.step_consts(k as f64 * self.config.time.substep_dt, k)
     }
 
     /// Constants of the substep with global index `substep` starting at `time_s`.
@@ -137,6 +146,9 @@ pub struct MpmSim<B: MpmKernels> {
     grid_bcs: B::Buf<GridBc>,
     particle_bcs: B::Buf<ParticleBc>,
     parts: B::Buf<PartConsts>,
+    mats: B::Buf<[B::Scalar; 4]>,
+    part_consts: Vec<PartConsts>,
+    slot_part: Vec<u32>,
     uploaded: Vec<PartParams>,
 }
 
@@ -168,11 +180,22 @@ impl<B: MpmKernels> MpmSim<B> {
         gb.push(GridBc::default());
         let mut pb = setup.particle_bcs.clone();
         pb.push(ParticleBc::default());
-        let consts: Vec<PartConsts> = config.parts.iter().map(|p| p.consts()).collect();
+        let part_consts: Vec<PartConsts> = config.parts.iter().map(|p| p.consts()).collect();
+        let slot_part: Vec<u32> = (0..config.parts.len() as u32).collect();
+        let tables = SlotTables::new(
+            &phys_params(&config.parts),
+            &part_consts,
+            &slot_part,
+            &scene.part,
+            &scene.volume,
+        );
         Ok(MpmSim {
             grid_bcs: backend.upload(&gb).map_err(be)?,
             particle_bcs: backend.upload(&pb).map_err(be)?,
-            parts: backend.upload(&consts).map_err(be)?,
+            parts: backend.upload(&tables.parts).map_err(be)?,
+            mats: backend.upload(&tables.mats).map_err(be)?,
+            part_consts,
+            slot_part,
             uploaded: config.parts.clone(),
             backend,
             setup,
@@ -202,13 +225,15 @@ impl<B: MpmKernels> MpmSim<B> {
         &self.setup.config.parts
     }
 
-    fn masses(&self, params: &[PartParams]) -> Vec<f32> {
-        self.scene
-            .volume
-            .iter()
-            .zip(&self.scene.part)
-            .map(|(v, &p)| (params[p as usize].density_kg_m3 * *v as f64) as f32)
-            .collect()
+    /// The kernels' tables for `params` (the one parameter mapping, [`SlotTables`]).
+    fn tables(&self, params: &[PartParams]) -> SlotTables<B::Scalar> {
+        SlotTables::new(
+            &phys_params(params),
+            &self.part_consts,
+            &self.slot_part,
+            &self.scene.part,
+            &self.scene.volume,
+        )
     }
 
     fn check_params(&self, params: &[PartParams]) -> Result<()> {
@@ -230,8 +255,9 @@ impl<B: MpmKernels> MpmSim<B> {
 
     fn upload_params(&mut self, params: &[PartParams]) -> Result<()> {
         if params != self.uploaded.as_slice() {
-            let consts: Vec<PartConsts> = params.iter().map(|p| p.consts()).collect();
-            self.backend.write(&mut self.parts, &consts).map_err(be)?;
+            let t = self.tables(params);
+            self.backend.write(&mut self.parts, &t.parts).map_err(be)?;
+            self.backend.write(&mut self.mats, &t.mats).map_err(be)?;
             self.uploaded = params.to_vec();
         }
         Ok(())
@@ -245,11 +271,11 @@ impl<B: MpmKernels> MpmSim<B> {
             frame: state.frame,
             substep: state.substep,
             time_s: state.time_s,
-            x: b.download(&p.x).map_err(be)?,
-            v: b.download(&p.v).map_err(be)?,
-            c: b.download(&p.c).map_err(be)?,
-            f: b.download(&p.f).map_err(be)?,
-            plastic: b.download(&p.plastic).map_err(be)?,
+            x: to_f32(b.download(&p.x).map_err(be)?),
+            v: to_f32(b.download(&p.v).map_err(be)?),
+            c: to_f32(b.download(&p.c).map_err(be)?),
+            f: to_f32(b.download(&p.f).map_err(be)?),
+            plastic: to_f32(b.download(&p.plastic).map_err(be)?),
         })
     }
 
@@ -268,31 +294,39 @@ impl<B: MpmKernels> MpmSim<B> {
         }
         let b = &self.backend;
         let p = &mut st.particles;
-        b.write(&mut p.x, &snap.x).map_err(be)?;
-        b.write(&mut p.v, &snap.v).map_err(be)?;
-        b.write(&mut p.c, &snap.c).map_err(be)?;
-        b.write(&mut p.f, &snap.f).map_err(be)?;
-        b.write(&mut p.plastic, &snap.plastic).map_err(be)?;
+        b.write(&mut p.x, &from_f32(&snap.x)).map_err(be)?;
+        b.write(&mut p.v, &from_f32(&snap.v)).map_err(be)?;
+        b.write(&mut p.c, &from_f32(&snap.c)).map_err(be)?;
+        b.write(&mut p.f, &from_f32(&snap.f)).map_err(be)?;
+        b.write(&mut p.plastic, &from_f32(&snap.plastic))
+            .map_err(be)?;
         st.frame = snap.frame;
         st.substep = snap.substep;
         st.time_s = snap.time_s;
         Ok(st)
     }
 
-    /// Runs one substep (no health check; [`Simulator::step_frame`] checks at frame end).
+    /// Runs one substep (no health check; [`Simulator::step_frame`] checks at frame end): the
+    /// stage order of [`substep::forward`], as every simulation runs it.
     pub fn substep(&mut self, state: &mut SimState<B>) -> Result<()> {
-        let c = self.setup.step_consts(state.time_s, state.substep);
-        let b = &self.backend;
-        let p = &mut state.particles;
-        if c.n_particle_bcs > 0 {
-            b.particle_bcs(p, &self.particle_bcs, &c).map_err(be)?;
-        }
-        b.p2g(p, &self.parts, &mut self.grid, &c).map_err(be)?;
-        b.grid_update(&mut self.grid, &self.grid_bcs, &c)
-            .map_err(be)?;
-        b.g2p(p, &mut self.grid, &c).map_err(be)?;
-        state.time_s += self.setup.config.time.substep_dt;
+        let c = self.setup.consts_at(state.substep);
+        let tables = SubstepTables {
+            parts: &self.parts,
+            mats: &self.mats,
+            grid_bcs: &self.grid_bcs,
+            particle_bcs: &self.particle_bcs,
+        };
+        substep::forward(
+            &self.backend,
+            &mut state.particles,
+            &mut self.grid,
+            &tables,
+            &c,
+            None,
+        )
+        .map_err(be)?;
         state.substep += 1;
+        state.time_s = state.substep as f64 * self.setup.config.time.substep_dt;
         Ok(())
     }
 
@@ -336,22 +370,24 @@ impl<B: MpmKernels> Simulator for MpmSim<B> {
         self.check_params(params)?;
         let b = &self.backend;
         let n = self.scene.len();
-        let ident = [1.0f32, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
-        let plastic: Vec<[f32; 2]> = self
+        let (z, o) = (B::Scalar::c(0.0), B::Scalar::c(1.0));
+        let ident = [o, z, z, z, o, z, z, z, o];
+        let yields = phys_params::<B::Scalar>(params);
+        let plastic: Vec<[B::Scalar; 2]> = self
             .scene
             .part
             .iter()
-            .map(|&p| [params[p as usize].yield_stress_pa as f32, 1.0])
+            .map(|&p| [yields[p as usize].yield_stress, o])
             .collect();
         let particles = Particles {
             count: n,
-            x: b.upload(&self.scene.x).map_err(be)?,
+            x: upload_as(b, &self.scene.x).map_err(be)?,
             v: b.zeros(n).map_err(be)?,
             c: b.zeros(n).map_err(be)?,
             f: b.upload(&vec![ident; n]).map_err(be)?,
             x0: b.upload(&self.scene.x).map_err(be)?,
-            vol0: b.upload(&self.scene.volume).map_err(be)?,
-            mass: b.upload(&self.masses(params)).map_err(be)?,
+            vol0: upload_as(b, &self.scene.volume).map_err(be)?,
+            mass: b.upload(&self.tables(params).mass).map_err(be)?,
             part: b.upload(&self.scene.part).map_err(be)?,
             plastic: b.upload(&plastic).map_err(be)?,
             stress: b.zeros(n).map_err(be)?,
@@ -368,7 +404,7 @@ impl<B: MpmKernels> Simulator for MpmSim<B> {
     fn step_frame(&mut self, state: &mut SimState<B>, params: &[PartParams]) -> Result<()> {
         if params != state.params.as_slice() {
             self.check_params(params)?;
-            let m = self.masses(params);
+            let m = self.tables(params).mass;
             self.backend
                 .write(&mut state.particles.mass, &m)
                 .map_err(be)?;
@@ -392,10 +428,57 @@ impl<B: MpmKernels> Simulator for MpmSim<B> {
     }
 
     fn positions(&self, state: &SimState<B>) -> Result<Vec<[f32; 3]>> {
-        self.backend.download(&state.particles.x).map_err(be)
+        Ok(to_f32(
+            self.backend.download(&state.particles.x).map_err(be)?,
+        ))
     }
 
     fn deformation_gradients(&self, state: &SimState<B>) -> Result<Vec<[f32; 9]>> {
-        self.backend.download(&state.particles.f).map_err(be)
+        Ok(to_f32(
+            self.backend.download(&state.particles.f).map_err(be)?,
+        ))
     }
+}
+
+/// `x` in the scalar type `S` (exact).
+fn cast<S: Real>(x: f32) -> S {
+    S::c(x as f64)
+}
+
+/// Uploads f32 host data as the backend's scalar type, without a host copy when it is f32.
+fn upload_as<B, V, W>(b: &B, v: &[V]) -> std::result::Result<B::Buf<W>, B::Error>
+where
+    B: MpmKernels,
+    V: bytemuck::Pod + Send + Sync + AsScalar<W>,
+    W: bytemuck::Pod + Send + Sync,
+{
+    match bytemuck::try_cast_slice::<V, W>(v) {
+        Ok(same) if B::Scalar::NAME == "f32" => b.upload(same),
+        _ => b.upload(&v.iter().map(|x| x.as_scalar()).collect::<Vec<W>>()),
+    }
+}
+
+/// Conversion of f32 host data to the scalar type (exact).
+trait AsScalar<W> {
+    fn as_scalar(&self) -> W;
+}
+impl<S: Real> AsScalar<S> for f32 {
+    fn as_scalar(&self) -> S {
+        cast(*self)
+    }
+}
+impl<S: Real, const N: usize> AsScalar<[S; N]> for [f32; N] {
+    fn as_scalar(&self) -> [S; N] {
+        self.map(cast)
+    }
+}
+
+/// Host f32 arrays in the scalar type `S` (exact).
+pub fn from_f32<S: Real, const N: usize>(v: &[[f32; N]]) -> Vec<[S; N]> {
+    v.iter().map(|a| a.map(cast)).collect()
+}
+
+/// Arrays in scalar type `S` rounded to f32 (for files and the renderer).
+pub fn to_f32<S: Real, const N: usize>(v: Vec<[S; N]>) -> Vec<[f32; N]> {
+    v.into_iter().map(|a| a.map(|x| x.f64() as f32)).collect()
 }

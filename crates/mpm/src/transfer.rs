@@ -13,13 +13,14 @@
 //! `(i n + j) n + k` as `[momentum or velocity (3), mass]`.
 
 use crate::boundary::{BC_BOUNDING_BOX, BC_CUBOID, BC_SURFACE, PBC_IMPULSE, PBC_VELOCITY};
-use crate::constitutive::stress_update;
+use crate::constitutive::{stress_update, stress_update_with};
 use crate::kernels::{
     GridBc, Health, ParticleBc, StepConsts, FORCE_MLS, HEALTH_NAN, HEALTH_OUT_OF_DOMAIN,
     HEALTH_SPEED, OUT_OF_DOMAIN_CLAMP,
 };
 use crate::material::PartConsts;
 use crate::math::{Mat3, Real};
+use crate::params::material_of;
 
 /// A device constant (stored as f32) in the kernel's scalar type.
 #[inline(always)]
@@ -76,6 +77,24 @@ pub fn in_domain<T: Real>(x: [T; 3], inv_dx: T, n: usize) -> bool {
         let g = xa * inv_dx;
         g.is_finite() && g >= lo && g < hi
     })
+}
+
+/// The coordinate (m) of `x` that puts it outside the grid's interior: the first non-finite
+/// one, else the one furthest outside `[0.5 dx, (n - 1.5) dx)`.
+pub fn out_of_domain_coordinate<T: Real>(x: [T; 3], inv_dx: T, n: usize) -> f32 {
+    let (lo, hi) = (0.5, n as f64 - 1.5);
+    let mut worst = (f64::NEG_INFINITY, x[0]);
+    for &xa in &x {
+        let g = (xa * inv_dx).f64();
+        if !g.is_finite() {
+            return xa.f64() as f32;
+        }
+        let outside = (lo - g).max(g - hi);
+        if outside > worst.0 {
+            worst = (outside, xa);
+        }
+    }
+    worst.1.f64() as f32
 }
 
 /// Whether a time window `[start, end)` contains `t` (compared in f32, as PhysGaussian does).
@@ -140,10 +159,16 @@ pub fn particle_stress<T: Real>(
     c_affine: &[T; 9],
     vol0: T,
     pc: &PartConsts,
+    mat: &[T; 4],
     c: &StepConsts,
 ) -> [T; 9] {
-    let grad_v = Mat3::from_array(*c_affine);
-    let (fe, tau) = stress_update(Mat3::from_array(*f), pc, plastic, &grad_v, k(c.dt));
+    let f_trial = Mat3::from_array(*f);
+    let (fe, tau) = if pc.material == crate::Material::Fluid.kernel_id() {
+        let grad_v = Mat3::from_array(*c_affine);
+        stress_update(f_trial, pc, plastic, &grad_v, k(c.dt))
+    } else {
+        stress_update_with(f_trial, pc, plastic, material_of(mat), k(c.dt))
+    };
     *f = fe.to_array();
     tau.sym().scaled(stress_scale(vol0, c)).to_array()
 }
@@ -478,11 +503,10 @@ pub fn g2p_finish<T: Real>(
                 *e = e.max(lo).min(hi);
             }
         } else {
-            let worst = x
-                .iter()
-                .cloned()
-                .fold(T::zero(), |m, e| if e.abs() > m.abs() { e } else { m });
-            return (HEALTH_OUT_OF_DOMAIN, worst.f64() as f32);
+            return (
+                HEALTH_OUT_OF_DOMAIN,
+                out_of_domain_coordinate(*x, k(c.inv_dx), n),
+            );
         }
     }
     (0, 0.0)

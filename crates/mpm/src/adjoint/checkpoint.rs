@@ -20,16 +20,19 @@
 //! of 6401; `Nested(20)` keeps 17 + 20 + 21 = 58 (frame boundaries, the inner checkpoints
 //! of one frame, one piece) for one more forward pass. [`memory_plan`] evaluates these formulas for a configuration.
 
-/// One differentiable substep and its adjoint.
+/// One differentiable substep and its adjoint, fallible with the backend's error (a device
+/// lost, out of memory); host backends use [`std::convert::Infallible`].
 pub trait Differentiable {
     /// Simulation state.
-    type State: Clone;
+    type State;
     /// Parameters.
     type Params;
     /// Parameter gradient (accumulated).
     type Grad;
+    /// What can go wrong.
+    type Error: std::error::Error + Send + Sync + 'static;
     /// Advances `s` by substep `k`.
-    fn step(&self, s: &mut Self::State, p: &Self::Params, k: u64);
+    fn step(&self, s: &mut Self::State, p: &Self::Params, k: u64) -> Result<(), Self::Error>;
     /// Reverse sweep of substep `k`: `before` is the state at its start; `adj` holds the
     /// adjoint after it on entry and before it on return; gradients are added to `grad`.
     fn step_vjp(
@@ -39,9 +42,11 @@ pub trait Differentiable {
         k: u64,
         adj: &mut Self::State,
         grad: &mut Self::Grad,
-    );
+    ) -> Result<(), Self::Error>;
     /// A zero adjoint shaped like `s`.
-    fn zero_adjoint(&self, s: &Self::State) -> Self::State;
+    fn zero_adjoint(&self, s: &Self::State) -> Result<Self::State, Self::Error>;
+    /// A copy of `s` (a checkpoint).
+    fn clone_state(&self, s: &Self::State) -> Result<Self::State, Self::Error>;
 }
 
 /// Which states the forward pass keeps for the backward pass.
@@ -142,24 +147,24 @@ pub fn value_and_grad<D: Differentiable>(
     mut grad: D::Grad,
     mut frame_loss: impl FnMut(usize, &D::State) -> f64,
     mut frame_adjoint: impl FnMut(usize, &D::State, &mut D::State),
-) -> (f64, D::State, D::Grad) {
+) -> Result<(f64, D::State, D::Grad), D::Error> {
     let spf = substeps_per_frame.max(1) as u64;
     let k = strategy.interval(substeps_per_frame);
     // Forward with checkpoints.
-    let mut checkpoints = vec![init.clone()];
-    let mut s = init.clone();
+    let mut checkpoints = vec![d.clone_state(init)?];
+    let mut s = d.clone_state(init)?;
     let mut loss = 0.0;
     for j in 0..substeps {
-        d.step(&mut s, params, j);
+        d.step(&mut s, params, j)?;
         if (j + 1) % spf == 0 {
             loss += frame_loss(((j + 1) / spf) as usize, &s);
         }
         if (j + 1) % k == 0 && j + 1 < substeps {
-            checkpoints.push(s.clone());
+            checkpoints.push(d.clone_state(&s)?);
         }
     }
     // Backward, segment by segment.
-    let mut adj = d.zero_adjoint(init);
+    let mut adj = d.zero_adjoint(init)?;
     let segments = substeps.div_ceil(k);
     let inner = match strategy {
         Checkpointing::Nested(n) => (n.max(1) as u64).min(k),
@@ -184,16 +189,16 @@ pub fn value_and_grad<D: Differentiable>(
                 &mut adj,
                 &mut grad,
                 &mut frame_adjoint,
-            );
+            )?;
             continue;
         }
         // Nested: checkpoints every `inner` substeps inside the segment, then each piece.
-        let mut inner_cks = vec![checkpoints[seg as usize].clone()];
-        let mut t = checkpoints[seg as usize].clone();
+        let mut inner_cks = vec![d.clone_state(&checkpoints[seg as usize])?];
+        let mut t = d.clone_state(&checkpoints[seg as usize])?;
         for j in start..end - 1 {
-            d.step(&mut t, params, j);
+            d.step(&mut t, params, j)?;
             if (j + 1 - start) % inner == 0 {
-                inner_cks.push(t.clone());
+                inner_cks.push(d.clone_state(&t)?);
             }
         }
         drop(t);
@@ -216,10 +221,10 @@ pub fn value_and_grad<D: Differentiable>(
                 &mut adj,
                 &mut grad,
                 &mut frame_adjoint,
-            );
+            )?;
         }
     }
-    (loss, adj, grad)
+    Ok((loss, adj, grad))
 }
 
 /// Reverse sweep of substeps `start..end` given the states at both ends: re-runs the piece
@@ -237,22 +242,23 @@ fn reverse_piece<D: Differentiable>(
     adj: &mut D::State,
     grad: &mut D::Grad,
     frame_adjoint: &mut impl FnMut(usize, &D::State, &mut D::State),
-) {
+) -> Result<(), D::Error> {
     let mut states = Vec::with_capacity((end - start + 1) as usize);
-    states.push(first.clone());
+    states.push(d.clone_state(first)?);
     for j in start..end - 1 {
-        let mut next = states.last().expect("piece start").clone();
-        d.step(&mut next, params, j);
+        let mut next = d.clone_state(states.last().expect("piece start"))?;
+        d.step(&mut next, params, j)?;
         states.push(next);
     }
-    states.push(last.clone());
+    states.push(d.clone_state(last)?);
     for j in (start..end).rev() {
         if (j + 1) % spf == 0 {
             let local = (j + 1 - start) as usize;
             frame_adjoint(((j + 1) / spf) as usize, &states[local], adj);
         }
-        d.step_vjp(&states[(j - start) as usize], params, j, adj, grad);
+        d.step_vjp(&states[(j - start) as usize], params, j, adj, grad)?;
     }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -269,16 +275,29 @@ mod tests {
         type State = f64;
         type Params = f64;
         type Grad = f64;
-        fn step(&self, s: &mut f64, p: &f64, _k: u64) {
+        type Error = std::convert::Infallible;
+        fn step(&self, s: &mut f64, p: &f64, _k: u64) -> Result<(), Self::Error> {
             self.steps.set(self.steps.get() + 1);
             *s = self.a * *s + p;
+            Ok(())
         }
-        fn step_vjp(&self, _b: &f64, _p: &f64, _k: u64, adj: &mut f64, grad: &mut f64) {
+        fn step_vjp(
+            &self,
+            _b: &f64,
+            _p: &f64,
+            _k: u64,
+            adj: &mut f64,
+            grad: &mut f64,
+        ) -> Result<(), Self::Error> {
             *grad += *adj;
             *adj *= self.a;
+            Ok(())
         }
-        fn zero_adjoint(&self, _s: &f64) -> f64 {
-            0.0
+        fn zero_adjoint(&self, _s: &f64) -> Result<f64, Self::Error> {
+            Ok(0.0)
+        }
+        fn clone_state(&self, s: &f64) -> Result<f64, Self::Error> {
+            Ok(*s)
         }
     }
 
@@ -306,7 +325,8 @@ mod tests {
                 0.0,
                 |_, s| *s,
                 |_, _, adj| *adj += 1.0,
-            );
+            )
+            .unwrap();
             // Forward 60, then the documented recompute K - ceil(K / k).
             let expect = match strategy {
                 Checkpointing::StoreAll => 60,

@@ -568,12 +568,15 @@ mod trajectory {
     //! Whole-trajectory gradients of the host simulator against f64 finite differences:
     //! every material x every parameter, 3 frames of 20 substeps, boundary conditions active.
     use super::Rng;
-    use crate::adjoint::host::{HostSim, HostState, PhysParams};
+    use crate::adjoint::checkpoint::Differentiable;
+    use crate::adjoint::engine::{KernelAdjoint, StateBufs};
+    use crate::adjoint::host::{HostSim, PhysParams};
     use crate::boundary::{BoundaryCondition, Surface};
     use crate::config::{Domain, ForceForm, SimConfig, SolverConfig, TimeConfig};
     use crate::constitutive::stress_update_with;
     use crate::material::{Material, PartParams};
     use crate::math::Mat3;
+    use crate::reference::ReferenceBackend;
     use crate::scene::{ParticleSet, Shape};
 
     const FRAMES: usize = 3;
@@ -645,7 +648,10 @@ mod trajectory {
         f: Vec<Vec<[f64; 9]>>,
     }
 
-    fn frame_loss(s: &HostState<f64>, w: &Weights, frame: usize) -> f64 {
+    type Oracle<'a> = KernelAdjoint<'a, ReferenceBackend<f64>>;
+    type State = StateBufs<ReferenceBackend<f64>>;
+
+    fn frame_loss(s: &State, w: &Weights, frame: usize) -> f64 {
         let mut l = 0.0;
         for p in 0..s.x.len() {
             for a in 0..3 {
@@ -660,13 +666,14 @@ mod trajectory {
 
     /// Loss of a run; also counts the plastic projections that happened.
     fn run(
-        sim: &HostSim,
+        eng: &Oracle,
         params: &[PhysParams<f64>],
         v0: &[[f64; 3]],
         w: &Weights,
-    ) -> (f64, Vec<HostState<f64>>, usize) {
-        let mut s = sim.init(params, v0);
-        let mut states = vec![s.clone()];
+    ) -> (f64, Vec<State>, usize) {
+        let sim = eng.sim;
+        let mut s = eng.init(params, v0).unwrap();
+        let mut states = vec![eng.clone_state(&s).unwrap()];
         let mut loss = 0.0;
         let mut plastic_events = 0;
         for kk in 0..FRAMES as u64 * SPF {
@@ -685,8 +692,8 @@ mod trajectory {
                     plastic_events += 1;
                 }
             }
-            sim.substep(&mut s, params, kk);
-            states.push(s.clone());
+            eng.step(&mut s, &params.to_vec(), kk).unwrap();
+            states.push(eng.clone_state(&s).unwrap());
             if (kk + 1) % SPF == 0 {
                 loss += frame_loss(&s, w, ((kk + 1) / SPF) as usize - 1);
             }
@@ -709,11 +716,12 @@ mod trajectory {
         };
         let v0: Vec<[f64; 3]> = (0..np).map(|_| [0.05, -0.02, 0.03]).collect();
         let params = vec![PhysParams::<f64>::of(&part)];
-        let (_, states, events) = run(&sim, &params, &v0, &w);
+        let eng = Oracle::new(ReferenceBackend::in_scalar(), &sim).unwrap();
+        let (_, states, events) = run(&eng, &params, &v0, &w);
         assert_eq!(events > 0, plastic, "{name}: {events} plastic projections");
         // Reverse sweep.
-        let mut adj = HostState::<f64>::zeros(np);
-        let mut grad = vec![PhysParams::<f64>::default()];
+        let mut adj = eng.zero_adjoint(&states[0]).unwrap();
+        let mut grad = eng.zero_grad().unwrap();
         for kk in (0..FRAMES as u64 * SPF).rev() {
             if (kk + 1) % SPF == 0 {
                 let fr = ((kk + 1) / SPF) as usize - 1;
@@ -726,9 +734,11 @@ mod trajectory {
                     }
                 }
             }
-            sim.substep_vjp(&states[kk as usize], &params, kk, &mut adj, &mut grad);
+            eng.step_vjp(&states[kk as usize], &params, kk, &mut adj, &mut grad)
+                .unwrap();
         }
-        sim.init_vjp(&adj, &mut grad);
+        let mut grad = eng.grad_to_host(&grad, &params).unwrap();
+        eng.init_vjp(&adj, &mut grad).unwrap();
         let g = grad[0];
         let analytic = [
             ("E", g.youngs_modulus),
@@ -760,7 +770,7 @@ mod trajectory {
                     friction_angle_deg: q[4],
                     density: q[5],
                 };
-                run(&sim, &[pp], &v0, &w).0
+                run(&eng, &[pp], &v0, &w).0
             };
             let fd = (eval(values[e] + h) - eval(values[e] - h)) / (2.0 * h);
             let rel = (a - fd).abs() / a.abs().max(fd.abs()).max(1e-300);
@@ -778,7 +788,7 @@ mod trajectory {
             let h = 1e-6;
             let shifted = |d: f64| {
                 run(
-                    &sim,
+                    &eng,
                     &params,
                     &v0.iter()
                         .map(|v| [v[0] + d, v[1], v[2]])
@@ -877,26 +887,28 @@ mod precision {
     //! through the checkpointed driver.
     use super::Rng;
     use crate::adjoint::checkpoint::{value_and_grad, Checkpointing};
-    use crate::adjoint::host::{HostSim, HostStepper, PhysParams};
+    use crate::adjoint::engine::KernelAdjoint;
+    use crate::adjoint::host::{HostSim, PhysParams};
     use crate::boundary::{BoundaryCondition, Surface};
     use crate::config::{Domain, ForceForm, SimConfig, SolverConfig, TimeConfig};
     use crate::material::{Material, PartParams};
     use crate::math::Real;
+    use crate::reference::ReferenceBackend;
     use crate::scene::{ParticleSet, Shape};
 
     fn grad<T: Real>(sim: &HostSim, part: &PartParams, w: &[Vec<[f64; 3]>]) -> [f64; 6] {
         let params = vec![PhysParams::<T>::of(part)];
         let v0 = vec![[T::zero(); 3]; sim.len()];
-        let init = sim.init(&params, &v0);
-        let stepper = HostStepper::<T>::new(sim);
-        let (_, adj0, mut g) = value_and_grad(
+        let stepper = KernelAdjoint::new(ReferenceBackend::<T>::in_scalar(), sim).unwrap();
+        let init = stepper.init(&params, &v0).unwrap();
+        let (_, adj0, g) = value_and_grad(
             &stepper,
             &init,
             &params,
             60,
             20,
             Checkpointing::EveryN(7),
-            vec![PhysParams::default()],
+            stepper.zero_grad().unwrap(),
             |_, _| 0.0,
             |f, _, adj| {
                 for (a, wp) in adj.x.iter_mut().zip(&w[f - 1]) {
@@ -905,8 +917,10 @@ mod precision {
                     }
                 }
             },
-        );
-        sim.init_vjp(&adj0, &mut g);
+        )
+        .unwrap();
+        let mut g = stepper.grad_to_host(&g, &params).unwrap();
+        stepper.init_vjp(&adj0, &mut g).unwrap();
         let g = g[0];
         [
             g.youngs_modulus,

@@ -1,0 +1,140 @@
+//! The parameter mapping, written once: from the physical parameters of each parameter slot
+//! (a part, or a particle in the per-particle ablation) to the tables the kernels read
+//! ([`SlotTables`]: fixed constants and differentiable material constants per slot, masses per
+//! particle), and its chain rule back ([`PhysParams::add_material_vjp`]).
+
+use crate::constitutive::MaterialParams;
+use crate::material::{PartConsts, PartParams};
+use crate::math::Real;
+
+/// The physical parameters of a part that receive gradients, in SI units.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PhysParams<T> {
+    /// Young's modulus E (Pa).
+    pub youngs_modulus: T,
+    /// Poisson's ratio nu.
+    pub poisson_ratio: T,
+    /// Initial yield stress (Pa).
+    pub yield_stress: T,
+    /// Plastic viscosity (Pa s).
+    pub plastic_viscosity: T,
+    /// Friction angle (degrees).
+    pub friction_angle_deg: T,
+    /// Density (kg/m^3).
+    pub density: T,
+}
+
+/// PhysGaussian's degrees-to-radians factor (its truncated pi), kept for identical yields.
+#[expect(clippy::approx_constant, reason = "PhysGaussian's truncated pi")]
+const DEG: f64 = 3.14159265 / 180.0;
+
+impl<T: Real> PhysParams<T> {
+    /// The values of a part.
+    pub fn of(p: &PartParams) -> Self {
+        PhysParams {
+            youngs_modulus: T::c(p.youngs_modulus_pa),
+            poisson_ratio: T::c(p.poisson_ratio),
+            yield_stress: T::c(p.yield_stress_pa),
+            plastic_viscosity: T::c(p.plastic_viscosity_pa_s),
+            friction_angle_deg: T::c(p.friction_angle_deg),
+            density: T::c(p.density_kg_m3),
+        }
+    }
+
+    /// The constants the constitutive model reads: mu, lambda, plastic viscosity, alpha.
+    pub fn material(&self) -> MaterialParams<T> {
+        let (e, nu) = (self.youngs_modulus, self.poisson_ratio);
+        let one = T::one();
+        let two = T::c(2.0);
+        let phi = self.friction_angle_deg * T::c(DEG);
+        let sp = phi.sin();
+        MaterialParams {
+            mu: e / (two * (one + nu)),
+            lambda: e * nu / ((one + nu) * (one - two * nu)),
+            eta: self.plastic_viscosity,
+            alpha: T::c((2.0f64 / 3.0).sqrt()) * two * sp / (T::c(3.0) - sp),
+        }
+    }
+
+    /// Chain rule of [`PhysParams::material`]: adds the gradient of the physical parameters
+    /// given that of the material constants.
+    pub fn add_material_vjp(&self, bar: &MaterialParams<T>, out: &mut PhysParams<T>) {
+        let (e, nu) = (self.youngs_modulus, self.poisson_ratio);
+        let one = T::one();
+        let two = T::c(2.0);
+        let d = (one + nu) * (one - two * nu);
+        out.youngs_modulus += bar.mu / (two * (one + nu)) + bar.lambda * nu / d;
+        out.poisson_ratio += -bar.mu * e / (two * (one + nu) * (one + nu))
+            + bar.lambda * e * (one + two * nu * nu) / (d * d);
+        out.plastic_viscosity += bar.eta;
+        let phi = self.friction_angle_deg * T::c(DEG);
+        let (sp, cp) = (phi.sin(), phi.cos());
+        let da = T::c((2.0f64 / 3.0).sqrt()) * two * T::c(3.0) * cp
+            / ((T::c(3.0) - sp) * (T::c(3.0) - sp));
+        out.friction_angle_deg += bar.alpha * da * T::c(DEG);
+    }
+}
+
+/// What the kernels read about the parameters: per slot the fixed constants ([`PartConsts`],
+/// with the differentiable fields overwritten from the slot's parameters, rounded to f32) and
+/// the material constants `[mu, lambda, plastic viscosity, alpha]` in the scalar type `S`; per
+/// particle its mass `density x V0`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SlotTables<S> {
+    /// Constants per slot.
+    pub parts: Vec<PartConsts>,
+    /// `[mu, lambda, plastic viscosity, Drucker-Prager alpha]` per slot.
+    pub mats: Vec<[S; 4]>,
+    /// Mass per particle.
+    pub mass: Vec<S>,
+}
+
+impl<S: Real> SlotTables<S> {
+    /// The tables for parameters `params` (one per slot). `part_consts` holds each part's
+    /// constants ([`PartParams::consts`]), `slot_part` the part of each slot, `slot` the slot
+    /// of each particle and `vol0` its initial volume (`f32` as files hold it, or `f64`).
+    pub fn new<V: Copy + Into<f64>>(
+        params: &[PhysParams<S>],
+        part_consts: &[PartConsts],
+        slot_part: &[u32],
+        slot: &[u32],
+        vol0: &[V],
+    ) -> Self {
+        let mut parts = Vec::with_capacity(params.len());
+        let mut mats = Vec::with_capacity(params.len());
+        for (p, &part) in params.iter().zip(slot_part) {
+            let m = p.material();
+            mats.push([m.mu, m.lambda, m.eta, m.alpha]);
+            parts.push(PartConsts {
+                mu: m.mu.f64() as f32,
+                lambda: m.lambda.f64() as f32,
+                plastic_viscosity: m.eta.f64() as f32,
+                dp_alpha: m.alpha.f64() as f32,
+                yield_stress: p.yield_stress.f64() as f32,
+                ..part_consts[part as usize]
+            });
+        }
+        let mass = vol0
+            .iter()
+            .zip(slot)
+            .map(|(&v, &s)| params[s as usize].density * S::c(v.into()))
+            .collect();
+        SlotTables { parts, mats, mass }
+    }
+}
+
+/// The material constants of a `mats` table entry.
+#[inline(always)]
+pub fn material_of<S: Real>(m: &[S; 4]) -> MaterialParams<S> {
+    MaterialParams {
+        mu: m[0],
+        lambda: m[1],
+        eta: m[2],
+        alpha: m[3],
+    }
+}
+
+/// The parameters of each part of a config, in scalar type `S`.
+pub fn phys_params<S: Real>(parts: &[PartParams]) -> Vec<PhysParams<S>> {
+    parts.iter().map(PhysParams::of).collect()
+}
