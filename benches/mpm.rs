@@ -112,13 +112,7 @@ fn benches(c: &mut Criterion) {
         |_| {},
         &[10_000, 32_000, 100_000],
     );
-    bench_backend(
-        c,
-        "reference",
-        ReferenceBackend::new,
-        |_| {},
-        &[10_000],
-    );
+    bench_backend(c, "reference", ReferenceBackend::new, |_| {}, &[10_000]);
     // The wgpu backend on whatever adapter is present (on a machine without a GPU: lavapipe,
     // a software rasterizer; its figures say nothing about GPU speed). Each substep waits for
     // the device, so the time is the real execution time.

@@ -11,6 +11,7 @@
 //! volumes, masses, slots) and the working buffers (grid, tape, adjoint scratch) live once in
 //! the stepper. A forward substep swaps the state's buffers into the working particles (no
 //! copy); a reverse substep copies the checkpoint in, re-runs the substep with a
+//! (lazily allocated, so forward-only runs never hold them) tape and adjoint scratch, with a
 //! `Tape` ([`crate::substep::Tape`]) and runs the reverse stages.
 //!
 //! Parameter adjoints are accumulated per slot on the backend as `[mu, lambda, eta, alpha,
@@ -198,8 +199,10 @@ pub struct SlotGrad<B: MpmKernels> {
 struct Work<B: MpmKernels> {
     p: Particles<B>,
     g: Grid<B>,
-    tape: Tape<B>,
-    scratch: AdjointScratch<B>,
+    /// The reverse sweep's buffers, allocated by its first substep (a forward-only run, and
+    /// whatever the caller does between the forward and the reverse pass, such as rendering,
+    /// never holds them).
+    reverse: Option<(Tape<B>, AdjointScratch<B>)>,
     parts: B::Buf<PartConsts>,
     mats: B::Buf<[B::Scalar; 4]>,
     params: Option<Vec<PhysParams<B::Scalar>>>,
@@ -254,8 +257,7 @@ impl<'a, B: MpmAdjointKernels> KernelAdjoint<'a, B> {
             health: b.zeros(1)?,
         };
         let work = Work {
-            tape: Tape::new(&b, np, n)?,
-            scratch: AdjointScratch::new(&b, np, n)?,
+            reverse: None,
             parts: b.zeros(slots)?,
             mats: b.zeros(slots)?,
             params: None,
@@ -393,6 +395,13 @@ impl<B: MpmAdjointKernels> Differentiable for KernelAdjoint<'_, B> {
         let mut guard = self.lock();
         let w = &mut *guard;
         self.prepare(w, params)?;
+        if w.reverse.is_none() {
+            let (np, n) = (self.sim.len(), self.sim.setup.n);
+            w.reverse = Some((
+                Tape::new(&self.b, np, n)?,
+                AdjointScratch::new(&self.b, np, n)?,
+            ));
+        }
         let c = self.sim.consts_at(k);
         let t = SubstepTables {
             parts: &w.parts,
@@ -400,21 +409,12 @@ impl<B: MpmAdjointKernels> Differentiable for KernelAdjoint<'_, B> {
             grid_bcs: &self.grid_bcs,
             particle_bcs: &self.particle_bcs,
         };
+        let (tape, scratch) = w.reverse.as_mut().expect("allocated above");
         before.copy_into(&self.b, &mut w.p)?;
-        substep::forward(&self.b, &mut w.p, &mut w.g, &t, &c, Some(&mut w.tape))?;
-        substep::reverse(
-            &self.b,
-            &w.p,
-            &w.g,
-            &t,
-            &c,
-            before,
-            &w.tape,
-            &mut w.scratch,
-            adj,
-        )?;
+        substep::forward(&self.b, &mut w.p, &mut w.g, &t, &c, Some(tape))?;
+        substep::reverse(&self.b, &w.p, &w.g, &t, &c, before, tape, scratch, adj)?;
         self.b
-            .reduce_slots(&w.scratch.pgrad, &w.p.part, &mut grad.acc)
+            .reduce_slots(&scratch.pgrad, &w.p.part, &mut grad.acc)
     }
 
     fn zero_adjoint(&self, _s: &StateBufs<B>) -> Result<StateBufs<B>, B::Error> {
