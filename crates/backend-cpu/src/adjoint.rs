@@ -12,7 +12,7 @@
 use crate::{slabs, CpuBackend};
 use r4d_mpm::adjoint::engine::{AdjointScratch, MpmAdjointKernels, StateBufs};
 use r4d_mpm::adjoint::particle_vjp::{particle_stage_vjp, ParticleForward};
-use r4d_mpm::adjoint::transfer_vjp::{g2p_vjp, grid_node_update_vjp, G2pBar};
+use r4d_mpm::adjoint::transfer_vjp::{g2p_vjp, grid_node_vjp, G2pBar};
 use r4d_mpm::kernels::{Grid, GridBc, Particles, StepConsts};
 use r4d_mpm::math::Real;
 use r4d_mpm::reference::reduce_slots_in_order;
@@ -101,12 +101,8 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
                 .for_each(|(i, plane)| {
                     for (jk, out) in plane.iter_mut().enumerate() {
                         let idx = i * n * n + jk;
-                        let vb = [grid_bar[idx][0], grid_bar[idx][1], grid_bar[idx][2]];
-                        *out = if vb.iter().any(|x| *x != T::zero()) {
-                            grid_node_update_vjp([i, jk / n, jk % n], tape.grid_in[idx], bcs, c, vb)
-                        } else {
-                            [T::zero(); 4]
-                        };
+                        let ijk = [i, jk / n, jk % n];
+                        *out = grid_node_vjp(ijk, tape.grid_in[idx], grid_bar[idx], bcs, c);
                     }
                 });
         });

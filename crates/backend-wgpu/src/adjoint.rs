@@ -45,8 +45,8 @@ use crate::context::{GpuBuffer, WgpuContext, WgpuError};
 use crate::mpm::Counts;
 use r4d_mpm::adjoint::checkpoint::Differentiable;
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
-use r4d_mpm::constitutive::MaterialParams;
 use r4d_mpm::kernels::{GridBc, ParticleBc, StepConsts};
+use r4d_mpm::params::SlotTables;
 use r4d_mpm::{Material, PartConsts};
 use std::sync::{Arc, Mutex};
 
@@ -367,19 +367,7 @@ impl<'a> WgpuAdjoint<'a> {
         Ok(params
             .iter()
             .enumerate()
-            .map(|(s, p)| {
-                let a = &acc[GRAD_STRIDE * s..GRAD_STRIDE * s + GRAD_STRIDE];
-                let mut out = PhysParams::default();
-                let bar = MaterialParams {
-                    mu: a[0],
-                    lambda: a[1],
-                    eta: a[2],
-                    alpha: a[3],
-                };
-                p.add_material_vjp(&bar, &mut out);
-                out.density += a[4];
-                out
-            })
+            .map(|(s, p)| p.from_slot_adjoint(&acc[GRAD_STRIDE * s..GRAD_STRIDE * (s + 1)]))
             .collect())
     }
 
@@ -390,16 +378,11 @@ impl<'a> WgpuAdjoint<'a> {
             return Ok(());
         }
         let sim = self.sim;
-        let mass = sim.masses(params);
-        let mut parts = vec![PartConsts::default(); sim.slots().max(1)];
-        for (p, &s) in sim.slot.iter().enumerate() {
-            let m = params[s as usize].material();
-            parts[s as usize] = PartConsts {
-                mu: m.mu,
-                lambda: m.lambda,
-                ..sim.consts[sim.part[p] as usize]
-            };
-        }
+        // The one parameter mapping (also the CPU's): every differentiable constant of a slot
+        // (mu, lambda, plastic viscosity, Drucker-Prager alpha, initial yield stress) comes
+        // from its current parameters, the rest from its part.
+        let tables = SlotTables::new(params, &sim.consts, &sim.slot_parts(), &sim.slot, &sim.vol0);
+        let (mass, parts) = (tables.mass, tables.parts);
         let mut info = vec![0f32; INFO_STRIDE * sim.len()];
         for p in 0..sim.len() {
             let r = &mut info[INFO_STRIDE * p..INFO_STRIDE * (p + 1)];

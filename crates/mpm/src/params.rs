@@ -75,6 +75,24 @@ impl<T: Real> PhysParams<T> {
     }
 }
 
+impl<T: Real> PhysParams<T> {
+    /// The gradient of these parameters from a slot's accumulated adjoints `[mu, lambda,
+    /// eta, alpha, density, ..]` (the kernels' parameter adjoints): the chain rule of
+    /// [`PhysParams::material`] and of the masses.
+    pub fn from_slot_adjoint(&self, a: &[T]) -> PhysParams<T> {
+        let mut out = PhysParams::default();
+        let bar = MaterialParams {
+            mu: a[0],
+            lambda: a[1],
+            eta: a[2],
+            alpha: a[3],
+        };
+        self.add_material_vjp(&bar, &mut out);
+        out.density += a[4];
+        out
+    }
+}
+
 /// What the kernels read about the parameters: per slot the fixed constants ([`PartConsts`],
 /// with the differentiable fields overwritten from the slot's parameters, rounded to f32) and
 /// the material constants `[mu, lambda, plastic viscosity, alpha]` in the scalar type `S`; per

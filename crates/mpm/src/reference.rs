@@ -4,7 +4,7 @@
 
 use crate::adjoint::engine::{AdjointScratch, MpmAdjointKernels, StateBufs};
 use crate::adjoint::particle_vjp::{particle_stage_vjp, ParticleForward};
-use crate::adjoint::transfer_vjp::{g2p_vjp, grid_node_update_vjp};
+use crate::adjoint::transfer_vjp::{g2p_vjp, grid_node_vjp};
 use crate::kernels::{
     Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts, HEALTH_OUT_OF_DOMAIN,
 };
@@ -203,13 +203,8 @@ impl<T: Real> MpmAdjointKernels for ReferenceBackend<T> {
             for j in 0..n {
                 for kk in 0..n {
                     let idx = (i * n + j) * n + kk;
-                    let gb = s.grid_bar[idx];
-                    let vb = [gb[0], gb[1], gb[2]];
-                    s.grid_in_bar[idx] = if vb.iter().any(|x| *x != T::zero()) {
-                        grid_node_update_vjp([i, j, kk], tape.grid_in[idx], bcs, c, vb)
-                    } else {
-                        [T::zero(); 4]
-                    };
+                    s.grid_in_bar[idx] =
+                        grid_node_vjp([i, j, kk], tape.grid_in[idx], s.grid_bar[idx], bcs, c);
                 }
             }
         }

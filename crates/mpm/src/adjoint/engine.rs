@@ -22,7 +22,6 @@
 
 use super::checkpoint::Differentiable;
 use super::host::{HostSim, HostState};
-use crate::constitutive::MaterialParams;
 use crate::kernels::{Grid, GridBc, MpmKernels, ParticleBc, Particles, StepConsts};
 use crate::material::PartConsts;
 use crate::math::Real;
@@ -226,10 +225,7 @@ impl<'a, B: MpmAdjointKernels> KernelAdjoint<'a, B> {
         let np = sim.len();
         let n = sim.setup.n;
         let slots = sim.slots().max(1);
-        let mut slot_part = vec![0u32; slots];
-        for (&s, &p) in sim.slot.iter().zip(&sim.part) {
-            slot_part[s as usize] = p;
-        }
+        let slot_part = sim.slot_parts();
         let vol0: Vec<B::Scalar> = sim.vol0.iter().map(|&v| B::Scalar::c(v)).collect();
         let mut gb = sim.setup.grid_bcs.clone();
         gb.push(GridBc::default());
@@ -307,18 +303,7 @@ impl<'a, B: MpmAdjointKernels> KernelAdjoint<'a, B> {
         Ok(params
             .iter()
             .zip(&acc)
-            .map(|(p, a)| {
-                let mut out = PhysParams::default();
-                let bar = MaterialParams {
-                    mu: a[0],
-                    lambda: a[1],
-                    eta: a[2],
-                    alpha: a[3],
-                };
-                p.add_material_vjp(&bar, &mut out);
-                out.density += a[4];
-                out
-            })
+            .map(|(p, a)| p.from_slot_adjoint(a))
             .collect())
     }
 
@@ -330,9 +315,7 @@ impl<'a, B: MpmAdjointKernels> KernelAdjoint<'a, B> {
         grad: &mut [PhysParams<B::Scalar>],
     ) -> Result<(), B::Error> {
         let plastic = self.b.download(&adj0.plastic)?;
-        for (pl, &slot) in plastic.iter().zip(&self.sim.slot) {
-            grad[slot as usize].yield_stress += pl[0];
-        }
+        self.sim.init_vjp_plastic(&plastic, grad);
         Ok(())
     }
 

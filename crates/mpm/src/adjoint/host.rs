@@ -128,15 +128,6 @@ impl HostSim {
         }
     }
 
-    /// Particle masses `density x V0` for the given parameters.
-    pub fn masses<T: Real>(&self, params: &[PhysParams<T>]) -> Vec<T> {
-        self.vol0
-            .iter()
-            .zip(&self.slot)
-            .map(|(&v, &p)| params[p as usize].density * T::c(v))
-            .collect()
-    }
-
     /// Constants of substep `k` (time `k dt`, as every simulation times substeps).
     pub fn consts_at(&self, k_sub: u64) -> crate::StepConsts {
         self.setup.consts_at(k_sub)
@@ -145,9 +136,23 @@ impl HostSim {
     /// Adds the gradient of the initial state's dependence on the parameters (the initial
     /// plastic yield stress) to `grad`, given the adjoint of the initial state.
     pub fn init_vjp<T: Real>(&self, adj0: &HostState<T>, grad: &mut [PhysParams<T>]) {
-        for (p, &slot) in self.slot.iter().enumerate() {
-            grad[slot as usize].yield_stress += adj0.plastic[p][0];
+        self.init_vjp_plastic(&adj0.plastic, grad);
+    }
+
+    /// [`HostSim::init_vjp`] from the adjoint of the initial plastic state alone.
+    pub fn init_vjp_plastic<T: Real>(&self, plastic_adj: &[[T; 2]], grad: &mut [PhysParams<T>]) {
+        for (pl, &slot) in plastic_adj.iter().zip(&self.slot) {
+            grad[slot as usize].yield_stress += pl[0];
         }
+    }
+
+    /// The part of each parameter slot (the slot tables' `slot_part`).
+    pub fn slot_parts(&self) -> Vec<u32> {
+        let mut slot_part = vec![0u32; self.slots().max(1)];
+        for (&s, &p) in self.slot.iter().zip(&self.part) {
+            slot_part[s as usize] = p;
+        }
+        slot_part
     }
 }
 

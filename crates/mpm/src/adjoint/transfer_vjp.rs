@@ -199,6 +199,26 @@ pub fn scatter_vjp<T: Real>(
     }
 }
 
+/// The adjoint of a node's scattered `[momentum, mass]` from the adjoint `node_bar` G2P left
+/// on the updated node (its velocity part): [`grid_node_update_vjp`], or zero where the
+/// velocity adjoint is zero (no particle gathered from the node). Every backend's
+/// `grid_update_vjp` applies this per node.
+#[inline]
+pub fn grid_node_vjp<T: Real>(
+    ijk: [usize; 3],
+    node_in: [T; 4],
+    node_bar: [T; 4],
+    bcs: &[GridBc],
+    c: &StepConsts,
+) -> [T; 4] {
+    let vb = [node_bar[0], node_bar[1], node_bar[2]];
+    if vb.iter().any(|x| *x != T::zero()) {
+        grid_node_update_vjp(ijk, node_in, bcs, c, vb)
+    } else {
+        [T::zero(); 4]
+    }
+}
+
 /// Adjoint of [`crate::transfer::grid_node_update`]: `v_bar` is the adjoint of the node's
 /// final velocity, `node_in` the node's scattered `[momentum, mass]` (forward input). Returns
 /// the adjoint of `[momentum, mass]`.
