@@ -6,7 +6,7 @@
 //! * `adjoint_substep/cpu/{forward,backward}/N`: the parallel CPU adjoint
 //!   (`KernelAdjoint<CpuBackend<f32>>`, all cores);
 //! * `adjoint_substep/wgpu/{forward,backward}/N`: the device adjoint
-//!   (`r4d_backend_wgpu::adjoint::WgpuAdjoint`) when a wgpu adapter exists; every call waits
+//!   (`KernelAdjoint<WgpuMpm>`, the same stepper) when a wgpu adapter exists; every call waits
 //!   for the device, so times are execution times.
 //!
 //! The input of every timed call is the same: the state after 20 warm-up substeps (run on
@@ -38,8 +38,7 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use r4d_backend_cpu::{CpuBackend, Par};
-use r4d_backend_wgpu::adjoint::{DeviceState, WgpuAdjoint};
-use r4d_backend_wgpu::WgpuContext;
+use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
 use r4d_mpm::adjoint::checkpoint::Differentiable;
 use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
@@ -263,29 +262,30 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
     group.sample_size(10);
     for case in cases {
         let np = case.sim.len();
-        let stepper = match WgpuAdjoint::new(ctx.clone(), &case.sim) {
+        let stepper = match KernelAdjoint::new(WgpuMpm::new(ctx.clone()), &case.sim) {
             Ok(s) => s,
             Err(e) => {
                 eprintln!("adjoint_substep/wgpu/{np} skipped: {e}");
                 continue;
             }
         };
-        let before = DeviceState::upload(&ctx, &case.before).expect("uploading the state");
-        let adj0 = DeviceState::upload(&ctx, &case.adj).expect("uploading the adjoint");
+        let b = stepper.backend();
+        let before = StateBufs::upload(b, &case.before).expect("uploading the state");
+        let adj0 = StateBufs::upload(b, &case.adj).expect("uploading the adjoint");
         let mut grad = stepper.zero_grad().expect("device gradient");
         let k = WARMUP;
         // First calls build the pipelines; the measured ones are the second.
-        let mut s = before.try_clone().unwrap();
+        let mut s = stepper.clone_state(&before).unwrap();
         stepper.step(&mut s, &case.params, k).unwrap();
-        let mut adj = adj0.try_clone().unwrap();
+        let mut adj = stepper.clone_state(&adj0).unwrap();
         stepper
             .step_vjp(&before, &case.params, k, &mut adj, &mut grad)
             .unwrap();
         wait();
         let mut peaks = Vec::new();
         for backward in [false, true] {
-            let mut s = before.try_clone().unwrap();
-            let mut adj = adj0.try_clone().unwrap();
+            let mut s = stepper.clone_state(&before).unwrap();
+            let mut adj = stepper.clone_state(&adj0).unwrap();
             wait();
             ctx.reset_peak();
             let base = reset_peak();
@@ -320,7 +320,7 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
                 time_calls(
                     iters,
                     || {
-                        let s = before.try_clone().unwrap();
+                        let s = stepper.clone_state(&before).unwrap();
                         wait();
                         s
                     },
@@ -336,7 +336,7 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
                 time_calls(
                     iters,
                     || {
-                        let a = adj0.try_clone().unwrap();
+                        let a = stepper.clone_state(&adj0).unwrap();
                         wait();
                         a
                     },

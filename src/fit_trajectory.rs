@@ -6,17 +6,17 @@
 //! substep ([`r4d_mpm::adjoint`]) and updates the free parameters with AdamW in the log
 //! domain ([`r4d_optim`]). The simulation and its reverse sweep run in f64 on the CPU
 //! (`KernelAdjoint<CpuBackend<f64>>`, all cores) by default, or in f32 on a GPU
-//! (`r4d_backend_wgpu::adjoint::WgpuAdjoint`) with [`FitBackend::Wgpu`]: there the states stay
-//! on the device, only the positions of each frame come back for the loss and its gradient
-//! goes back to the position adjoint on the device.
+//! (`KernelAdjoint<WgpuMpm>`) with [`FitBackend::Wgpu`]: the same stepper and the same
+//! sweep; the states stay on the backend, only the positions of each frame come back for the
+//! loss and its gradient goes back to the position adjoint on the backend.
 
 use r4d_backend_cpu::CpuBackend;
-use r4d_backend_wgpu::adjoint::{AdjointError, DeviceState, WgpuAdjoint};
-use r4d_backend_wgpu::{WgpuContext, WgpuError};
+use r4d_backend_wgpu::{WgpuContext, WgpuError, WgpuMpm};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing};
-use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint};
+use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, MpmAdjointKernels, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
+use r4d_mpm::math::Real;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
 use r4d_optim::{AdamW, LogDomainOptimizer, ParamKind};
 use serde::Serialize;
@@ -42,18 +42,6 @@ pub enum FitError {
     /// The wgpu backend failed: no adapter ([`WgpuError::NoAdapter`]), no device, a transfer.
     #[error(transparent)]
     Wgpu(#[from] WgpuError),
-    /// The wgpu adjoint refused the setup (a material without a device VJP).
-    #[error(transparent)]
-    Adjoint(AdjointError),
-}
-
-impl From<AdjointError> for FitError {
-    fn from(e: AdjointError) -> Self {
-        match e {
-            AdjointError::Wgpu(e) => FitError::Wgpu(e),
-            e => FitError::Adjoint(e),
-        }
-    }
 }
 
 /// Where the simulation and its reverse sweep run.
@@ -62,7 +50,7 @@ pub enum FitBackend {
     /// f64 on the CPU, all cores (`KernelAdjoint<CpuBackend<f64>>`).
     #[default]
     Cpu,
-    /// f32 on a GPU through wgpu (`WgpuAdjoint`); the adapter is chosen as by
+    /// f32 on a GPU through wgpu (`KernelAdjoint<WgpuMpm>`); the adapter is chosen as by
     /// [`WgpuContext::new`] (`R4D_WGPU_ADAPTER`).
     Wgpu,
 }
@@ -245,8 +233,8 @@ pub fn fit_trajectory_resumable(
             CpuBackend::<f64>::with_par(r4d_backend_cpu::Par::Rayon),
             &sim,
         )))),
-        FitBackend::Wgpu => Stepper::Wgpu(Box::new(WgpuAdjoint::new(
-            Arc::new(WgpuContext::new()?),
+        FitBackend::Wgpu => Stepper::Wgpu(Box::new(KernelAdjoint::new(
+            WgpuMpm::new(Arc::new(WgpuContext::new()?)),
             &sim,
         )?)),
     };
@@ -323,8 +311,8 @@ pub fn fit_trajectory_resumable(
             substeps,
         };
         let (loss, grad) = match &stepper {
-            Stepper::Cpu(d) => sweep.cpu(d),
-            Stepper::Wgpu(d) => sweep.wgpu(d)?,
+            Stepper::Cpu(d) => infallible(sweep.run(d)),
+            Stepper::Wgpu(d) => sweep.run(d)?,
         };
         let g: Vec<f64> = slots
             .iter()
@@ -372,7 +360,7 @@ pub fn fit_trajectory_resumable(
 /// The simulator of a fit.
 enum Stepper<'a> {
     Cpu(Box<KernelAdjoint<'a, CpuBackend<f64>>>),
-    Wgpu(Box<WgpuAdjoint<'a>>),
+    Wgpu(Box<KernelAdjoint<'a, WgpuMpm>>),
 }
 
 /// One evaluation of the loss and of its parameter gradient (per slot, with the yield stress
@@ -389,70 +377,40 @@ struct Sweep<'a> {
 }
 
 impl Sweep<'_> {
-    /// In f64 on the CPU.
-    fn cpu(&self, stepper: &KernelAdjoint<CpuBackend<f64>>) -> (f64, Vec<PhysParams<f64>>) {
-        let (sim, targets, opts_loss) = (self.sim, self.targets, self.loss);
-        let phys: Vec<PhysParams<f64>> = self.parts.iter().map(PhysParams::of).collect();
-        let v0 = vec![[0.0; 3]; sim.len()];
-        let init = infallible(stepper.init(&phys, &v0));
-        let grad0 = infallible(stepper.zero_grad());
-        let scale = 1.0 / self.frames as f64;
-        let (loss, adj0, grad) = infallible(value_and_grad(
-            stepper,
-            &init,
-            &phys,
-            self.substeps,
-            self.spf,
-            self.checkpointing,
-            grad0,
-            |f, s| {
-                let mut g = vec![[0.0; 3]; s.x.len()];
-                scale * opts_loss.value_and_grad(&s.x, &targets[f - 1], &mut g)
-            },
-            |f, s, adj| {
-                let mut g = vec![[0.0; 3]; s.x.len()];
-                let _ = opts_loss.value_and_grad(&s.x, &targets[f - 1], &mut g);
-                for (a, gp) in adj.x.iter_mut().zip(&g) {
-                    for q in 0..3 {
-                        a[q] += scale * gp[q];
-                    }
-                }
-            },
-        ));
-        let mut grad = infallible(stepper.grad_to_host(&grad, &phys));
-        infallible(stepper.init_vjp(&adj0, &mut grad));
-        (loss, grad)
-    }
-
-    /// In f32 on the device. The loss of each frame is evaluated in f64 on the downloaded
-    /// positions during the forward pass; its gradient is kept and added to the position
-    /// adjoint on the device when the reverse sweep reaches the frame.
-    fn wgpu(&self, d: &WgpuAdjoint) -> Result<(f64, Vec<PhysParams<f64>>), FitError> {
+    /// One evaluation on any backend. The loss of each frame is evaluated in f64 on the
+    /// downloaded positions during the forward pass; its gradient is kept and added to the
+    /// position adjoint on the backend when the reverse sweep reaches the frame.
+    fn run<B: MpmAdjointKernels>(
+        &self,
+        d: &KernelAdjoint<B>,
+    ) -> Result<(f64, Vec<PhysParams<f64>>), B::Error> {
         let (sim, targets, loss_kind) = (self.sim, self.targets, self.loss);
-        let phys: Vec<PhysParams<f32>> = self.parts.iter().map(PhysParams::of).collect();
-        let init = d.init(&phys, &vec![[0.0f32; 3]; sim.len()])?;
+        let b = d.backend();
+        let phys: Vec<PhysParams<B::Scalar>> = self.parts.iter().map(PhysParams::of).collect();
+        let init = d.init(&phys, &vec![[B::Scalar::c(0.0); 3]; sim.len()])?;
         let scale = 1.0 / self.frames as f64;
-        let ctx = d.context();
-        let error: RefCell<Option<WgpuError>> = RefCell::new(None);
-        let frame_grads: RefCell<Vec<Option<Vec<[f32; 3]>>>> =
+        let error: RefCell<Option<B::Error>> = RefCell::new(None);
+        // Each frame's position gradient, from the forward pass to its reverse hook.
+        type PosGrad<S> = Option<Vec<[S; 3]>>;
+        let frame_grads: RefCell<Vec<PosGrad<B::Scalar>>> =
             RefCell::new(vec![None; self.frames + 1]);
         // The loss at frame `f` of the state `s` and its (scaled) gradient.
-        let eval = |f: usize, s: &DeviceState| -> Option<(f64, Vec<[f32; 3]>)> {
-            let flat = match ctx.download(&s.x) {
+        let eval = |f: usize, s: &StateBufs<B>| -> Option<(f64, Vec<[B::Scalar; 3]>)> {
+            let x = match b.download(&s.x) {
                 Ok(v) => v,
                 Err(e) => {
                     error.borrow_mut().get_or_insert(e);
                     return None;
                 }
             };
-            let x: Vec<[f64; 3]> = flat
-                .chunks_exact(3)
-                .map(|c| [c[0] as f64, c[1] as f64, c[2] as f64])
-                .collect();
+            let x: Vec<[f64; 3]> = x.iter().map(|p| p.map(|v| v.f64())).collect();
             let mut g = vec![[0.0f64; 3]; x.len()];
             let l = loss_kind.value_and_grad(&x, &targets[f - 1], &mut g);
-            let g32 = g.iter().map(|gp| gp.map(|v| (scale * v) as f32)).collect();
-            Some((scale * l, g32))
+            let g = g
+                .iter()
+                .map(|gp| gp.map(|v| B::Scalar::c(scale * v)))
+                .collect();
+            Some((scale * l, g))
         };
         let (loss, adj0, grad) = value_and_grad(
             d,
@@ -474,27 +432,16 @@ impl Sweep<'_> {
                 let Some(g) = cached.or_else(|| eval(f, s).map(|(_, g)| g)) else {
                     return;
                 };
-                if let Err(e) = adj.add_to_x(&g) {
+                if let Err(e) = adj.add_to_x(b, &g) {
                     error.borrow_mut().get_or_insert(e);
                 }
             },
         )?;
         if let Some(e) = error.into_inner() {
-            return Err(e.into());
+            return Err(e);
         }
         let mut grad = d.grad_to_host(&grad, &phys)?;
-        sim.init_vjp(&adj0.download()?, &mut grad);
-        let grad = grad
-            .iter()
-            .map(|g| PhysParams {
-                youngs_modulus: g.youngs_modulus as f64,
-                poisson_ratio: g.poisson_ratio as f64,
-                yield_stress: g.yield_stress as f64,
-                plastic_viscosity: g.plastic_viscosity as f64,
-                friction_angle_deg: g.friction_angle_deg as f64,
-                density: g.density as f64,
-            })
-            .collect();
-        Ok((loss, grad))
+        d.init_vjp(&adj0, &mut grad)?;
+        Ok((loss, grad.iter().map(PhysParams::to_f64).collect()))
     }
 }

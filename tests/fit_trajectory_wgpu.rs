@@ -1,4 +1,4 @@
-//! `fit_trajectory` on the wgpu backend (f32, `WgpuAdjoint`) against the CPU backend (f64,
+//! `fit_trajectory` on the wgpu backend (f32, `KernelAdjoint<WgpuMpm>`) against the CPU backend (f64,
 //! `KernelAdjoint<CpuBackend<f64>>`): the first iteration's loss and gradient agree to 1e-3 relative and the
 //! fitted parameters to 1% (issue 9's CPU-vs-wgpu bound). Skipped without an adapter unless
 //! `R4D_REQUIRE_GPU=1`.

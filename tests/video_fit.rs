@@ -452,7 +452,7 @@ fn row_bands_give_the_whole_frame_loss_and_gradient() {
     assert!(rel(v.total, ev.total) < 1e-5);
 }
 
-/// The video fit on the GPU: simulation and reverse sweep (`WgpuAdjoint`, f32), rendering and
+/// The video fit on the GPU: simulation and reverse sweep (`KernelAdjoint<WgpuMpm>`, f32), rendering and
 /// render VJP (`WgpuSplat`), the loss on the CPU. Loss and every parameter gradient agree with
 /// the CPU's f32 run, and a few fit iterations reach the same parameters within 1% (issue 9's
 /// bound).

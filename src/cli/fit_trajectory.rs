@@ -220,9 +220,7 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         },
     )
     .map_err(|e| match e {
-        e @ (FitError::Wgpu(_) | FitError::Adjoint(_)) => {
-            anyhow::Error::new(e).context("--backend wgpu")
-        }
+        e @ FitError::Wgpu(_) => anyhow::Error::new(e).context("--backend wgpu"),
         e => e.into(),
     })?;
     if let Some(e) = ck_error {

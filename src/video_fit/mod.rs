@@ -9,7 +9,7 @@
 //! * [`fit`]: the loop: initialisation, iterations, logs, checkpoints and resume.
 //!
 //! The simulation and its reverse sweep run on the CPU (`KernelAdjoint<CpuBackend<T>>`, all cores, f64 by
-//! default) or, with [`VideoProblem::gpu`], on a GPU (`r4d_backend_wgpu::adjoint::WgpuAdjoint`,
+//! default) or, with [`VideoProblem::gpu`], on a GPU (`KernelAdjoint<WgpuMpm>`, the same stepper,
 //! f32, state and gradients on the device; positions and F are read back once per frame);
 //! rendering, its VJP and the loss run on the CPU (the GPU renderer's backward exists but is
 //! not used by the fit yet).

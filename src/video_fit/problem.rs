@@ -11,13 +11,13 @@
 use super::FitError;
 use r4d_backend_cpu::splat::CpuSplat;
 use r4d_backend_cpu::CpuBackend;
-use r4d_backend_wgpu::adjoint::{DeviceState, WgpuAdjoint};
 use r4d_backend_wgpu::context::WgpuContext;
 use r4d_backend_wgpu::splat::WgpuSplat;
+use r4d_backend_wgpu::WgpuMpm;
 use r4d_loss::bands::{BandedDms, ReferenceVideo};
 use r4d_loss::{DmsConfig, DmsTerms, Video};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
-use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, StateBufs};
+use r4d_mpm::adjoint::engine::{KernelAdjoint, MpmAdjointKernels, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::math::Real;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
@@ -400,8 +400,8 @@ impl<'a> Objective<'a> {
         Ok((r.0, r.1.expect("gradient requested")))
     }
 
-    /// Runs on the chosen simulator: the CPU (`KernelAdjoint<CpuBackend<T>>`, f32 or f64) or the GPU
-    /// (`WgpuAdjoint`, f32).
+    /// Runs on the chosen simulator: the CPU (`KernelAdjoint<CpuBackend<T>>`, f32 or f64) or the
+    /// GPU (`KernelAdjoint<WgpuMpm>`, f32).
     fn dispatch(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
         for (i, p) in slots.iter().enumerate() {
             p.validate(&format!("parameters of slot {i}"))?;
@@ -421,39 +421,8 @@ impl<'a> Objective<'a> {
     }
 
     fn run_cpu<T: Real>(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
-        let phys: Vec<PhysParams<T>> = slots.iter().map(PhysParams::of).collect();
-        let stepper = infallible(KernelAdjoint::new(
-            CpuBackend::<T>::with_par(r4d_backend_cpu::Par::Rayon),
-            &self.sim,
-        ));
-        let init = infallible(stepper.init(&phys, &vec![[T::zero(); 3]; self.sim.len()]));
-        let grad0 = infallible(stepper.zero_grad());
-        let read = |s: &StateBufs<CpuBackend<T>>| -> Result<Frame, FitError> {
-            Ok(Frame {
-                x: s.x.iter().map(|p| p.map(|c| c.f64() as f32)).collect(),
-                f: s.f.iter().map(|m| m.map(|c| c.f64() as f32)).collect(),
-            })
-        };
-        let add = |adj: &mut StateBufs<CpuBackend<T>>, d: &FrameGrad| -> Result<(), FitError> {
-            for (a, g) in adj.x.iter_mut().zip(&d.x) {
-                for q in 0..3 {
-                    a[q] += T::c(g[q] as f64);
-                }
-            }
-            for (a, g) in adj.f.iter_mut().zip(&d.f) {
-                for q in 0..9 {
-                    a[q] += T::c(g[q] as f64);
-                }
-            }
-            Ok(())
-        };
-        let (ev, back, videos) = self.run_with(&stepper, &init, &phys, grad0, mode, &read, &add)?;
-        let g = back.map(|(adj0, g)| {
-            let mut g = infallible(stepper.grad_to_host(&g, &phys));
-            infallible(stepper.init_vjp(&adj0, &mut g));
-            g.iter().map(to_f64).collect::<Vec<_>>()
-        });
-        Ok((ev, check_grad(g)?, videos))
+        let b = CpuBackend::<T>::with_par(r4d_backend_cpu::Par::Rayon);
+        self.run_on(b, slots, mode, |e| match e {})
     }
 
     fn run_gpu(
@@ -462,28 +431,50 @@ impl<'a> Objective<'a> {
         slots: &[PartParams],
         mode: Mode,
     ) -> Result<RunOut, FitError> {
-        let gpu = |e: r4d_backend_wgpu::context::WgpuError| FitError::Gpu(e.to_string());
-        let d = WgpuAdjoint::new(ctx, &self.sim).map_err(|e| FitError::Gpu(e.to_string()))?;
-        let phys: Vec<PhysParams<f32>> = slots.iter().map(PhysParams::of).collect();
-        let init = d
-            .init(&phys, &vec![[0.0; 3]; self.sim.len()])
-            .map_err(gpu)?;
-        let grad0 = d.zero_grad().map_err(gpu)?;
-        let read = |s: &DeviceState| -> Result<Frame, FitError> {
-            let h = s.download().map_err(gpu)?;
-            Ok(Frame { x: h.x, f: h.f })
+        self.run_on(WgpuMpm::new(ctx), slots, mode, |e| {
+            FitError::Gpu(e.to_string())
+        })
+    }
+
+    /// Runs on any backend: the simulation and its reverse sweep on `b` (the one stepper,
+    /// `KernelAdjoint`), each frame's positions and deformation gradients downloaded for the
+    /// renderer and the loss, the loss's gradient added to the adjoint state on `b`.
+    fn run_on<B: MpmAdjointKernels>(
+        &self,
+        b: B,
+        slots: &[PartParams],
+        mode: Mode,
+        err: fn(B::Error) -> FitError,
+    ) -> Result<RunOut, FitError> {
+        let phys: Vec<PhysParams<B::Scalar>> = slots.iter().map(PhysParams::of).collect();
+        let stepper = KernelAdjoint::new(b, &self.sim).map_err(err)?;
+        let be = stepper.backend();
+        let zero = B::Scalar::c(0.0);
+        let init = stepper
+            .init(&phys, &vec![[zero; 3]; self.sim.len()])
+            .map_err(err)?;
+        let grad0 = stepper.zero_grad().map_err(err)?;
+        let read = |s: &StateBufs<B>| -> Result<Frame, FitError> {
+            let x = be.download(&s.x).map_err(err)?;
+            let f = be.download(&s.f).map_err(err)?;
+            Ok(Frame {
+                x: x.iter().map(|p| p.map(|c| c.f64() as f32)).collect(),
+                f: f.iter().map(|m| m.map(|c| c.f64() as f32)).collect(),
+            })
         };
-        let add = |adj: &mut DeviceState, g: &FrameGrad| -> Result<(), FitError> {
-            adj.add_to_x(&g.x).map_err(gpu)?;
-            adj.add_to_f(&g.f).map_err(gpu)
+        let add = |adj: &mut StateBufs<B>, g: &FrameGrad| -> Result<(), FitError> {
+            let cast = |v: &f32| B::Scalar::c(*v as f64);
+            let x: Vec<[B::Scalar; 3]> = g.x.iter().map(|p| p.each_ref().map(cast)).collect();
+            let f: Vec<[B::Scalar; 9]> = g.f.iter().map(|m| m.each_ref().map(cast)).collect();
+            adj.add_to_x(be, &x).map_err(err)?;
+            adj.add_to_f(be, &f).map_err(err)
         };
-        let (ev, back, videos) = self.run_with(&d, &init, &phys, grad0, mode, &read, &add)?;
+        let (ev, back, videos) = self.run_with(&stepper, &init, &phys, grad0, mode, &read, &add)?;
         let g = match back {
             Some((adj0, g)) => {
-                let mut host = d.grad_to_host(&g, &phys).map_err(gpu)?;
-                let adj0 = adj0.download().map_err(gpu)?;
-                self.sim.init_vjp(&adj0, &mut host);
-                Some(host.iter().map(to_f64).collect::<Vec<_>>())
+                let mut g = stepper.grad_to_host(&g, &phys).map_err(err)?;
+                stepper.init_vjp(&adj0, &mut g).map_err(err)?;
+                Some(g.iter().map(PhysParams::to_f64).collect::<Vec<_>>())
             }
             None => None,
         };
@@ -976,17 +967,6 @@ struct Frame {
 struct FrameGrad {
     x: Vec<[f32; 3]>,
     f: Vec<[f32; 9]>,
-}
-
-fn to_f64<T: Real>(p: &PhysParams<T>) -> PhysParams<f64> {
-    PhysParams {
-        youngs_modulus: p.youngs_modulus.f64(),
-        poisson_ratio: p.poisson_ratio.f64(),
-        yield_stress: p.yield_stress.f64(),
-        plastic_viscosity: p.plastic_viscosity.f64(),
-        friction_angle_deg: p.friction_angle_deg.f64(),
-        density: p.density.f64(),
-    }
 }
 
 /// A non-finite parameter gradient is an error.

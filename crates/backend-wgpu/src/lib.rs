@@ -5,9 +5,9 @@
 //! shader fails `cargo build`; the build also writes each kernel's SPIR-V for a Vulkan/ash
 //! path. See [`context`] for device selection and memory tracking.
 
-pub mod adjoint;
 pub mod context;
 pub mod mpm;
+pub mod mpm_vjp;
 pub mod shaders;
 pub mod splat;
 pub mod testing;

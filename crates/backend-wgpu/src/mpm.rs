@@ -35,6 +35,7 @@ pub struct Counts {
 pub struct WgpuMpm {
     ctx: Arc<WgpuContext>,
     scratch: Mutex<Option<GpuBuffer<u32>>>,
+    pub(crate) reverse_records: Mutex<Option<crate::mpm_vjp::ReverseRecords>>,
 }
 
 impl WgpuMpm {
@@ -43,6 +44,7 @@ impl WgpuMpm {
         WgpuMpm {
             ctx,
             scratch: Mutex::new(None),
+            reverse_records: Mutex::new(None),
         }
     }
 
@@ -51,7 +53,8 @@ impl WgpuMpm {
         &self.ctx
     }
 
-    fn consts(
+    /// The uniforms of a dispatch: the substep's constants and the sizes.
+    pub(crate) fn consts(
         &self,
         c: &StepConsts,
         particles: usize,
@@ -59,15 +62,24 @@ impl WgpuMpm {
     ) -> Result<(GpuBuffer<StepConsts>, GpuBuffer<Counts>), WgpuError> {
         Ok((
             self.ctx.uniform("StepConsts", c)?,
-            self.ctx.uniform(
-                "Counts",
-                &Counts {
-                    particles: particles as u32,
-                    n_grid: n as u32,
-                    _pad: [0; 2],
-                },
-            )?,
+            self.counts(particles, n)?,
         ))
+    }
+
+    /// The sizes uniform of a dispatch.
+    pub(crate) fn counts(
+        &self,
+        particles: usize,
+        n: usize,
+    ) -> Result<GpuBuffer<Counts>, WgpuError> {
+        self.ctx.uniform(
+            "Counts",
+            &Counts {
+                particles: particles as u32,
+                n_grid: n as u32,
+                _pad: [0; 2],
+            },
+        )
     }
 }
 
@@ -113,6 +125,29 @@ impl MpmKernels for WgpuMpm {
             enc.copy_buffer_to_buffer(&src.buffer, 0, &dst.buffer, 0, bytes);
             self.ctx.submit(enc);
         }
+        Ok(())
+    }
+
+    fn accumulate<const N: usize>(
+        &self,
+        dst: &mut GpuBuffer<[f32; N]>,
+        add: &[[f32; N]],
+    ) -> Result<(), WgpuError> {
+        assert_eq!(dst.len, add.len(), "accumulate: same length");
+        if add.is_empty() {
+            return Ok(());
+        }
+        let src: GpuBuffer<[f32; N]> = self.ctx.upload("adjoint increment", add)?;
+        let counts = self.counts(N * add.len(), 0)?;
+        let mut enc = self.ctx.encoder();
+        self.ctx.dispatch(
+            &mut enc,
+            "mpm_add_vjp",
+            &[&counts.buffer, &src.buffer, &dst.buffer],
+            (N * add.len()) as u32,
+            64,
+        )?;
+        self.ctx.submit(enc);
         Ok(())
     }
 

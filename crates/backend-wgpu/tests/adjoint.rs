@@ -1,12 +1,13 @@
-//! The device adjoint (`WgpuAdjoint`) against the parallel CPU adjoint (`KernelAdjoint<CpuBackend<f32>>`),
-//! both driven by the same checkpointing driver: parameter gradients (issue 9's bound for
-//! elastic scenes: 1e-3 relative) and the adjoint of the initial state.
+//! The device adjoint against the parallel CPU adjoint: the one stepper
+//! (`KernelAdjoint`) on `WgpuMpm` and on `CpuBackend<f32>`, driven by the same checkpointing
+//! driver: parameter gradients (issue 9's bound for elastic scenes: 1e-3 relative) and the
+//! adjoint of the initial state.
 
 use r4d_backend_cpu::{CpuBackend, Par};
-use r4d_backend_wgpu::adjoint::{AdjointError, WgpuAdjoint};
 use r4d_backend_wgpu::testing::gpu_or_skip;
+use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
-use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint};
+use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, MpmAdjointKernels};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
 use r4d_mpm::{
     BoundaryCondition, Domain, ForceForm, Material, PartParams, ParticleSet, Shape, SimConfig,
@@ -126,43 +127,16 @@ fn initial_velocity(n: usize) -> Vec<[f32; 3]> {
         .collect()
 }
 
-fn cpu(sim: &HostSim, params: &[PhysParams<f32>]) -> (Vec<PhysParams<f32>>, HostState<f32>) {
-    let d = infallible(KernelAdjoint::new(
-        CpuBackend::<f32>::with_par(Par::Rayon),
-        sim,
-    ));
-    let init = infallible(d.init(params, &initial_velocity(sim.len())));
-    let (_, adj0, g) = infallible(value_and_grad(
-        &d,
-        &init,
-        &params.to_vec(),
-        60,
-        20,
-        Checkpointing::PerFrame,
-        infallible(d.zero_grad()),
-        |_, _| 0.0,
-        |f, _, adj| {
-            for (a, w) in adj.x.iter_mut().zip(weights(f, sim.len())) {
-                for q in 0..3 {
-                    a[q] += w[q];
-                }
-            }
-        },
-    ));
-    (
-        infallible(d.grad_to_host(&g, params)),
-        infallible(adj0.download(d.backend())),
-    )
-}
-
-fn gpu(
-    d: &WgpuAdjoint,
+/// Gradients and initial adjoint of the weighted position loss on backend `b`.
+fn run<B: MpmAdjointKernels<Scalar = f32>>(
+    b: B,
     sim: &HostSim,
     params: &[PhysParams<f32>],
 ) -> (Vec<PhysParams<f32>>, HostState<f32>) {
+    let d = KernelAdjoint::new(b, sim).unwrap();
     let init = d.init(params, &initial_velocity(sim.len())).unwrap();
     let (_, adj0, g) = value_and_grad(
-        d,
+        &d,
         &init,
         &params.to_vec(),
         60,
@@ -170,13 +144,25 @@ fn gpu(
         Checkpointing::PerFrame,
         d.zero_grad().unwrap(),
         |_, _| 0.0,
-        |f, _, adj| adj.add_to_x(&weights(f, sim.len())).unwrap(),
+        |f, _, adj| adj.add_to_x(d.backend(), &weights(f, sim.len())).unwrap(),
     )
     .unwrap();
     (
         d.grad_to_host(&g, params).unwrap(),
-        adj0.download().unwrap(),
+        adj0.download(d.backend()).unwrap(),
     )
+}
+
+fn cpu(sim: &HostSim, params: &[PhysParams<f32>]) -> (Vec<PhysParams<f32>>, HostState<f32>) {
+    run(CpuBackend::<f32>::with_par(Par::Rayon), sim, params)
+}
+
+fn gpu(
+    ctx: &Arc<WgpuContext>,
+    sim: &HostSim,
+    params: &[PhysParams<f32>],
+) -> (Vec<PhysParams<f32>>, HostState<f32>) {
+    run(WgpuMpm::new(ctx.clone()), sim, params)
 }
 
 fn rel(a: f64, b: f64) -> f64 {
@@ -208,9 +194,8 @@ fn device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly() {
         let (cfg, sc) = scene(force);
         let sim = HostSim::new(&cfg, &sc).unwrap();
         let params: Vec<PhysParams<f32>> = cfg.parts.iter().map(PhysParams::of).collect();
-        let d = WgpuAdjoint::new(ctx.clone(), &sim).unwrap();
         let (gc, ac) = cpu(&sim, &params);
-        let (gg, ag) = gpu(&d, &sim, &params);
+        let (gg, ag) = gpu(&ctx, &sim, &params);
         eprintln!("{force:?}: {} particles", sim.len());
         for s in 0..params.len() {
             let pairs = [
@@ -243,24 +228,6 @@ fn device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly() {
 }
 
 #[test]
-fn unsupported_materials_are_a_typed_error() {
-    let Some(ctx) = gpu_or_skip("unsupported_materials_are_a_typed_error") else {
-        return;
-    };
-    let (cfg, sc) = scene(ForceForm::Classic);
-    let mut sim = HostSim::new(&cfg, &sc).unwrap();
-    // HostSim itself refuses fluid parts; the device adjoint checks on its own.
-    sim.setup.config.parts[1].material = Material::Fluid;
-    match WgpuAdjoint::new(Arc::new(ctx), &sim) {
-        Err(e @ AdjointError::Unsupported { part: 1, .. }) => {
-            assert!(e.to_string().contains("does not support"), "{e}");
-        }
-        Err(e) => panic!("wrong error: {e}"),
-        Ok(_) => panic!("the fluid must be refused"),
-    }
-}
-
-#[test]
 fn per_particle_gradients_are_reduced_per_slot() {
     let Some(ctx) = gpu_or_skip("per_particle_gradients_are_reduced_per_slot") else {
         return;
@@ -272,9 +239,8 @@ fn per_particle_gradients_are_reduced_per_slot() {
         .iter()
         .map(|&p| PhysParams::of(&cfg.parts[p as usize]))
         .collect();
-    let d = WgpuAdjoint::new(Arc::new(ctx), &sim).unwrap();
     let (gc, _) = cpu(&sim, &params);
-    let (gg, _) = gpu(&d, &sim, &params);
+    let (gg, _) = gpu(&Arc::new(ctx), &sim, &params);
     type Field = fn(&PhysParams<f32>) -> f32;
     let fields: [(&str, Field); 3] = [
         ("E", |g| g.youngs_modulus),
@@ -383,9 +349,8 @@ fn device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials() {
         let sc = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
         let sim = HostSim::new(&cfg, &sc).unwrap();
         let params: Vec<PhysParams<f32>> = cfg.parts.iter().map(PhysParams::of).collect();
-        let d = WgpuAdjoint::new(ctx.clone(), &sim).unwrap();
         let (mut gc, ac) = cpu(&sim, &params);
-        let (mut gg, ag) = gpu(&d, &sim, &params);
+        let (mut gg, ag) = gpu(&ctx, &sim, &params);
         sim.init_vjp(&ac, &mut gc);
         sim.init_vjp(&ag, &mut gg);
         for s in 0..params.len() {
@@ -443,9 +408,8 @@ fn particles_leaving_the_grid_match_the_cpu_adjoint() {
     let sc = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
     let sim = HostSim::new(&cfg, &sc).unwrap();
     let params: Vec<PhysParams<f32>> = cfg.parts.iter().map(PhysParams::of).collect();
-    let d = WgpuAdjoint::new(Arc::new(ctx), &sim).unwrap();
     let (gc, ac) = cpu(&sim, &params);
-    let (gg, ag) = gpu(&d, &sim, &params);
+    let (gg, ag) = gpu(&Arc::new(ctx), &sim, &params);
     let host = infallible(KernelAdjoint::new(
         CpuBackend::<f32>::with_par(Par::Rayon),
         &sim,

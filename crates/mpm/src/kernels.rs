@@ -229,6 +229,13 @@ pub trait MpmKernels: Sized + Send + Sync + 'static {
         src: &Self::Buf<T>,
         dst: &mut Self::Buf<T>,
     ) -> Result<(), Self::Error>;
+    /// `dst[i] += add[i]` element-wise (same length), on the backend: how a loss gradient
+    /// enters an adjoint state.
+    fn accumulate<const N: usize>(
+        &self,
+        dst: &mut Self::Buf<[Self::Scalar; N]>,
+        add: &[[Self::Scalar; N]],
+    ) -> Result<(), Self::Error>;
 
     /// Impulses and velocity overrides (particle boundary conditions) of this substep.
     fn particle_bcs(
@@ -312,6 +319,19 @@ macro_rules! host_vec_buffers {
             dst: &mut Vec<E>,
         ) -> Result<(), std::convert::Infallible> {
             dst.copy_from_slice(src);
+            Ok(())
+        }
+        fn accumulate<const N: usize>(
+            &self,
+            dst: &mut Vec<[Self::Scalar; N]>,
+            add: &[[Self::Scalar; N]],
+        ) -> Result<(), std::convert::Infallible> {
+            assert_eq!(dst.len(), add.len(), "accumulate: same length");
+            for (d, a) in dst.iter_mut().zip(add) {
+                for (d, a) in d.iter_mut().zip(a) {
+                    *d += *a;
+                }
+            }
             Ok(())
         }
     };

@@ -76,6 +76,18 @@ impl<T: Real> PhysParams<T> {
 }
 
 impl<T: Real> PhysParams<T> {
+    /// The same values in f64.
+    pub fn to_f64(&self) -> PhysParams<f64> {
+        PhysParams {
+            youngs_modulus: self.youngs_modulus.f64(),
+            poisson_ratio: self.poisson_ratio.f64(),
+            yield_stress: self.yield_stress.f64(),
+            plastic_viscosity: self.plastic_viscosity.f64(),
+            friction_angle_deg: self.friction_angle_deg.f64(),
+            density: self.density.f64(),
+        }
+    }
+
     /// The gradient of these parameters from a slot's accumulated adjoints `[mu, lambda,
     /// eta, alpha, density, ..]` (the kernels' parameter adjoints): the chain rule of
     /// [`PhysParams::material`] and of the masses.

@@ -1,13 +1,10 @@
 // The end of a substep's reverse sweep, one thread per particle: reverse of the particle
 // boundary conditions (impulses, velocity overrides, in reverse order) and of the RPIC
 // damping, the particle's adjoint state before the substep (in place: `adj_x` holds the G2P
-// position adjoint on entry), and the per-slot parameter adjoints [mu, lambda, plastic
-// viscosity, Drucker-Prager alpha] and [density]
-// reduced in workgroup memory (one tree reduction per slot present in the workgroup), then one
-// float atomic per slot and field. Mirrors the end of
-// `r4d_mpm::adjoint::host::HostSim::particle_stage_vjp` and `particle_bcs_vjp`.
+// position adjoint on entry), and its parameter adjoints [mu, lambda, plastic viscosity,
+// Drucker-Prager alpha, density] (`pgrad`, 5 floats per particle; `reduce_slots` sums them
+// per slot). Mirrors the end of `r4d_mpm::adjoint::particle_vjp::particle_stage_vjp`.
 #import lib/transfer_vjp.wgsl
-#import atomic
 
 @group(0) @binding(0) var<uniform> c: StepConsts;
 @group(0) @binding(1) var<uniform> counts: Counts;
@@ -18,18 +15,7 @@
 @group(0) @binding(6) var<storage, read_write> adj_v: array<f32>;
 @group(0) @binding(7) var<storage, read_write> adj_c: array<f32>;
 @group(0) @binding(8) var<storage, read_write> adj_plastic: array<f32>;
-@group(0) @binding(9) var<storage, read_write> grid_atomic: array<AtomicF32>;
-
-const NO_SLOT: u32 = 0xffffffffu;
-
-var<workgroup> s_red: array<vec4<f32>, 64>;
-var<workgroup> s_red_d: array<f32, 64>;
-// Floats per slot in the gradient accumulator: mu, lambda, eta, alpha, density, padding.
-const GRAD_STRIDE: u32 = 8u;
-var<workgroup> s_lo: atomic<u32>;
-var<workgroup> s_hi: atomic<u32>;
-var<workgroup> s_lo_copy: u32;
-var<workgroup> s_hi_copy: u32;
+@group(0) @binding(9) var<storage, read_write> pgrad: array<f32>;
 
 // Returns [mu, lambda, eta, alpha] adjoints; the density adjoint goes to `dens`.
 fn finish(i: u32, dens: ptr<function, f32>) -> vec4<f32> {
@@ -84,52 +70,16 @@ fn finish(i: u32, dens: ptr<function, f32>) -> vec4<f32> {
 }
 
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let i = linear_id(gid, nwg, 64u);
-    if lid == 0u {
-        atomicStore(&s_lo, NO_SLOT);
-        atomicStore(&s_hi, 0u);
-    }
-    workgroupBarrier();
-    var val = vec4<f32>(0.0);
-    var dens = 0.0;
-    var slot = NO_SLOT;
-    if i < counts.particles {
-        val = finish(i, &dens);
-        slot = bitcast<u32>(info[INFO_STRIDE * i + 5u]);
-        atomicMin(&s_lo, slot);
-        atomicMax(&s_hi, slot);
-    }
-    workgroupBarrier();
-    if lid == 0u {
-        s_lo_copy = atomicLoad(&s_lo);
-        s_hi_copy = atomicLoad(&s_hi);
-    }
-    let lo = workgroupUniformLoad(&s_lo_copy);
-    let hi = workgroupUniformLoad(&s_hi_copy);
-    if lo == NO_SLOT {
+    if i >= counts.particles {
         return;
     }
-    for (var s = lo; s <= hi; s++) {
-        s_red[lid] = select(vec4<f32>(0.0), val, slot == s);
-        s_red_d[lid] = select(0.0, dens, slot == s);
-        workgroupBarrier();
-        for (var stride = 32u; stride > 0u; stride = stride / 2u) {
-            if lid < stride {
-                s_red[lid] = s_red[lid] + s_red[lid + stride];
-                s_red_d[lid] = s_red_d[lid] + s_red_d[lid + stride];
-            }
-            workgroupBarrier();
-        }
-        if lid == 0u {
-            let t = s_red[0];
-            let b = GRAD_STRIDE * s;
-            grid_add(b, t.x);
-            grid_add(b + 1u, t.y);
-            grid_add(b + 2u, t.z);
-            grid_add(b + 3u, t.w);
-            grid_add(b + 4u, s_red_d[0]);
-        }
-        workgroupBarrier();
-    }
+    var dens = 0.0;
+    let val = finish(i, &dens);
+    pgrad[5u * i] = val.x;
+    pgrad[5u * i + 1u] = val.y;
+    pgrad[5u * i + 2u] = val.z;
+    pgrad[5u * i + 3u] = val.w;
+    pgrad[5u * i + 4u] = dens;
 }

@@ -89,6 +89,16 @@ impl<B: MpmKernels> StateBufs<B> {
         b.copy(&self.f, &mut dst.f)?;
         b.copy(&self.plastic, &mut dst.plastic)
     }
+    /// Adds `dx` (one vector per particle) to the positions: how a loss on the positions
+    /// enters an adjoint state.
+    pub fn add_to_x(&mut self, b: &B, dx: &[[B::Scalar; 3]]) -> Result<(), B::Error> {
+        b.accumulate(&mut self.x, dx)
+    }
+    /// Adds `df` (one row-major matrix per particle) to the deformation gradients: how a
+    /// rendering loss's dL/dF enters an adjoint state.
+    pub fn add_to_f(&mut self, b: &B, df: &[[B::Scalar; 9]]) -> Result<(), B::Error> {
+        b.accumulate(&mut self.f, df)
+    }
     /// Exchanges the buffers with the state fields of `p` (no copy).
     fn swap_with(&mut self, p: &mut Particles<B>) {
         std::mem::swap(&mut self.x, &mut p.x);

@@ -24,10 +24,10 @@
 //!   `PerFrame`, `EveryN`, `Nested`), fallible, and `memory_plan`.
 //! * [`trajectory_loss`]: position and Chamfer losses with gradients.
 //!
-//! The CPU backend implements the reverse stages in parallel (`r4d_backend_cpu`); the GPU
-//! keeps its own stepper for now (`r4d_backend_wgpu::adjoint::WgpuAdjoint`, WGSL kernels,
-//! state and parameter gradients on the device), also a [`checkpoint::Differentiable`], so
-//! the checkpointing driver is written once. Not done yet: the fluid's adjoint.
+//! The CPU backend implements the reverse stages in parallel (`r4d_backend_cpu`), the wgpu
+//! backend in WGSL (`r4d_backend_wgpu::mpm_vjp`, state and parameter gradients on the
+//! device); both run through the one stepper [`engine::KernelAdjoint`] and the one
+//! checkpointing driver. Not done yet: the fluid's adjoint.
 
 pub mod checkpoint;
 pub mod constitutive_vjp;
