@@ -9,6 +9,7 @@
 //! are not bitwise reproducible run to run on a GPU).
 
 use bytemuck::Pod;
+use r4d_shaders::Kernel;
 use std::collections::HashMap;
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -42,9 +43,16 @@ pub enum WgpuError {
     /// Reading a buffer back failed.
     #[error("reading buffer '{0}' back from the device failed")]
     Readback(String),
-    /// A kernel name that the build did not produce (a bug).
-    #[error("unknown kernel '{0}'")]
-    UnknownKernel(String),
+    /// A dispatch bound another number of buffers than the kernel declares (a bug).
+    #[error("kernel '{kernel}' binds {expected} buffers, the dispatch gave {given}")]
+    Bindings {
+        /// The kernel.
+        kernel: &'static str,
+        /// Buffers given.
+        given: usize,
+        /// Bindings the kernel's entry point uses.
+        expected: usize,
+    },
 }
 
 /// The device and everything shared by the kernels.
@@ -61,7 +69,7 @@ pub struct WgpuContext {
     pub limits: wgpu::Limits,
     in_use: Arc<AtomicU64>,
     peak: Arc<AtomicU64>,
-    pipelines: Mutex<HashMap<String, Arc<wgpu::ComputePipeline>>>,
+    pipelines: Mutex<HashMap<&'static str, Arc<wgpu::ComputePipeline>>>,
 }
 
 /// A typed device buffer with its length and label.
@@ -297,30 +305,24 @@ impl WgpuContext {
         Ok(out)
     }
 
-    /// The pipeline of a kernel (built once); scatter kernels pick their float-atomic variant.
-    pub fn pipeline(&self, name: &str) -> Result<Arc<wgpu::ComputePipeline>, WgpuError> {
-        let full =
-            if !self.float_atomics && crate::shaders::source(&format!("{name}_cas")).is_some() {
-                format!("{name}_cas")
-            } else {
-                name.to_string()
-            };
-        let mut cache = self.pipelines.lock().expect("pipeline cache");
-        if let Some(p) = cache.get(&full) {
-            return Ok(p.clone());
+    /// The pipeline of a kernel (built once); scatter kernels run their compare-exchange
+    /// variant where the device has no float atomics.
+    pub fn pipeline(&self, kernel: &'static Kernel) -> Arc<wgpu::ComputePipeline> {
+        let k = kernel.variant(self.float_atomics);
+        let mut cache = self.pipelines.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(p) = cache.get(k.name) {
+            return p.clone();
         }
-        let src =
-            crate::shaders::source(&full).ok_or_else(|| WgpuError::UnknownKernel(full.clone()))?;
         let module = self
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(&full),
-                source: wgpu::ShaderSource::Wgsl(src.into()),
+                label: Some(k.name),
+                source: wgpu::ShaderSource::Wgsl(k.wgsl.into()),
             });
         let p = Arc::new(
             self.device
                 .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(&full),
+                    label: Some(k.name),
                     layout: None,
                     module: &module,
                     entry_point: Some("main"),
@@ -328,24 +330,51 @@ impl WgpuContext {
                     cache: None,
                 }),
         );
-        cache.insert(full, p.clone());
-        Ok(p)
+        cache.insert(k.name, p.clone());
+        p
     }
 
-    /// Records one dispatch of `kernel` with `buffers` bound at bindings 0, 1, ... of group 0,
-    /// over `threads` invocations in workgroups of `wg` (split over y beyond 65535 groups).
+    /// Records one dispatch of `kernel` over `threads` invocations (workgroups of the
+    /// kernel's reflected size, split over y beyond 65535 groups), with `buffers` bound at
+    /// bindings 0, 1, ... of group 0.
     pub fn dispatch(
         &self,
         enc: &mut wgpu::CommandEncoder,
-        kernel: &str,
+        kernel: &'static Kernel,
         buffers: &[&wgpu::Buffer],
         threads: u32,
-        wg: u32,
     ) -> Result<(), WgpuError> {
         if threads == 0 {
             return Ok(());
         }
-        let p = self.pipeline(kernel)?;
+        let groups = threads.div_ceil(kernel.threads_per_group());
+        let (x, y) = if groups <= 65535 {
+            (groups, 1)
+        } else {
+            (65535, groups.div_ceil(65535))
+        };
+        self.dispatch_groups(enc, kernel, buffers, [x, y, 1])
+    }
+
+    /// Records one dispatch of `kernel` over a grid of workgroups.
+    pub fn dispatch_groups(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        kernel: &'static Kernel,
+        buffers: &[&wgpu::Buffer],
+        groups: [u32; 3],
+    ) -> Result<(), WgpuError> {
+        if buffers.len() != kernel.bindings.len() {
+            return Err(WgpuError::Bindings {
+                kernel: kernel.name,
+                given: buffers.len(),
+                expected: kernel.bindings.len(),
+            });
+        }
+        if groups.contains(&0) {
+            return Ok(());
+        }
+        let p = self.pipeline(kernel);
         let layout = p.get_bind_group_layout(0);
         let entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()
@@ -356,23 +385,17 @@ impl WgpuContext {
             })
             .collect();
         let bg = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(kernel),
+            label: Some(kernel.name),
             layout: &layout,
             entries: &entries,
         });
-        let groups = threads.div_ceil(wg);
-        let (x, y) = if groups <= 65535 {
-            (groups, 1)
-        } else {
-            (65535, groups.div_ceil(65535))
-        };
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(kernel),
+            label: Some(kernel.name),
             timestamp_writes: None,
         });
         pass.set_pipeline(&p);
         pass.set_bind_group(0, &bg, &[]);
-        pass.dispatch_workgroups(x, y, 1);
+        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
         Ok(())
     }
 

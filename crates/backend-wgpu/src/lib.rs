@@ -1,9 +1,10 @@
 //! # r4d-backend-wgpu: the wgpu (WGSL compute) backend
 //!
-//! Kernels are WGSL files under `shaders/` (one source per kernel; `shaders/lib/` holds the
-//! shared structs and math), preprocessed and validated by naga in `build.rs`, so a broken
-//! shader fails `cargo build`; the build also writes each kernel's SPIR-V for a Vulkan/ash
-//! path. See [`context`] for device selection and memory tracking.
+//! The kernels are `r4d-shaders`' typed constants (WGSL validated by naga at build time,
+//! workgroup sizes and bindings reflected); this crate creates their pipelines, binds buffers
+//! and records dispatches. [`mpm`] and [`mpm_vjp`] implement the simulator's forward and
+//! reverse stages, [`splat`] the renderer's. See [`context`] for device selection and memory
+//! tracking.
 
 pub mod context;
 pub mod mpm;

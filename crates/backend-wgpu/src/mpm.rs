@@ -1,5 +1,5 @@
 //! [`r4d_mpm::MpmKernels`] on wgpu: particles and grid live in device buffers; the host sees
-//! them only through `download`. One WGSL kernel per stage (`shaders/mpm/`), mirroring the
+//! them only through `download`. One WGSL kernel per stage (`r4d-shaders/wgsl/mpm/`), mirroring the
 //! per-particle and per-node functions of `r4d_mpm::transfer` and `r4d_mpm::constitutive`:
 //!
 //! * `particle_bcs`: one thread per particle;
@@ -19,7 +19,7 @@ use r4d_mpm::kernels::{Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Partic
 use r4d_mpm::PartConsts;
 use std::sync::{Arc, Mutex};
 
-/// Per-dispatch sizes (`Counts` in `shaders/lib/structs.wgsl`).
+/// Per-dispatch sizes (`Counts` in `r4d-shaders/wgsl/lib/structs.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct Counts {
@@ -142,10 +142,9 @@ impl MpmKernels for WgpuMpm {
         let mut enc = self.ctx.encoder();
         self.ctx.dispatch(
             &mut enc,
-            "mpm_add_vjp",
+            &r4d_shaders::mpm::ADD_VJP,
             &[&counts.buffer, &src.buffer, &dst.buffer],
             (N * add.len()) as u32,
-            64,
         )?;
         self.ctx.submit(enc);
         Ok(())
@@ -164,7 +163,7 @@ impl MpmKernels for WgpuMpm {
         let mut enc = self.ctx.encoder();
         self.ctx.dispatch(
             &mut enc,
-            "mpm_particle_bcs",
+            &r4d_shaders::mpm::PARTICLE_BCS,
             &[
                 &cb.buffer,
                 &counts.buffer,
@@ -174,7 +173,6 @@ impl MpmKernels for WgpuMpm {
                 &p.v.buffer,
             ],
             p.count as u32,
-            64,
         )?;
         self.ctx.submit(enc);
         Ok(())
@@ -194,7 +192,7 @@ impl MpmKernels for WgpuMpm {
         enc.clear_buffer(&g.nodes.buffer, 0, None);
         self.ctx.dispatch(
             &mut enc,
-            "mpm_p2g_stress",
+            &r4d_shaders::mpm::P2G_STRESS,
             &[
                 &cb.buffer,
                 &counts.buffer,
@@ -207,11 +205,10 @@ impl MpmKernels for WgpuMpm {
                 &p.stress.buffer,
             ],
             p.count as u32,
-            64,
         )?;
         self.ctx.dispatch(
             &mut enc,
-            "mpm_p2g",
+            &r4d_shaders::mpm::P2G,
             &[
                 &cb.buffer,
                 &counts.buffer,
@@ -223,7 +220,6 @@ impl MpmKernels for WgpuMpm {
                 &g.nodes.buffer,
             ],
             p.count as u32,
-            64,
         )?;
         self.ctx.submit(enc);
         Ok(())
@@ -239,10 +235,9 @@ impl MpmKernels for WgpuMpm {
         let mut enc = self.ctx.encoder();
         self.ctx.dispatch(
             &mut enc,
-            "mpm_grid_update",
+            &r4d_shaders::mpm::GRID_UPDATE,
             &[&cb.buffer, &counts.buffer, &bcs.buffer, &g.nodes.buffer],
             (g.n * g.n * g.n) as u32,
-            64,
         )?;
         self.ctx.submit(enc);
         Ok(())
@@ -265,7 +260,7 @@ impl MpmKernels for WgpuMpm {
         let mut enc = self.ctx.encoder();
         self.ctx.dispatch(
             &mut enc,
-            "mpm_g2p",
+            &r4d_shaders::mpm::G2P,
             &[
                 &cb.buffer,
                 &counts.buffer,
@@ -277,13 +272,11 @@ impl MpmKernels for WgpuMpm {
                 &scratch.buffer,
             ],
             p.count as u32,
-            64,
         )?;
         self.ctx.dispatch(
             &mut enc,
-            "mpm_health",
+            &r4d_shaders::mpm::HEALTH,
             &[&cb.buffer, &scratch.buffer, &g.health.buffer],
-            1,
             1,
         )?;
         self.ctx.submit(enc);

@@ -3,7 +3,7 @@
 //! `r4d_mpm::adjoint::engine::KernelAdjoint` (so the checkpointing driver, the forward
 //! re-run with its tape and the per-slot chain rule are the CPU's).
 //!
-//! One WGSL kernel per step (`shaders/mpm/`), mirroring the per-particle and per-node VJP
+//! One WGSL kernel per step (`r4d-shaders/wgsl/mpm/`), mirroring the per-particle and per-node VJP
 //! functions of `r4d_mpm::adjoint`:
 //!
 //! * [`g2p_vjp`](MpmAdjointKernels::g2p_vjp): `g2p_vjp`, one thread per particle; node velocity
@@ -14,7 +14,7 @@
 //!   record), `scatter_vjp` (one thread per particle gathering the node adjoints, no atomics),
 //!   `stress_vjp` (the constitutive VJP in f32: fixed corotated in closed form, every other
 //!   isotropic model as the CPU does it, the scalar model's Jacobian from dual numbers in
-//!   `shaders/lib/dual_model.wgsl`, the matrix part by divided differences; the
+//!   `r4d-shaders/wgsl/lib/dual_model.wgsl`, the matrix part by divided differences; the
 //!   regularisation threshold differs from the CPU's: see the kernel's header), then
 //!   `particle_vjp` (particle conditions, RPIC damping, per-particle parameter adjoints);
 //! * [`reduce_slots`](MpmAdjointKernels::reduce_slots): `reduce_slots`, a tree reduction per
@@ -40,7 +40,7 @@ use r4d_mpm::kernels::{Grid, GridBc, Particles, StepConsts};
 use r4d_mpm::substep::{SubstepTables, Tape};
 
 /// Floats per particle of the reverse sweep's private record (`SBAR_STRIDE` in
-/// `shaders/lib/transfer_vjp.wgsl`).
+/// `r4d-shaders/wgsl/lib/transfer_vjp.wgsl`).
 const SBAR_STRIDE: usize = 32;
 /// Floats per particle of the constant record (`INFO_STRIDE` there).
 const INFO_STRIDE: usize = 8;
@@ -80,7 +80,7 @@ impl MpmAdjointKernels for WgpuMpm {
         enc.clear_buffer(&s.grid_bar.buffer, 0, None);
         ctx.dispatch(
             &mut enc,
-            "mpm_g2p_vjp",
+            &r4d_shaders::mpm::G2P_VJP,
             &[
                 &cb.buffer,
                 &counts.buffer,
@@ -94,7 +94,6 @@ impl MpmAdjointKernels for WgpuMpm {
                 &s.grid_bar.buffer,
             ],
             np as u32,
-            64,
         )?;
         ctx.submit(enc);
         Ok(())
@@ -113,7 +112,7 @@ impl MpmAdjointKernels for WgpuMpm {
         let mut enc = ctx.encoder();
         ctx.dispatch(
             &mut enc,
-            "mpm_grid_update_vjp",
+            &r4d_shaders::mpm::GRID_UPDATE_VJP,
             &[
                 &cb.buffer,
                 &counts.buffer,
@@ -123,7 +122,6 @@ impl MpmAdjointKernels for WgpuMpm {
                 &s.grid_in_bar.buffer,
             ],
             (n * n * n) as u32,
-            64,
         )?;
         ctx.submit(enc);
         Ok(())
@@ -159,7 +157,7 @@ impl MpmAdjointKernels for WgpuMpm {
         let mut enc = ctx.encoder();
         ctx.dispatch(
             &mut enc,
-            "mpm_pack_info",
+            &r4d_shaders::mpm::PACK_INFO,
             &[
                 k,
                 &p.x0.buffer,
@@ -169,11 +167,10 @@ impl MpmAdjointKernels for WgpuMpm {
                 &r.info.buffer,
             ],
             np as u32,
-            64,
         )?;
         ctx.dispatch(
             &mut enc,
-            "mpm_scatter_vjp",
+            &r4d_shaders::mpm::SCATTER_VJP,
             &[
                 c,
                 k,
@@ -186,14 +183,13 @@ impl MpmAdjointKernels for WgpuMpm {
                 &r.sbar.buffer,
             ],
             np as u32,
-            64,
         )?;
         // F_elastic's adjoint becomes F_trial's, the plastic state's after the substep
         // becomes the one before it.
         copy_all(&mut enc, &s.fe_bar, &adj.f);
         ctx.dispatch(
             &mut enc,
-            "mpm_stress_vjp",
+            &r4d_shaders::mpm::STRESS_VJP,
             &[
                 c,
                 k,
@@ -206,12 +202,11 @@ impl MpmAdjointKernels for WgpuMpm {
                 &adj.plastic.buffer,
             ],
             np as u32,
-            64,
         )?;
         copy_all(&mut enc, &s.x_bar, &adj.x);
         ctx.dispatch(
             &mut enc,
-            "mpm_particle_vjp",
+            &r4d_shaders::mpm::PARTICLE_VJP,
             &[
                 c,
                 k,
@@ -225,7 +220,6 @@ impl MpmAdjointKernels for WgpuMpm {
                 &s.pgrad.buffer,
             ],
             np as u32,
-            64,
         )?;
         ctx.submit(enc);
         Ok(())
@@ -242,10 +236,9 @@ impl MpmAdjointKernels for WgpuMpm {
         let mut enc = ctx.encoder();
         ctx.dispatch(
             &mut enc,
-            "mpm_reduce_slots",
+            &r4d_shaders::mpm::REDUCE_SLOTS,
             &[&counts.buffer, &pgrad.buffer, &slot.buffer, &grad.buffer],
             pgrad.len as u32,
-            64,
         )?;
         ctx.submit(enc);
         Ok(())
@@ -256,7 +249,7 @@ impl MpmAdjointKernels for WgpuMpm {
 mod tests {
     #[test]
     fn record_strides_match_the_shaders() {
-        let src = crate::shaders::source("mpm_scatter_vjp").expect("kernel");
+        let src = r4d_shaders::mpm::SCATTER_VJP.wgsl;
         assert!(src.contains(&format!(
             "const SBAR_STRIDE: u32 = {}u;",
             super::SBAR_STRIDE

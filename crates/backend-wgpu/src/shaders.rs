@@ -1,16 +1,8 @@
-//! The preprocessed WGSL kernels and the struct layouts naga reflected at build time.
+//! The kernels come from `r4d-shaders` (WGSL validated by naga at build time, dispatched as
+//! typed constants); this module checks that the structs they share with the host have the
+//! Rust `#[repr(C)]` layouts naga reflected.
 
-include!(concat!(env!("OUT_DIR"), "/kernels.rs"));
-
-/// The source of a kernel by name (`"mpm_p2g"`, `"mpm_p2g_cas"`, ...).
-pub fn source(name: &str) -> Option<&'static str> {
-    KERNELS.iter().find(|k| k.0 == name).map(|k| k.1)
-}
-
-/// The layout naga reflected for a WGSL struct: size and member offsets.
-pub fn layout(name: &str) -> Option<(u32, &'static [(&'static str, u32)])> {
-    LAYOUTS.iter().find(|l| l.0 == name).map(|l| (l.1, l.2))
-}
+pub use r4d_shaders::{layout, Kernel, LAYOUTS};
 
 #[cfg(test)]
 mod tests {

@@ -1,12 +1,12 @@
 //! [`r4d_splat::SplatKernels`] on wgpu: the renderer and its backward pass in WGSL
-//! (`shaders/splat/`), mirroring the CPU backend stage by stage and the per-Gaussian /
+//! (`r4d-shaders/wgsl/splat/`), mirroring the CPU backend stage by stage and the per-Gaussian /
 //! per-pixel functions of `r4d_splat::project`, `r4d_splat::covariance`, `r4d_splat::sh` and
 //! `r4d_splat::raster`. Every stage runs on the device; the host only records dispatches (and
 //! reads back the 4-byte intersection count in `bin_tiles`).
 //!
 //! * `project`: one thread per Gaussian (`project.wgsl`); culled Gaussians get radii (0, 0).
 //!   The per-Gaussian math (covariance, `F Sigma F^T`, the polar rotation of F, the SH basis,
-//!   the projection up to the 2D covariance) is in `shaders/lib/splat_project.wgsl`, shared
+//!   the projection up to the 2D covariance) is in `r4d-shaders/wgsl/lib/splat_project.wgsl`, shared
 //!   with `project_vjp`.
 //! * `bin_tiles`: `count_tiles` (tiles per Gaussian, `r4d_splat::raster::tile_rect` computed
 //!   exactly), an exclusive scan (`scan_block` / `scan_add`, 1024 values per workgroup,
@@ -50,15 +50,13 @@ use std::sync::Arc;
 
 /// Values per workgroup of the scan and radix kernels.
 const BLOCK: usize = 1024;
-/// Threads per workgroup of the scan and radix kernels.
-const WG: u32 = 256;
 
-/// One record of the intersection sort (`SplatTileKey` in `shaders/lib/splat_structs.wgsl`):
+/// One record of the intersection sort (`SplatTileKey` in `r4d-shaders/wgsl/lib/splat_structs.wgsl`):
 /// tile id, order-preserving depth key, Gaussian index.
 type TileKey = [u32; 3];
 
 /// Sizes of the per-Gaussian kernels `project`, `project_vjp` and `project_vjp_sh`
-/// (`SplatProjectParams` in `shaders/lib/splat_structs.wgsl`).
+/// (`SplatProjectParams` in `r4d-shaders/wgsl/lib/splat_structs.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct SplatProjectParams {
@@ -85,7 +83,7 @@ impl SplatProjectParams {
 }
 
 /// The sections of `project_vjp.wgsl`'s output buffer (`PV_*` in
-/// `shaders/lib/splat_project.wgsl`), as (start in multiples of n, values per Gaussian):
+/// `r4d-shaders/wgsl/lib/splat_project.wgsl`), as (start in multiples of n, values per Gaussian):
 /// dL/dmean, dL/dlog_scale, dL/dquat, dL/dopacity_logit; between the last two sections, the SH
 /// direction and the masked dL/dcolour that `project_vjp_sh.wgsl` reads (3 + 3).
 const SECTION_MEAN: (usize, usize) = (0, 3);
@@ -156,14 +154,18 @@ impl WgpuSplat {
         let sums = sums.buffer.clone();
         ctx.dispatch(
             enc,
-            "splat_scan_block",
+            &r4d_shaders::splat::SCAN_BLOCK,
             &[&params, data, &sums],
-            blocks as u32 * WG,
-            WG,
+            blocks as u32 * r4d_shaders::splat::SCAN_BLOCK.threads_per_group(),
         )?;
         if blocks > 1 {
             self.scan(enc, &sums, blocks, keep)?;
-            ctx.dispatch(enc, "splat_scan_add", &[&params, data, &sums], n as u32, WG)?;
+            ctx.dispatch(
+                enc,
+                &r4d_shaders::splat::SCAN_ADD,
+                &[&params, data, &sums],
+                n as u32,
+            )?;
         }
         Ok(())
     }
@@ -193,21 +195,19 @@ impl WgpuSplat {
                 &[m as u32, shift, key_sel, blocks as u32],
             )?);
             let params = params.buffer.clone();
-            let threads = blocks as u32 * WG;
+            let threads = blocks as u32 * r4d_shaders::splat::RADIX_HIST.threads_per_group();
             ctx.dispatch(
                 enc,
-                "splat_radix_hist",
+                &r4d_shaders::splat::RADIX_HIST,
                 &[&params, &src.buffer, &hist],
                 threads,
-                WG,
             )?;
             self.scan(enc, &hist, 16 * blocks, keep)?;
             ctx.dispatch(
                 enc,
-                "splat_radix_scatter",
+                &r4d_shaders::splat::RADIX_SCATTER,
                 &[&params, &src.buffer, &hist, &dst.buffer],
                 threads,
-                WG,
             )?;
             std::mem::swap(&mut src, &mut dst);
         }
@@ -219,33 +219,12 @@ impl WgpuSplat {
     fn dispatch_tiles(
         &self,
         enc: &mut wgpu::CommandEncoder,
-        kernel: &str,
+        kernel: &'static r4d_shaders::Kernel,
         buffers: &[&wgpu::Buffer],
         tiles: [u32; 2],
     ) -> Result<(), WgpuError> {
-        let ctx = &self.ctx;
-        let pipeline = ctx.pipeline(kernel)?;
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(kernel),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
-        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(kernel),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups(tiles[0], tiles[1], 1);
-        Ok(())
+        self.ctx
+            .dispatch_groups(enc, kernel, buffers, [tiles[0], tiles[1], 1])
     }
 
     /// The buffer of a projection, or a one-record dummy when it is empty (a runtime-sized
@@ -300,7 +279,7 @@ impl SplatKernels for WgpuSplat {
         let mut enc = ctx.encoder();
         ctx.dispatch(
             &mut enc,
-            "splat_project",
+            &r4d_shaders::splat::PROJECT,
             &[
                 &cam_u.buffer,
                 &params.buffer,
@@ -313,7 +292,6 @@ impl SplatKernels for WgpuSplat {
                 &out.buffer,
             ],
             n as u32,
-            64,
         )?;
         ctx.submit(enc);
         Ok(out)
@@ -347,10 +325,9 @@ impl SplatKernels for WgpuSplat {
         let mut enc = ctx.encoder();
         ctx.dispatch(
             &mut enc,
-            "splat_count_tiles",
+            &r4d_shaders::splat::COUNT_TILES,
             &[&cam_u.buffer, &params.buffer, &proj.buffer, &counts.buffer],
             n as u32,
-            WG,
         )?;
         self.scan(&mut enc, &counts.buffer, n + 1, &mut keep)?;
         enc.copy_buffer_to_buffer(&counts.buffer, 4 * n as u64, &total.buffer, 0, 4);
@@ -367,7 +344,7 @@ impl SplatKernels for WgpuSplat {
         let mut enc = ctx.encoder();
         ctx.dispatch(
             &mut enc,
-            "splat_emit_keys",
+            &r4d_shaders::splat::EMIT_KEYS,
             &[
                 &cam_u.buffer,
                 &params.buffer,
@@ -376,7 +353,6 @@ impl SplatKernels for WgpuSplat {
                 &keys_a.buffer,
             ],
             n as u32,
-            WG,
         )?;
         let tile_bits = u32::BITS - (tiles as u32 - 1).leading_zeros();
         let sorted = self.radix_sort(
@@ -390,7 +366,7 @@ impl SplatKernels for WgpuSplat {
         let range_params = ctx.uniform("splat_range_params", &[m as u32, tiles as u32, 0, 0])?;
         ctx.dispatch(
             &mut enc,
-            "splat_tile_ranges",
+            &r4d_shaders::splat::TILE_RANGES,
             &[
                 &range_params.buffer,
                 &sorted.buffer,
@@ -398,7 +374,6 @@ impl SplatKernels for WgpuSplat {
                 &ids.buffer,
             ],
             m as u32,
-            WG,
         )?;
         ctx.submit(enc);
         Ok(TileBufs {
@@ -431,7 +406,7 @@ impl SplatKernels for WgpuSplat {
         let mut enc = ctx.encoder();
         self.dispatch_tiles(
             &mut enc,
-            "splat_rasterize",
+            &r4d_shaders::splat::RASTERIZE,
             &[
                 &cam_u.buffer,
                 proj_buf,
@@ -472,7 +447,7 @@ impl SplatKernels for WgpuSplat {
         let mut enc = ctx.encoder();
         self.dispatch_tiles(
             &mut enc,
-            "splat_rasterize_vjp",
+            &r4d_shaders::splat::RASTERIZE_VJP,
             &[
                 &cam_u.buffer,
                 &proj.buffer,
@@ -537,7 +512,7 @@ impl SplatKernels for WgpuSplat {
         let mut enc = ctx.encoder();
         ctx.dispatch(
             &mut enc,
-            "splat_project_vjp",
+            &r4d_shaders::splat::PROJECT_VJP,
             &[
                 &cam_u.buffer,
                 &params_u.buffer,
@@ -551,14 +526,12 @@ impl SplatKernels for WgpuSplat {
                 &packed.buffer,
             ],
             n as u32,
-            64,
         )?;
         ctx.dispatch(
             &mut enc,
-            "splat_project_vjp_sh",
+            &r4d_shaders::splat::PROJECT_VJP_SH,
             &[&params_u.buffer, &packed.buffer, &out.sh.buffer],
             n as u32,
-            64,
         )?;
         let mut copy = |(start, width): (usize, usize), dst: &wgpu::Buffer| {
             let (off, len) = (4 * (start * n) as u64, 4 * (width * n) as u64);

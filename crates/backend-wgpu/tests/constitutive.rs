@@ -1,4 +1,4 @@
-//! The WGSL constitutive models (`shaders/lib/constitutive.wgsl`, `shaders/lib/svd.wgsl`) against
+//! The WGSL constitutive models (`r4d-shaders/wgsl/lib/constitutive.wgsl`, `r4d-shaders/wgsl/lib/svd.wgsl`) against
 //! the Rust reference `r4d_mpm::constitutive::stress_update::<f32>`, through the test-only kernel
 //! `mpm_stress_check`.
 //!
@@ -25,7 +25,7 @@ use r4d_mpm::constitutive::stress_update;
 use r4d_mpm::math::{svd3, Mat3};
 use r4d_mpm::{Material, PartConsts, PartParams};
 
-/// Mirrors `StressCheckParams` in `shaders/mpm/stress_check.wgsl`.
+/// Mirrors `StressCheckParams` in `r4d-shaders/wgsl/mpm/stress_check.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct StressCheckParams {
@@ -362,7 +362,7 @@ fn wgsl_constitutive_models_match_the_rust_reference() {
     let mut enc = ctx.encoder();
     ctx.dispatch(
         &mut enc,
-        "mpm_stress_check",
+        &r4d_shaders::mpm::STRESS_CHECK,
         &[
             &params.buffer,
             &f_buf.buffer,
@@ -375,7 +375,6 @@ fn wgsl_constitutive_models_match_the_rust_reference() {
             &plastic_out_buf.buffer,
         ],
         n as u32,
-        64,
     )
     .unwrap();
     ctx.submit(enc);

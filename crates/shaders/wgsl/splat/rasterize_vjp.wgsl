@@ -1,5 +1,6 @@
 // VJP of `rasterize.wgsl` for dL/drgb: one workgroup per 16x16 tile, one thread per pixel,
-// per pixel exactly `r4d_splat::raster::composite_pixel` then `composite_pixel_vjp`.
+// per pixel exactly `r4d_splat::raster::composite_pixel` then `composite_pixel_vjp` (the
+// per-Gaussian rule is lib/composite.wgsl, shared with the forward).
 //
 // 1. Replay: the pixel composites its tile's Gaussians front to back as the forward does
 //    (same tests, same order) and keeps its final transmittance T and `last`, one past the
@@ -18,7 +19,7 @@
 //    are not a wgpu feature), and after each batch the workgroup adds the nonzero sums to the
 //    global `ProjectedGrad` array with one float atomic each (`#import atomic`: native
 //    `atomic<f32>` or a compare-exchange loop).
-#import lib/splat_structs.wgsl
+#import lib/composite.wgsl
 #import atomic
 
 @group(0) @binding(0) var<uniform> cam: CameraConsts;
@@ -31,9 +32,6 @@
 
 const BATCH: u32 = 128u;
 const THREADS: u32 = 256u;
-const ALPHA_MAX: f32 = 0.999;
-const ALPHA_MIN: f32 = 1.0 / 255.0;
-const T_MIN: f32 = 1e-4;
 
 // (u, v, opacity, s_cut)
 var<workgroup> s_geo: array<vec4<f32>, BATCH>;
@@ -67,7 +65,7 @@ fn stage(lid: u32, base: u32, start: u32, end: u32, with_color: bool) {
     if lid < BATCH && k < end {
         let id = ids[base + k];
         let p = proj[id];
-        s_geo[lid] = vec4<f32>(p.mean_x, p.mean_y, p.opacity, log(255.0 * p.opacity) + 1e-3);
+        s_geo[lid] = staged_geometry(p);
         s_conic[lid] = vec4<f32>(p.conic_a, p.conic_b, p.conic_c, 0.0);
         if with_color {
             s_color[lid] = vec4<f32>(p.color_r, p.color_g, p.color_b, 0.0);
@@ -126,20 +124,12 @@ fn main(
         if !done {
             let cnt = min(BATCH, total - start);
             for (var q = 0u; q < cnt; q++) {
-                let geo = s_geo[q];
-                let con = s_conic[q];
-                let dx = geo.x - px;
-                let dy = geo.y - py;
-                let s = 0.5 * (con.x * dx * dx + con.z * dy * dy) + con.y * dx * dy;
-                if s < 0.0 || s > geo.w {
+                let h = composite_hit(s_geo[q], s_conic[q].xyz, px, py);
+                if !h.hit {
                     continue;
                 }
-                let alpha = min(geo.z * exp(-s), ALPHA_MAX);
-                if alpha < ALPHA_MIN {
-                    continue;
-                }
-                let t_next = t * (1.0 - alpha);
-                if t_next <= T_MIN {
+                let t_next = t * (1.0 - h.alpha);
+                if composite_stops(t_next) {
                     done = true;
                     break;
                 }
@@ -170,21 +160,16 @@ fn main(
         let hi = min(BATCH, select(0u, last - start, last > start));
         for (var qq = hi; qq > 0u; qq--) {
             let q = qq - 1u;
-            let geo = s_geo[q];
             let con = s_conic[q];
-            let dx = geo.x - px;
-            let dy = geo.y - py;
-            let s = 0.5 * (con.x * dx * dx + con.z * dy * dy) + con.y * dx * dy;
-            if s < 0.0 || s > geo.w {
+            let h = composite_hit(s_geo[q], con.xyz, px, py);
+            if !h.hit {
                 continue;
             }
-            let g = exp(-s);
-            let raw = geo.z * g;
-            let capped = raw > ALPHA_MAX;
-            let alpha = min(raw, ALPHA_MAX);
-            if alpha < ALPHA_MIN {
-                continue;
-            }
+            let alpha = h.alpha;
+            let g = h.g;
+            let capped = h.capped;
+            let dx = h.dx;
+            let dy = h.dy;
             let one_minus = 1.0 - alpha;
             // Transmittance in front of this Gaussian.
             let t_front = t / one_minus;

@@ -1,10 +1,9 @@
 // Composites every pixel: one workgroup per 16x16 tile, one thread per pixel, the tile's
-// Gaussians (front to back) loaded 256 at a time into workgroup memory with their cut-off
-// exponent `ln(255 o) + 1e-3`; per pixel exactly `r4d_splat::raster::composite_pixel`: skip
-// `s < 0` or `s > s_cut`, alpha capped at 0.999, skip alpha < 1/255, exclusive stop when
-// `T_next <= 1e-4`; rgb + T * background, alpha = 1 - T, depth = D / max(1 - T, 1e-10).
+// Gaussians (front to back) loaded 256 at a time into workgroup memory; per pixel exactly
+// `r4d_splat::raster::composite_pixel` (the per-Gaussian rule is lib/composite.wgsl, shared
+// with the VJP); rgb + T * background, alpha = 1 - T, depth = D / max(1 - T, 1e-10).
 // The workgroup stops loading once every pixel of the tile has stopped.
-#import lib/splat_structs.wgsl
+#import lib/composite.wgsl
 
 @group(0) @binding(0) var<uniform> cam: CameraConsts;
 @group(0) @binding(1) var<storage, read> proj: array<Projected>;
@@ -15,9 +14,6 @@
 @group(0) @binding(6) var<storage, read_write> out_depth: array<f32>;
 
 const BATCH: u32 = 256u;
-const ALPHA_MAX: f32 = 0.999;
-const ALPHA_MIN: f32 = 1.0 / 255.0;
-const T_MIN: f32 = 1e-4;
 
 // (u, v, opacity, s_cut)
 var<workgroup> s_geo: array<vec4<f32>, 256>;
@@ -67,7 +63,7 @@ fn main(
         let k = range.x + start + lid;
         if k < range.y {
             let p = proj[ids[k]];
-            s_geo[lid] = vec4<f32>(p.mean_x, p.mean_y, p.opacity, log(255.0 * p.opacity) + 1e-3);
+            s_geo[lid] = staged_geometry(p);
             s_conic[lid] = vec4<f32>(p.conic_a, p.conic_b, p.conic_c, p.depth);
             s_color[lid] = vec4<f32>(p.color_r, p.color_g, p.color_b, 0.0);
         }
@@ -75,25 +71,17 @@ fn main(
         if !done {
             let cnt = min(BATCH, total - start);
             for (var q = 0u; q < cnt; q++) {
-                let geo = s_geo[q];
                 let con = s_conic[q];
-                let dx = geo.x - px;
-                let dy = geo.y - py;
-                let s = 0.5 * (con.x * dx * dx + con.z * dy * dy) + con.y * dx * dy;
-                if s < 0.0 || s > geo.w {
+                let h = composite_hit(s_geo[q], con.xyz, px, py);
+                if !h.hit {
                     continue;
                 }
-                let g = exp(-s);
-                let alpha = min(geo.z * g, ALPHA_MAX);
-                if alpha < ALPHA_MIN {
-                    continue;
-                }
-                let t_next = t * (1.0 - alpha);
-                if t_next <= T_MIN {
+                let t_next = t * (1.0 - h.alpha);
+                if composite_stops(t_next) {
                     done = true;
                     break;
                 }
-                let wgt = alpha * t;
+                let wgt = h.alpha * t;
                 let col = s_color[q];
                 rgb.x += wgt * col.x;
                 rgb.y += wgt * col.y;
