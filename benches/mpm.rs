@@ -128,7 +128,7 @@ fn benches(c: &mut Criterion) {
                 "wgpu",
                 || WgpuMpm::new(ctx.clone()),
                 |b: &WgpuMpm| {
-                    let _ = b.context().device.poll(wgpu::PollType::Wait {
+                    let _ = b.engine().context().device.poll(wgpu::PollType::Wait {
                         submission_index: None,
                         timeout: None,
                     });

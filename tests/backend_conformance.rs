@@ -294,7 +294,7 @@ fn wgpu_path_dependent_materials_match_cpu() {
     let Some(b) = wgpu("wgpu_plastic") else {
         return;
     };
-    let ctx = b.context().clone();
+    let ctx = b.engine().context().clone();
     let scenes = [
         ("metal beam (clamped, pressed at mid-span)", METAL_BEAM.to_string()),
         (

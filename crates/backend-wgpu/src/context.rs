@@ -265,6 +265,21 @@ impl WgpuContext {
         Ok(b)
     }
 
+    /// A uniform buffer holding `bytes` (padded to 16 bytes).
+    pub fn uniform_bytes(
+        &self,
+        label: &'static str,
+        bytes: &[u8],
+    ) -> Result<GpuBuffer<u8>, WgpuError> {
+        let b = self.alloc::<u8>(
+            label,
+            bytes.len().next_multiple_of(16),
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        )?;
+        self.write(&b, bytes);
+        Ok(b)
+    }
+
     /// Copies a buffer back to the host (waits for all submitted work).
     pub fn download<T: Pod>(&self, b: &GpuBuffer<T>) -> Result<Vec<T>, WgpuError> {
         let n = b.len * std::mem::size_of::<T>();

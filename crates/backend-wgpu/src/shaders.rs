@@ -67,7 +67,7 @@ mod tests {
         );
         check(
             "Counts",
-            size_of::<crate::mpm::Counts>(),
+            size_of::<r4d_gpu::Counts>(),
             &[("particles", 0), ("n_grid", 4)],
         );
     }

@@ -1,0 +1,110 @@
+//! The wgpu engine of `r4d-gpu`'s recordings ([`GpuEngine`] for [`WgpuEngine`]): buffers are
+//! [`GpuBuffer`]s of the context (labelled, counted in its memory report), a recording
+//! becomes one command encoder (one compute pass per dispatch, bind groups from the kernels'
+//! reflected layouts) and one queue submission.
+//!
+//! [`WgpuMpm`] is the simulator's kernels on it: the forward and reverse stages recorded once
+//! in `r4d_gpu::GpuMpm`, so nothing here knows an MPM kernel.
+
+use crate::context::{GpuBuffer, WgpuContext, WgpuError};
+use r4d_gpu::{Command, GpuEngine, Recording, Resource};
+use r4d_mpm::kernels::MemoryUsage;
+use std::sync::Arc;
+
+/// The simulator's kernels (forward and reverse) on wgpu.
+pub type WgpuMpm = r4d_gpu::GpuMpm<WgpuEngine>;
+
+/// A wgpu device as an engine of recordings.
+#[derive(Clone)]
+pub struct WgpuEngine {
+    ctx: Arc<WgpuContext>,
+}
+
+impl WgpuEngine {
+    /// The engine of a device.
+    pub fn new(ctx: Arc<WgpuContext>) -> Self {
+        WgpuEngine { ctx }
+    }
+
+    /// The device.
+    pub fn context(&self) -> &Arc<WgpuContext> {
+        &self.ctx
+    }
+}
+
+impl From<Arc<WgpuContext>> for WgpuEngine {
+    fn from(ctx: Arc<WgpuContext>) -> Self {
+        WgpuEngine::new(ctx)
+    }
+}
+
+impl GpuEngine for WgpuEngine {
+    type Raw = GpuBuffer<u8>;
+    type Error = WgpuError;
+
+    fn name(&self) -> &'static str {
+        "wgpu"
+    }
+
+    fn alloc(&self, label: &'static str, bytes: u64) -> Result<GpuBuffer<u8>, WgpuError> {
+        self.ctx.zeros(label, bytes as usize)
+    }
+
+    fn write(&self, raw: &GpuBuffer<u8>, data: &[u8]) -> Result<(), WgpuError> {
+        self.ctx.write(raw, data);
+        Ok(())
+    }
+
+    fn read(&self, raw: &GpuBuffer<u8>, bytes: u64) -> Result<Vec<u8>, WgpuError> {
+        let mut v = self.ctx.download(raw)?;
+        v.truncate(bytes as usize);
+        Ok(v)
+    }
+
+    fn execute(&self, rec: Recording<'_, GpuBuffer<u8>>) -> Result<(), WgpuError> {
+        let ctx = &self.ctx;
+        let uniforms = rec
+            .uniforms
+            .iter()
+            .map(|u| ctx.uniform_bytes("recording uniform", u))
+            .collect::<Result<Vec<_>, _>>()?;
+        let data = rec
+            .data
+            .iter()
+            .map(|d| ctx.upload("recording data", d))
+            .collect::<Result<Vec<_>, _>>()?;
+        let buf = |r: &Resource| -> &wgpu::Buffer {
+            match *r {
+                Resource::Buffer(i) => &rec.buffers[i].buffer,
+                Resource::Uniform(i) => &uniforms[i].buffer,
+                Resource::Data(i) => &data[i].buffer,
+            }
+        };
+        let mut enc = ctx.encoder();
+        for c in &rec.commands {
+            match c {
+                Command::Dispatch {
+                    kernel,
+                    groups,
+                    bindings,
+                } => {
+                    let bufs: Vec<&wgpu::Buffer> = bindings.iter().map(buf).collect();
+                    ctx.dispatch_groups(&mut enc, kernel, &bufs, *groups)?;
+                }
+                Command::Clear(r) => enc.clear_buffer(buf(r), 0, None),
+                Command::Copy { src, dst, bytes } => {
+                    enc.copy_buffer_to_buffer(buf(src), 0, buf(dst), 0, *bytes)
+                }
+            }
+        }
+        ctx.submit(enc);
+        Ok(())
+    }
+
+    fn memory_usage(&self) -> MemoryUsage {
+        MemoryUsage {
+            bytes_in_use: self.ctx.bytes_in_use(),
+            peak_bytes: self.ctx.peak_bytes(),
+        }
+    }
+}
