@@ -86,7 +86,11 @@ impl<T: Real> Mat3<T> {
     /// `self * diag(d)` (scales columns).
     #[inline(always)]
     pub fn mul_diag(self, d: Vec3<T>) -> Self {
-        Mat3(self.0.map(|r| [r[0] * d[0], r[1] * d[1], r[2] * d[2]]))
+        let r = |i: usize| {
+            let r = self.0[i];
+            [r[0] * d[0], r[1] * d[1], r[2] * d[2]]
+        };
+        Mat3([r(0), r(1), r(2)])
     }
     /// `(self + self^T) / 2`.
     #[inline(always)]

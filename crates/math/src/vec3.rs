@@ -42,5 +42,5 @@ pub fn sub<T: Real>(a: Vec3<T>, b: Vec3<T>) -> Vec3<T> {
 /// Converts a vector between scalar types.
 #[inline(always)]
 pub fn cast<A: Real, B: Real>(v: Vec3<A>) -> Vec3<B> {
-    v.map(|x| B::c(x.f64()))
+    [B::c(v[0].f64()), B::c(v[1].f64()), B::c(v[2].f64())]
 }

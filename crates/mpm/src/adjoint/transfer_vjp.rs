@@ -240,12 +240,12 @@ pub fn grid_node_update_vjp<T: Real>(
     let damp = c.grid_v_damping < 1.0;
     if damp {
         let d = k::<T>(c.grid_v_damping);
-        v = v.map(|x| x * d);
+        v = [v[0] * d, v[1] * d, v[2] * d];
     }
     let mut bar = apply_grid_bcs_vjp(ijk, v, bcs, c, v_bar);
     if damp {
         let d = k::<T>(c.grid_v_damping);
-        bar = bar.map(|x| x * d);
+        bar = [bar[0] * d, bar[1] * d, bar[2] * d];
     }
     // u = mom / m: mom_bar = bar / m, m_bar = -(bar . u) / m.
     let dot = (0..3).fold(T::zero(), |s, a| s + bar[a] * u[a]);
