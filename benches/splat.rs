@@ -21,7 +21,7 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use r4d_backend_cpu::splat::CpuSplat;
-use r4d_backend_wgpu::{splat::WgpuSplat, WgpuContext};
+use r4d_backend_wgpu::{WgpuContext, WgpuSplat};
 use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SplatRenderer};
 use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use std::sync::Arc;

@@ -114,7 +114,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         RenderBackend::Wgpu => {
             let ctx = r4d_backend_wgpu::WgpuContext::new()?;
             eprintln!("wgpu adapter: {} ({:?})", ctx.info.name, ctx.info.backend);
-            Box::new(SplatRenderer::new(r4d_backend_wgpu::splat::WgpuSplat::new(
+            Box::new(SplatRenderer::new(r4d_backend_wgpu::WgpuSplat::new(
                 std::sync::Arc::new(ctx),
             )))
         }

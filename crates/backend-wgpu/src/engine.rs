@@ -3,8 +3,9 @@
 //! becomes one command encoder (one compute pass per dispatch, bind groups from the kernels'
 //! reflected layouts) and one queue submission.
 //!
-//! [`WgpuMpm`] is the simulator's kernels on it: the forward and reverse stages recorded once
-//! in `r4d_gpu::GpuMpm`, so nothing here knows an MPM kernel.
+//! [`WgpuMpm`] and [`WgpuSplat`] are the simulator's and the renderer's kernels on it: their
+//! stages are recorded once in `r4d_gpu` (`GpuMpm`, `GpuSplat`), so nothing here knows a
+//! kernel.
 
 use crate::context::{GpuBuffer, WgpuContext, WgpuError};
 use r4d_gpu::{Command, GpuEngine, Recording, Resource};
@@ -13,6 +14,9 @@ use std::sync::Arc;
 
 /// The simulator's kernels (forward and reverse) on wgpu.
 pub type WgpuMpm = r4d_gpu::GpuMpm<WgpuEngine>;
+
+/// The renderer's kernels (forward and backward) on wgpu.
+pub type WgpuSplat = r4d_gpu::GpuSplat<WgpuEngine>;
 
 /// A wgpu device as an engine of recordings.
 #[derive(Clone)]
@@ -73,11 +77,17 @@ impl GpuEngine for WgpuEngine {
             .iter()
             .map(|d| ctx.upload("recording data", d))
             .collect::<Result<Vec<_>, _>>()?;
+        let scratch = rec
+            .scratch
+            .iter()
+            .map(|&b| ctx.zeros::<u8>("recording scratch", b as usize))
+            .collect::<Result<Vec<_>, _>>()?;
         let buf = |r: &Resource| -> &wgpu::Buffer {
             match *r {
                 Resource::Buffer(i) => &rec.buffers[i].buffer,
                 Resource::Uniform(i) => &uniforms[i].buffer,
                 Resource::Data(i) => &data[i].buffer,
+                Resource::Scratch(i) => &scratch[i].buffer,
             }
         };
         let mut enc = ctx.encoder();
@@ -92,8 +102,14 @@ impl GpuEngine for WgpuEngine {
                     ctx.dispatch_groups(&mut enc, kernel, &bufs, *groups)?;
                 }
                 Command::Clear(r) => enc.clear_buffer(buf(r), 0, None),
-                Command::Copy { src, dst, bytes } => {
-                    enc.copy_buffer_to_buffer(buf(src), 0, buf(dst), 0, *bytes)
+                Command::Copy {
+                    src,
+                    src_offset,
+                    dst,
+                    dst_offset,
+                    bytes,
+                } => {
+                    enc.copy_buffer_to_buffer(buf(src), *src_offset, buf(dst), *dst_offset, *bytes)
                 }
             }
         }

@@ -7,9 +7,9 @@
 //! Gaussians, capped alphas), an empty render and the WGSL struct layouts.
 
 use r4d_backend_cpu::splat::CpuSplat;
-use r4d_backend_wgpu::splat::WgpuSplat;
 use r4d_backend_wgpu::testing::{gpu_or_skip, gpu_or_skip_with};
 use r4d_backend_wgpu::WgpuContext;
+use r4d_backend_wgpu::WgpuSplat;
 use r4d_splat::kernels::{SceneBufs, TileBufs};
 use r4d_splat::project::Projected;
 use r4d_splat::{
@@ -798,7 +798,7 @@ fn wgsl_splat_structs_match_the_rust_layouts() {
             ("color_b", offset_of!(G, color) + 8),
         ],
     );
-    type S = r4d_backend_wgpu::splat::SplatProjectParams;
+    type S = r4d_gpu::SplatProjectParams;
     check(
         "SplatProjectParams",
         size_of::<S>(),

@@ -49,6 +49,21 @@ impl<E: GpuEngine, T: Pod> GpuBuf<E, T> {
         })
     }
 
+    /// A zero-filled buffer of `len` elements with room for `capacity >= len` (a kernel that
+    /// binds a runtime-sized array needs at least one element even when `len` is 0).
+    pub fn zeros_with_capacity(
+        e: &E,
+        label: &'static str,
+        len: usize,
+        capacity: usize,
+    ) -> Result<Self, E::Error> {
+        Ok(GpuBuf {
+            raw: e.alloc(label, Self::bytes_for(capacity.max(len)))?,
+            len,
+            _t: PhantomData,
+        })
+    }
+
     /// A buffer holding `data`.
     pub fn upload(e: &E, label: &'static str, data: &[T]) -> Result<Self, E::Error> {
         let b = Self::zeros(e, label, data.len())?;

@@ -7,10 +7,11 @@
 //! knows nothing about MPM.
 //!
 //! [`GpuMpm`] implements the simulator's kernel traits ([`r4d_mpm::MpmKernels`] forward,
-//! [`r4d_mpm::adjoint::engine::MpmAdjointKernels`] reverse) once for every engine: a new GPU
-//! backend implements [`GpuEngine`] (six methods) and gets the whole differentiable
-//! simulator, with the stage order of `r4d_mpm::substep` and the stepper of
-//! `r4d_mpm::adjoint::engine`.
+//! [`r4d_mpm::adjoint::engine::MpmAdjointKernels`] reverse) and [`GpuSplat`] the renderer's
+//! ([`r4d_splat::SplatKernels`], forward and backward) once for every engine: a new GPU
+//! backend implements [`GpuEngine`] (six methods) and gets the whole differentiable simulator
+//! (the stage order of `r4d_mpm::substep`, the stepper of `r4d_mpm::adjoint::engine`) and
+//! renderer (`r4d_splat::SplatRenderer`).
 //!
 //! ```
 //! use r4d_gpu::{Recording, Resource};
@@ -29,7 +30,9 @@ pub mod engine;
 pub mod mpm;
 pub mod mpm_vjp;
 pub mod recording;
+pub mod splat;
 
 pub use engine::{GpuBuf, GpuEngine};
 pub use mpm::{Counts, GpuMpm};
 pub use recording::{Command, Recording, Resource};
+pub use splat::{GpuSplat, SplatProjectParams};

@@ -15,6 +15,9 @@ pub enum Resource {
     /// The `i`-th storage block of [`Recording::data`] (created by the engine for this
     /// recording only, read-only to the kernels).
     Data(usize),
+    /// The `i`-th zero-filled scratch buffer of [`Recording::scratch`] (created by the engine
+    /// for this recording only: prefix-sum partials, histograms).
+    Scratch(usize),
 }
 
 /// One command.
@@ -33,12 +36,16 @@ pub enum Command {
     },
     /// Zeroes a whole buffer.
     Clear(Resource),
-    /// Copies the first `bytes` bytes of `src` into `dst`.
+    /// Copies `bytes` bytes of `src` from byte `src_offset` into `dst` at `dst_offset`.
     Copy {
         /// Source.
         src: Resource,
+        /// Byte offset in the source (a multiple of 4).
+        src_offset: u64,
         /// Destination.
         dst: Resource,
+        /// Byte offset in the destination (a multiple of 4).
+        dst_offset: u64,
         /// Bytes (a multiple of 4).
         bytes: u64,
     },
@@ -63,6 +70,8 @@ pub struct Recording<'a, R> {
     pub uniforms: Vec<Vec<u8>>,
     /// Read-only storage blocks (bytes), one buffer each.
     pub data: Vec<Vec<u8>>,
+    /// Sizes in bytes of the zero-filled scratch buffers.
+    pub scratch: Vec<u64>,
     /// The commands.
     pub commands: Vec<Command>,
 }
@@ -73,6 +82,7 @@ impl<R> Default for Recording<'_, R> {
             buffers: Vec::new(),
             uniforms: Vec::new(),
             data: Vec::new(),
+            scratch: Vec::new(),
             commands: Vec::new(),
         }
     }
@@ -104,6 +114,12 @@ impl<'a, R> Recording<'a, R> {
     pub fn data<T: Pod>(&mut self, v: &[T]) -> Resource {
         self.data.push(bytemuck::cast_slice(v).to_vec());
         Resource::Data(self.data.len() - 1)
+    }
+
+    /// A zero-filled scratch buffer of at least `bytes` bytes, alive for this recording.
+    pub fn scratch(&mut self, bytes: u64) -> Resource {
+        self.scratch.push(bytes);
+        Resource::Scratch(self.scratch.len() - 1)
     }
 
     /// Dispatches `kernel` over `threads` invocations (workgroups of its reflected size, split
@@ -146,10 +162,28 @@ impl<'a, R> Recording<'a, R> {
         self.commands.push(Command::Clear(r));
     }
 
-    /// Copies `bytes` bytes from `src` to `dst` (nothing for zero bytes).
+    /// Copies the first `bytes` bytes of `src` to the start of `dst` (nothing for zero bytes).
     pub fn copy(&mut self, src: Resource, dst: Resource, bytes: u64) {
+        self.copy_range(src, 0, dst, 0, bytes);
+    }
+
+    /// Copies `bytes` bytes from `src` at `src_offset` to `dst` at `dst_offset`.
+    pub fn copy_range(
+        &mut self,
+        src: Resource,
+        src_offset: u64,
+        dst: Resource,
+        dst_offset: u64,
+        bytes: u64,
+    ) {
         if bytes > 0 {
-            self.commands.push(Command::Copy { src, dst, bytes });
+            self.commands.push(Command::Copy {
+                src,
+                src_offset,
+                dst,
+                dst_offset,
+                bytes,
+            });
         }
     }
 

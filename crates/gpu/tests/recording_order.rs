@@ -63,7 +63,10 @@ impl GpuEngine for TraceEngine {
                         let ok = match (r, b.kind) {
                             (Resource::Uniform(_), BindingKind::Uniform) => true,
                             (Resource::Data(_), BindingKind::Storage { read_only }) => read_only,
-                            (Resource::Buffer(_), BindingKind::Storage { .. }) => true,
+                            (
+                                Resource::Buffer(_) | Resource::Scratch(_),
+                                BindingKind::Storage { .. },
+                            ) => true,
                             _ => false,
                         };
                         if !ok {
@@ -78,7 +81,9 @@ impl GpuEngine for TraceEngine {
                 Command::Clear(Resource::Buffer(i)) => rec.buffers[*i].lock().unwrap().fill(0),
                 Command::Copy {
                     src: Resource::Buffer(s),
+                    src_offset: 0,
                     dst: Resource::Buffer(d),
+                    dst_offset: 0,
                     bytes,
                 } => {
                     let v = rec.buffers[*s].lock().unwrap()[..*bytes as usize].to_vec();

@@ -2,7 +2,7 @@
 //
 // `CameraConsts`, `Projected` and `ProjectedGrad` mirror the `#[repr(C)]` + Pod structs of
 // `r4d_splat::kernels` / `r4d_splat::project`, `SplatProjectParams` the one of
-// `r4d_backend_wgpu::splat`, field for field (a test compares the layouts naga reflects with
+// `r4d_gpu::splat`, field for field (a test compares the layouts naga reflects with
 // the Rust ones). `Projected` and `ProjectedGrad` use scalar fields (a `vec3<f32>` would be
 // 16-byte aligned), so they are 10 f32 + 2 u32 = 48 bytes and 9 f32 = 36 bytes, like
 // `Projected<f32>` and `ProjectedGrad<f32>`.

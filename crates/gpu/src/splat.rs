@@ -1,0 +1,420 @@
+//! [`r4d_splat::SplatKernels`] for every GPU engine: the renderer and its backward pass in WGSL
+//! (`r4d-shaders/wgsl/splat/`), mirroring the CPU backend stage by stage and the per-Gaussian /
+//! per-pixel functions of `r4d_splat::project`, `r4d_splat::covariance`, `r4d_splat::sh` and
+//! `r4d_splat::raster`. Every stage is a recording ([`crate::Recording`]) of `r4d-shaders`' kernels that
+//! the engine executes; the host reads back only the 4-byte intersection count in
+//! `bin_tiles` (between its two recordings).
+//!
+//! * `project`: one thread per Gaussian (`project.wgsl`); culled Gaussians get radii (0, 0).
+//!   The per-Gaussian math (covariance, `F Sigma F^T`, the polar rotation of F, the SH basis,
+//!   the projection up to the 2D covariance) is in `r4d-shaders/wgsl/lib/splat_project.wgsl`, shared
+//!   with `project_vjp`.
+//! * `bin_tiles`: `count_tiles` (tiles per Gaussian, `r4d_splat::raster::tile_rect` computed
+//!   exactly), an exclusive scan (`scan_block` / `scan_add`, 1024 values per workgroup,
+//!   recursive over the block sums), one 4-byte readback of the number of intersections,
+//!   `emit_keys` (a (tile, depth, index) record per intersection, in ascending Gaussian
+//!   index), a stable LSD radix sort with 4-bit digits (`radix_hist`, scan, `radix_scatter`):
+//!   8 passes over the depth key (the f32 bits mapped to `total_cmp` order), then
+//!   `ceil(log2(tiles) / 4)` passes over the tile id, so each tile's list is ordered by depth
+//!   then index exactly as [`r4d_splat::raster::depth_order`] orders it; then `tile_ranges`
+//!   writes the ids and the `tiles + 1` offsets. The result equals
+//!   [`r4d_splat::raster::bin_tiles`] for the same projection, id for id.
+//! * `rasterize`: one workgroup per 16x16 tile, one thread per pixel, the tile's Gaussians
+//!   staged 256 at a time in workgroup memory (`rasterize.wgsl`).
+//!
+//! * `rasterize_vjp`: one workgroup per tile, one thread per pixel (`rasterize_vjp.wgsl`).
+//!   The trait hands it no forward image, so each pixel first replays its compositing (as the
+//!   CPU reference does) for its final transmittance and the position of its last composited
+//!   Gaussian; then the tile's list is staged 128 Gaussians at a time from that position down
+//!   and each pixel runs [`r4d_splat::raster::composite_pixel_vjp`]'s recursion back to front,
+//!   recovering the transmittance in front of each Gaussian as `T / (1 - alpha)`. Pixels add
+//!   their per-Gaussian gradients (mean2d, conic, opacity, colour) into workgroup memory
+//!   first (a compare-exchange on the f32 bits), and each batch's nonzero sums go to the
+//!   global `ProjectedGrad` array with one float atomic each: native `atomic<f32>` where the
+//!   adapter has `SHADER_FLOAT32_ATOMIC`, else the compare-exchange variant
+//!   (`splat_rasterize_vjp_cas`), so the sums are not bitwise reproducible run to run.
+//! * `project_vjp`: one thread per Gaussian (`project_vjp.wgsl`),
+//!   [`r4d_splat::project::project_vjp`] in f32 (including the polar-rotation VJP, which the
+//!   reference solves in f64): it recomputes the forward quantities and writes dL/dmean,
+//!   dL/dlog_scale, dL/dquat, dL/dopacity_logit and dL/dF into sections of one buffer (a kernel
+//!   binds at most 8 storage buffers, WebGPU's default), plus the SH direction and the
+//!   clamp-masked dL/dcolour, from which `project_vjp_sh.wgsl` writes dL/dsh; the sections are
+//!   then copied into the separate gradient buffers on the device.
+
+use crate::engine::{GpuBuf, GpuEngine};
+use crate::recording::{Recording, Resource};
+use bytemuck::{Pod, Zeroable};
+use r4d_shaders::splat as k;
+use r4d_splat::kernels::{ImageBufs, SceneBufs, SceneGradBufs, TileBufs};
+use r4d_splat::project::{Projected, ProjectedGrad};
+use r4d_splat::{CameraConsts, SplatKernels};
+
+/// Values per workgroup of the scan and radix kernels (4 per thread).
+const BLOCK: usize = 1024;
+
+/// One record of the intersection sort (`SplatTileKey` in `wgsl/lib/splat_structs.wgsl`):
+/// tile id, order-preserving depth key, Gaussian index.
+type TileKey = [u32; 3];
+
+/// Sizes of the per-Gaussian kernels `project`, `project_vjp` and `project_vjp_sh`
+/// (`SplatProjectParams` in `wgsl/lib/splat_structs.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct SplatProjectParams {
+    /// Number of Gaussians.
+    pub n: u32,
+    /// 1 when the scene is deformed (F given).
+    pub has_f: u32,
+    /// SH degree.
+    pub sh_degree: u32,
+    /// SH values per Gaussian (`K * 3`).
+    pub sh_len: u32,
+}
+
+impl SplatProjectParams {
+    fn of<E: GpuEngine>(scene: &SceneBufs<GpuSplat<E>>) -> Self {
+        let k = r4d_splat::gaussians::sh_coeffs(scene.sh_degree) as u32;
+        SplatProjectParams {
+            n: scene.n as u32,
+            has_f: scene.f.is_some() as u32,
+            sh_degree: scene.sh_degree,
+            sh_len: 3 * k,
+        }
+    }
+}
+
+/// The sections of `project_vjp.wgsl`'s output buffer (`PV_*` in
+/// `wgsl/lib/splat_project.wgsl`), as (start in multiples of n, values per Gaussian):
+/// dL/dmean, dL/dlog_scale, dL/dquat, dL/dopacity_logit; between the last two sections, the SH
+/// direction and the masked dL/dcolour that `project_vjp_sh.wgsl` reads (3 + 3).
+const SECTION_MEAN: (usize, usize) = (0, 3);
+const SECTION_LOG_SCALE: (usize, usize) = (3, 3);
+const SECTION_QUAT: (usize, usize) = (6, 4);
+const SECTION_OPACITY: (usize, usize) = (10, 1);
+/// dL/dF, present when the scene is deformed: it ends the buffer.
+const SECTION_F: (usize, usize) = (17, 9);
+
+/// The renderer's kernels on GPU engine `E`.
+pub struct GpuSplat<E: GpuEngine> {
+    engine: E,
+}
+
+impl<E: GpuEngine> GpuSplat<E> {
+    /// The kernels on an engine (anything that converts into one, such as a wgpu context).
+    pub fn new(engine: impl Into<E>) -> Self {
+        GpuSplat {
+            engine: engine.into(),
+        }
+    }
+
+    /// The engine.
+    pub fn engine(&self) -> &E {
+        &self.engine
+    }
+
+    /// A zero-filled buffer of `len` elements, allocated with at least one element so that it
+    /// satisfies the minimum binding size of a runtime-sized array of `T`.
+    fn zeros_bindable<T: Pod>(
+        &self,
+        label: &'static str,
+        len: usize,
+    ) -> Result<GpuBuf<E, T>, E::Error> {
+        GpuBuf::zeros_with_capacity(&self.engine, label, len, len.max(1))
+    }
+
+    fn zeros<T: Pod>(&self, label: &'static str, len: usize) -> Result<GpuBuf<E, T>, E::Error> {
+        GpuBuf::zeros(&self.engine, label, len)
+    }
+}
+
+/// Records an in-place exclusive prefix sum of the first `n` u32 of `data`.
+fn scan<R>(r: &mut Recording<'_, R>, data: Resource, n: usize) {
+    if n == 0 {
+        return;
+    }
+    let blocks = n.div_ceil(BLOCK);
+    let params = r.uniform(&[n as u32, blocks as u32, 0, 0]);
+    let sums = r.scratch(4 * blocks as u64);
+    let threads = blocks as u32 * k::SCAN_BLOCK.threads_per_group();
+    r.dispatch(&k::SCAN_BLOCK, threads, &[params, data, sums]);
+    if blocks > 1 {
+        scan(r, sums, blocks);
+        r.dispatch(&k::SCAN_ADD, n as u32, &[params, data, sums]);
+    }
+}
+
+/// Records a stable radix sort of `m` records (4-bit digits: 8 passes over the depth key,
+/// then `tile_passes` over the tile id), ping-ponging between `a` and `b`; returns the one
+/// holding the result.
+fn radix_sort<R>(
+    r: &mut Recording<'_, R>,
+    a: Resource,
+    b: Resource,
+    m: usize,
+    tile_passes: u32,
+) -> Resource {
+    let blocks = m.div_ceil(BLOCK);
+    let hist = r.scratch(4 * 16 * blocks as u64);
+    let (mut src, mut dst) = (a, b);
+    let passes = (0..8u32)
+        .map(|p| (0u32, 4 * p))
+        .chain((0..tile_passes).map(|p| (1u32, 4 * p)));
+    for (key_sel, shift) in passes {
+        let params = r.uniform(&[m as u32, shift, key_sel, blocks as u32]);
+        let threads = blocks as u32 * k::RADIX_HIST.threads_per_group();
+        r.dispatch(&k::RADIX_HIST, threads, &[params, src, hist]);
+        scan(r, hist, 16 * blocks);
+        r.dispatch(&k::RADIX_SCATTER, threads, &[params, src, hist, dst]);
+        std::mem::swap(&mut src, &mut dst);
+    }
+    src
+}
+
+impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
+    type Buf<T: Pod + Send + Sync> = GpuBuf<E, T>;
+    type Error = E::Error;
+
+    fn upload<T: Pod + Send + Sync>(&self, data: &[T]) -> Result<GpuBuf<E, T>, E::Error> {
+        GpuBuf::upload(&self.engine, "splat_upload", data)
+    }
+
+    fn download<T: Pod + Send + Sync>(&self, buf: &GpuBuf<E, T>) -> Result<Vec<T>, E::Error> {
+        buf.download(&self.engine)
+    }
+
+    fn project(
+        &self,
+        scene: &SceneBufs<Self>,
+        cam: &CameraConsts,
+    ) -> Result<GpuBuf<E, Projected<f32>>, E::Error> {
+        let n = scene.n;
+        let out = self.zeros_bindable::<Projected<f32>>("splat_projected", n)?;
+        if n == 0 {
+            return Ok(out);
+        }
+        let mut r = Recording::new();
+        let f = match &scene.f {
+            Some(f) => r.buf(&f.raw),
+            None => r.scratch(16),
+        };
+        let bind = [
+            r.uniform(cam),
+            r.uniform(&SplatProjectParams::of(scene)),
+            r.buf(&scene.means.raw),
+            r.buf(&scene.log_scales.raw),
+            r.buf(&scene.quats.raw),
+            r.buf(&scene.opacity_logits.raw),
+            r.buf(&scene.sh.raw),
+            f,
+            r.buf(&out.raw),
+        ];
+        r.dispatch(&k::PROJECT, n as u32, &bind);
+        self.engine.execute(r)?;
+        Ok(out)
+    }
+
+    fn bin_tiles(
+        &self,
+        proj: &GpuBuf<E, Projected<f32>>,
+        cam: &CameraConsts,
+    ) -> Result<TileBufs<Self>, E::Error> {
+        let n = proj.len;
+        let tiles = (cam.tiles[0] * cam.tiles[1]) as usize;
+        let offsets = self.zeros::<u32>("splat_tile_offsets", tiles + 1)?;
+        let empty = |offsets: GpuBuf<E, u32>| -> Result<TileBufs<Self>, E::Error> {
+            Ok(TileBufs {
+                offsets,
+                ids: self.zeros::<u32>("splat_tile_ids", 0)?,
+                intersections: 0,
+            })
+        };
+        if n == 0 || tiles == 0 {
+            return empty(offsets);
+        }
+        // n + 1 counts: the last stays 0 and scans to the total.
+        let counts = self.zeros::<u32>("splat_tile_counts", n + 1)?;
+        let total = self.zeros::<u32>("splat_intersections", 1)?;
+        let params = [n as u32, 0, 0, 0];
+        {
+            let mut r = Recording::new();
+            let (cam_u, params_u) = (r.uniform(cam), r.uniform(&params));
+            let (p, c, t) = (r.buf(&proj.raw), r.buf(&counts.raw), r.buf(&total.raw));
+            r.dispatch(&k::COUNT_TILES, n as u32, &[cam_u, params_u, p, c]);
+            scan(&mut r, c, n + 1);
+            r.copy_range(c, 4 * n as u64, t, 0, 4);
+            self.engine.execute(r)?;
+        }
+        let m = total.download(&self.engine)?[0] as usize;
+        if m == 0 {
+            return empty(offsets);
+        }
+        let keys_a = self.zeros_bindable::<TileKey>("splat_tile_keys", m)?;
+        let keys_b = self.zeros_bindable::<TileKey>("splat_tile_keys", m)?;
+        let ids = self.zeros::<u32>("splat_tile_ids", m)?;
+        let mut r = Recording::new();
+        let (cam_u, params_u) = (r.uniform(cam), r.uniform(&params));
+        let (a, b) = (r.buf(&keys_a.raw), r.buf(&keys_b.raw));
+        let emit = [cam_u, params_u, r.buf(&proj.raw), r.buf(&counts.raw), a];
+        r.dispatch(&k::EMIT_KEYS, n as u32, &emit);
+        let tile_bits = u32::BITS - (tiles as u32 - 1).leading_zeros();
+        let sorted = radix_sort(&mut r, a, b, m, tile_bits.div_ceil(4));
+        let ranges = [
+            r.uniform(&[m as u32, tiles as u32, 0, 0]),
+            sorted,
+            r.buf(&offsets.raw),
+            r.buf(&ids.raw),
+        ];
+        r.dispatch(&k::TILE_RANGES, m as u32, &ranges);
+        self.engine.execute(r)?;
+        Ok(TileBufs {
+            offsets,
+            ids,
+            intersections: m,
+        })
+    }
+
+    fn rasterize(
+        &self,
+        proj: &GpuBuf<E, Projected<f32>>,
+        bins: &TileBufs<Self>,
+        cam: &CameraConsts,
+    ) -> Result<ImageBufs<Self>, E::Error> {
+        let [w, h] = cam.size.map(|v| v as usize);
+        let img = ImageBufs {
+            rgb: self.zeros::<f32>("splat_rgb", w * h * 3)?,
+            alpha: self.zeros::<f32>("splat_alpha", w * h)?,
+            depth: self.zeros::<f32>("splat_depth", w * h)?,
+        };
+        let [tx, ty] = cam.tiles;
+        if w == 0 || h == 0 || tx == 0 || ty == 0 {
+            return Ok(img);
+        }
+        let mut r = Recording::new();
+        // An empty projection binds a one-record dummy (a runtime-sized array needs one).
+        let p = if proj.bytes() < std::mem::size_of::<Projected<f32>>() as u64 {
+            r.scratch(std::mem::size_of::<Projected<f32>>() as u64)
+        } else {
+            r.buf(&proj.raw)
+        };
+        let bind = [
+            r.uniform(cam),
+            p,
+            r.buf(&bins.offsets.raw),
+            r.buf(&bins.ids.raw),
+            r.buf(&img.rgb.raw),
+            r.buf(&img.alpha.raw),
+            r.buf(&img.depth.raw),
+        ];
+        r.dispatch_groups(&k::RASTERIZE, [tx, ty, 1], &bind);
+        self.engine.execute(r)?;
+        Ok(img)
+    }
+
+    /// `rasterize_vjp.wgsl`: one workgroup per tile replays each pixel's compositing, walks it
+    /// back to front and adds the per-Gaussian sums of each batch with float atomics.
+    fn rasterize_vjp(
+        &self,
+        proj: &GpuBuf<E, Projected<f32>>,
+        bins: &TileBufs<Self>,
+        cam: &CameraConsts,
+        d_rgb: &GpuBuf<E, f32>,
+    ) -> Result<GpuBuf<E, ProjectedGrad<f32>>, E::Error> {
+        let out = self.zeros_bindable::<ProjectedGrad<f32>>("splat_d_projected", proj.len)?;
+        let [tx, ty] = cam.tiles;
+        if proj.len == 0 || bins.intersections == 0 || tx == 0 || ty == 0 {
+            return Ok(out);
+        }
+        let [w, h] = cam.size.map(|v| v as usize);
+        assert_eq!(
+            d_rgb.len,
+            w * h * 3,
+            "rasterize_vjp: dL/drgb must have 3 values per pixel"
+        );
+        let mut r = Recording::new();
+        let bind = [
+            r.uniform(cam),
+            r.buf(&proj.raw),
+            r.buf(&bins.offsets.raw),
+            r.buf(&bins.ids.raw),
+            r.buf(&d_rgb.raw),
+            r.buf(&out.raw),
+        ];
+        r.dispatch_groups(&k::RASTERIZE_VJP, [tx, ty, 1], &bind);
+        self.engine.execute(r)?;
+        Ok(out)
+    }
+
+    /// `project_vjp.wgsl` (one thread per Gaussian, into one sectioned buffer), then
+    /// `project_vjp_sh.wgsl` (dL/dsh) and copies of the sections into the gradient buffers.
+    fn project_vjp(
+        &self,
+        scene: &SceneBufs<Self>,
+        cam: &CameraConsts,
+        proj: &GpuBuf<E, Projected<f32>>,
+        d_proj: &GpuBuf<E, ProjectedGrad<f32>>,
+    ) -> Result<SceneGradBufs<Self>, E::Error> {
+        let n = scene.n;
+        assert!(
+            proj.len == n && d_proj.len == n,
+            "project_vjp: {n} Gaussians but {} projections and {} projection gradients",
+            proj.len,
+            d_proj.len
+        );
+        let params = SplatProjectParams::of(scene);
+        let out = SceneGradBufs {
+            means: self.zeros::<[f32; 3]>("splat_d_means", n)?,
+            log_scales: self.zeros::<[f32; 3]>("splat_d_log_scales", n)?,
+            quats: self.zeros::<[f32; 4]>("splat_d_quats", n)?,
+            opacity_logits: self.zeros::<f32>("splat_d_opacity_logits", n)?,
+            sh: self.zeros_bindable::<f32>("splat_d_sh", n * params.sh_len as usize)?,
+            f: match scene.f {
+                Some(_) => Some(self.zeros::<[[f32; 3]; 3]>("splat_d_f", n)?),
+                None => None,
+            },
+        };
+        if n == 0 {
+            return Ok(out);
+        }
+        let width = match scene.f {
+            Some(_) => SECTION_F.0 + SECTION_F.1,
+            None => SECTION_F.0,
+        };
+        let packed = self.zeros::<f32>("splat_project_vjp_sections", n * width)?;
+        let mut r = Recording::new();
+        let f = match &scene.f {
+            Some(f) => r.buf(&f.raw),
+            None => r.scratch(16),
+        };
+        let params_u = r.uniform(&params);
+        let pk = r.buf(&packed.raw);
+        let bind = [
+            r.uniform(cam),
+            params_u,
+            r.buf(&scene.means.raw),
+            r.buf(&scene.log_scales.raw),
+            r.buf(&scene.quats.raw),
+            r.buf(&scene.opacity_logits.raw),
+            r.buf(&scene.sh.raw),
+            f,
+            r.buf(&d_proj.raw),
+            pk,
+        ];
+        r.dispatch(&k::PROJECT_VJP, n as u32, &bind);
+        let sh = r.buf(&out.sh.raw);
+        r.dispatch(&k::PROJECT_VJP_SH, n as u32, &[params_u, pk, sh]);
+        let mut sections = vec![
+            (SECTION_MEAN, r.buf(&out.means.raw)),
+            (SECTION_LOG_SCALE, r.buf(&out.log_scales.raw)),
+            (SECTION_QUAT, r.buf(&out.quats.raw)),
+            (SECTION_OPACITY, r.buf(&out.opacity_logits.raw)),
+        ];
+        if let Some(df) = &out.f {
+            sections.push((SECTION_F, r.buf(&df.raw)));
+        }
+        for ((start, width), dst) in sections {
+            r.copy_range(pk, 4 * (start * n) as u64, dst, 0, 4 * (width * n) as u64);
+        }
+        self.engine.execute(r)?;
+        Ok(out)
+    }
+}
