@@ -7,7 +7,7 @@ use common::fixture;
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{MpmSim, ParticleSet, SimConfig, Simulator};
 use r4d_optim::ParamKind;
-use resonance4d::fit_trajectory::{fit_trajectory, FitOptions};
+use resonance4d::fit_trajectory::{fit_trajectory, FitBackend, FitOptions};
 
 /// Simulates `cfg` on the CPU backend (as `r4d simulate` does) and returns frames 1 ...
 fn targets(cfg: &SimConfig, scene: &ParticleSet) -> Vec<Vec<[f32; 3]>> {
@@ -28,12 +28,19 @@ fn recovers_a_jelly_beams_youngs_modulus_from_10x_off() {
     let target = targets(&truth, &scene);
     let mut start = truth.clone();
     start.parts[0].youngs_modulus_pa = 2e6;
-    let fitted = fit_trajectory(&start, &scene, &target, &FitOptions::default(), |it| {
-        eprintln!(
-            "iter {:2}: loss {:.3e} E {:.0}",
-            it.iter, it.loss, it.parts[0].e
-        )
-    })
+    let fitted = fit_trajectory(
+        FitBackend::Cpu,
+        &start,
+        &scene,
+        &target,
+        &FitOptions::default(),
+        |it| {
+            eprintln!(
+                "iter {:2}: loss {:.3e} E {:.0}",
+                it.iter, it.loss, it.parts[0].e
+            )
+        },
+    )
     .unwrap();
     let e = fitted[0].youngs_modulus_pa;
     eprintln!(
@@ -59,7 +66,7 @@ fn recovers_both_parts_stiffness_to_density_ratios() {
         iters: 70,
         ..Default::default()
     };
-    let fitted = fit_trajectory(&start, &scene, &target, &opts, |it| {
+    let fitted = fit_trajectory(FitBackend::Cpu, &start, &scene, &target, &opts, |it| {
         eprintln!(
             "iter {:2}: loss {:.3e} E/rho {:.1} {:.1}",
             it.iter,
@@ -97,6 +104,7 @@ fn a_resumed_fit_continues_exactly_where_it_stopped() {
     };
     let mut at2: Option<FitCheckpoint> = None;
     let full = fit_trajectory_resumable(
+        FitBackend::Cpu,
         &start,
         &scene,
         &target,
@@ -114,6 +122,7 @@ fn a_resumed_fit_continues_exactly_where_it_stopped() {
     .unwrap();
     let mut iters_run = Vec::new();
     let resumed = fit_trajectory_resumable(
+        FitBackend::Cpu,
         &start,
         &scene,
         &target,

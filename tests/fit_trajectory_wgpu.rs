@@ -44,12 +44,11 @@ fn wgpu_fit_matches_the_cpu_fit() {
     let run = |backend: FitBackend| {
         let opts = FitOptions {
             iters: 4,
-            backend,
             ..Default::default()
         };
         let mut log: Vec<IterLog> = Vec::new();
         let t = std::time::Instant::now();
-        let fitted = fit_trajectory(&start, &scene, &target, &opts, |it| {
+        let fitted = fit_trajectory(backend, &start, &scene, &target, &opts, |it| {
             eprintln!(
                 "{backend:?} iter {}: loss {:.6e} |grad| {:.6e} E {:.1}",
                 it.iter, it.loss, it.grad_norm, it.parts[0].e
@@ -104,11 +103,13 @@ fn wgpu_yield_stress_gradient_matches_the_cpu() {
         let opts = FitOptions {
             params: vec![r4d_optim::ParamKind::YieldStress],
             iters: 1,
-            backend,
             ..Default::default()
         };
         let mut log: Vec<IterLog> = Vec::new();
-        fit_trajectory(&start, &scene, &target, &opts, |it| log.push(it.clone())).unwrap();
+        fit_trajectory(backend, &start, &scene, &target, &opts, |it| {
+            log.push(it.clone())
+        })
+        .unwrap();
         eprintln!(
             "{backend:?}: loss {:.6e} |grad| {:.6e}",
             log[0].loss, log[0].grad_norm

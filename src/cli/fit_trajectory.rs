@@ -183,7 +183,6 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         loss,
         checkpointing,
         granularity,
-        backend,
         ..Default::default()
     };
     let mut io_error = None;
@@ -198,6 +197,7 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         Ok(())
     };
     let fitted = fit_trajectory_resumable(
+        backend,
         &config,
         &loaded.scene,
         &targets,
@@ -220,7 +220,9 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         },
     )
     .map_err(|e| match e {
-        e @ FitError::Wgpu(_) => anyhow::Error::new(e).context("--backend wgpu"),
+        e @ FitError::Backend(_) => {
+            anyhow::Error::new(e).context(format!("--backend {}", a.backend))
+        }
         e => e.into(),
     })?;
     if let Some(e) = ck_error {

@@ -38,12 +38,12 @@
 //! bounds = { E = [1e4, 1e6] }
 //! ```
 
-use super::params::{default_free, Granularity};
 use super::problem::Precision;
 use super::FitError;
 use r4d_loss::DmsConfig;
 use r4d_mpm::adjoint::checkpoint::Checkpointing;
 use r4d_mpm::PartParams;
+use r4d_optim::space::{default_free, Granularity};
 use r4d_optim::{AdamW, ParamKind};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;

@@ -2,12 +2,12 @@
 //! and gradient clipping; a record per iteration and a resumable checkpoint.
 
 use super::config::{FitConfig, LrSchedule, OptimizerKind};
-use super::params::{get, set, Granularity, ParamSpace};
 use super::problem::{Evaluation, Objective, VideoProblem};
 use super::FitError;
 use crate::fit_trajectory::PartRecord;
 use r4d_loss::{ssim::ms_ssim, MsSsimConfig, Video};
 use r4d_mpm::PartParams;
+use r4d_optim::space::{part_summary, Granularity, ParamSpace};
 use r4d_optim::{
     Candidate, InitOutcome, LatinHypercubeInit, LogDomainOptimizer, ParamKind, SearchSpace,
     TrustRegion, TrustRegionBfgs,
@@ -354,35 +354,6 @@ pub struct FitOutcome {
     pub best_loss: Option<f64>,
     /// The initialisation's result.
     pub init: Option<InitOutcome>,
-}
-
-/// Per-part parameters from per-slot ones (per-particle slots: geometric means per part).
-pub fn part_summary(
-    base: &[PartParams],
-    slot_parts: &[u32],
-    slots: &[PartParams],
-) -> Vec<PartParams> {
-    if slots.len() == base.len() && slot_parts.iter().enumerate().all(|(i, &p)| p as usize == i) {
-        return slots.to_vec();
-    }
-    (0..base.len())
-        .map(|i| {
-            let mine: Vec<&PartParams> = slots
-                .iter()
-                .zip(slot_parts)
-                .filter(|(_, &p)| p as usize == i)
-                .map(|(v, _)| v)
-                .collect();
-            let mut out = base[i];
-            if !mine.is_empty() {
-                for k in ParamKind::ALL {
-                    let m = mine.iter().map(|v| get(v, k).ln()).sum::<f64>() / mine.len() as f64;
-                    set(&mut out, k, m.exp());
-                }
-            }
-            out
-        })
-        .collect()
 }
 
 /// MS-SSIM of rendered videos against the problem's references (mean over views), with the

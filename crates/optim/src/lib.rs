@@ -52,6 +52,8 @@ use serde::{Deserialize, Serialize};
 mod heap;
 mod init;
 mod lhs;
+pub mod space;
+pub mod trajectory;
 mod trust_bfgs;
 
 pub use heap::{HeapProbe, HeapSpan};

@@ -1,0 +1,419 @@
+//! Fitting part parameters to target particle trajectories with exact adjoint gradients
+//! (issue 3's trajectory supervision; `r4d fit-trajectory` is its command line), on any
+//! simulator backend.
+//!
+//! Each iteration runs the simulation forward with checkpoints, evaluates a
+//! [`TrajectoryLoss`] at every frame against the targets, sweeps backward through every
+//! substep (`r4d_mpm::adjoint`, the one stepper `KernelAdjoint` on the given kernels) and
+//! updates the free parameters with AdamW in the log domain. The caller picks the kernels:
+//! the CPU backend in f64 (`CpuBackend<f64>`, the default of `r4d fit-trajectory`) or a GPU
+//! in f32 (`WgpuMpm`); the states stay on the backend, only the positions of each frame come
+//! back for the loss and its gradient goes back to the position adjoint on the backend.
+
+use crate::space::{get, grad_of, part_summary, set};
+use crate::{AdamW, LogDomainOptimizer, ParamKind};
+use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing};
+use r4d_mpm::adjoint::engine::{KernelAdjoint, MpmAdjointKernels, StateBufs};
+use r4d_mpm::adjoint::host::{HostSim, PhysParams};
+use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
+use r4d_mpm::math::Real;
+use r4d_mpm::{PartParams, ParticleSet, SimConfig};
+use serde::Serialize;
+use std::cell::RefCell;
+use std::time::Instant;
+
+/// Errors of the fitting pipeline.
+#[derive(Debug, thiserror::Error)]
+pub enum FitError {
+    /// The simulator refused the setup.
+    #[error(transparent)]
+    Mpm(#[from] r4d_mpm::Error),
+    /// The optimiser refused a value or bound.
+    #[error(transparent)]
+    Optim(#[from] crate::Error),
+    /// Targets don't fit the simulation.
+    #[error("{0}")]
+    Targets(String),
+    /// The loss or a gradient became NaN.
+    #[error("iteration {0}: the loss or its gradient is not finite")]
+    NonFinite(usize),
+    /// The backend failed (a GPU: no adapter, no device, a transfer).
+    #[error(transparent)]
+    Backend(Box<dyn std::error::Error + Send + Sync>),
+}
+
+pub use crate::space::Granularity;
+
+/// The result of a fit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fitted {
+    /// Parameters per part (for per-particle fits: the geometric mean over each part's
+    /// particles).
+    pub parts: Vec<PartParams>,
+    /// Per-particle parameters, for per-particle fits.
+    pub per_particle: Option<Vec<PartParams>>,
+}
+
+/// Options of [`fit_trajectory`].
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    /// Free parameters.
+    pub params: Vec<ParamKind>,
+    /// Iterations.
+    pub iters: usize,
+    /// AdamW settings; the learning rate decays along a cosine to 5% of `adam.lr`.
+    pub adam: AdamW,
+    /// Gradient-norm clip in log space.
+    pub clip_norm: Option<f64>,
+    /// Loss.
+    pub loss: TrajectoryLoss,
+    /// Checkpointing of the reverse sweep.
+    pub checkpointing: Checkpointing,
+    /// Part or object parameters.
+    pub granularity: Granularity,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            params: vec![ParamKind::YoungsModulus],
+            iters: 30,
+            adam: AdamW {
+                lr: 0.3,
+                beta1: 0.5,
+                ..Default::default()
+            },
+            clip_norm: Some(1.0),
+            loss: TrajectoryLoss::Position,
+            checkpointing: Checkpointing::PerFrame,
+            granularity: Granularity::Part,
+        }
+    }
+}
+
+/// One iteration's record (a line of `log.jsonl`).
+#[derive(Clone, Debug, Serialize)]
+pub struct IterLog {
+    /// Iteration (0-based); parameters are those evaluated at this iteration.
+    pub iter: usize,
+    /// Loss (mean over frames).
+    pub loss: f64,
+    /// Norm of the gradient with respect to the log parameters, before clipping.
+    pub grad_norm: f64,
+    /// The parameters evaluated.
+    pub parts: Vec<PartRecord>,
+    /// Wall time of the iteration (s).
+    pub time_s: f64,
+}
+
+/// A part's parameters in the `params.json` schema.
+#[derive(Clone, Debug, Serialize, serde::Deserialize, PartialEq)]
+pub struct PartRecord {
+    /// Part index.
+    pub id: usize,
+    /// Material name.
+    pub material: String,
+    /// Young's modulus (Pa).
+    #[serde(rename = "E")]
+    pub e: f64,
+    /// Poisson's ratio.
+    pub nu: f64,
+    /// Density (kg/m^3).
+    pub density: f64,
+    /// Yield stress (Pa).
+    pub yield_stress: f64,
+    /// Plastic viscosity (Pa s).
+    pub plastic_viscosity: f64,
+    /// Friction angle (degrees).
+    pub friction_angle: f64,
+}
+
+impl PartRecord {
+    /// The record of a part.
+    pub fn of(id: usize, p: &PartParams) -> Self {
+        PartRecord {
+            id,
+            material: format!("{:?}", p.material).to_lowercase(),
+            e: p.youngs_modulus_pa,
+            nu: p.poisson_ratio,
+            density: p.density_kg_m3,
+            yield_stress: p.yield_stress_pa,
+            plastic_viscosity: p.plastic_viscosity_pa_s,
+            friction_angle: p.friction_angle_deg,
+        }
+    }
+}
+
+/// Fits the free parameters of `config`'s parts so that the simulation of `scene` follows
+/// `targets` (positions at frames 1, 2, ...). The starting point is the config's parameters.
+/// `on_iter` sees every iteration's record. Returns the parameters with the lowest loss
+/// evaluated.
+pub fn fit_trajectory<B: MpmAdjointKernels>(
+    backend: B,
+    config: &SimConfig,
+    scene: &ParticleSet,
+    targets: &[Vec<[f32; 3]>],
+    opts: &FitOptions,
+    on_iter: impl FnMut(&IterLog),
+) -> Result<Vec<PartParams>, FitError> {
+    fit_trajectory_resumable(backend, config, scene, targets, opts, None, on_iter, |_| {})
+        .map(|f| f.parts)
+}
+
+/// Per-part geometric means of per-particle parameters (`part` gives each particle's part).
+fn part_means(config: &SimConfig, part: &[u32], values: &[PartParams]) -> Vec<PartParams> {
+    part_summary(&config.parts, part, values)
+}
+
+/// Everything a killed fit needs to continue exactly where it stopped: the optimiser with its
+/// moments, the iterations done and the best parameters so far.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct FitCheckpoint {
+    /// Iterations completed.
+    pub iters_done: usize,
+    /// The optimiser (log parameters, Adam moments, step count).
+    pub optimizer: LogDomainOptimizer,
+    /// Lowest loss so far and its parameters.
+    pub best: Option<(f64, Vec<PartParams>)>,
+}
+
+/// [`fit_trajectory`] that starts from `resume` when given and hands a [`FitCheckpoint`] to
+/// `on_checkpoint` after every iteration (to be written to disk).
+#[allow(clippy::too_many_arguments)]
+pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
+    backend: B,
+    config: &SimConfig,
+    scene: &ParticleSet,
+    targets: &[Vec<[f32; 3]>],
+    opts: &FitOptions,
+    resume: Option<FitCheckpoint>,
+    mut on_iter: impl FnMut(&IterLog),
+    mut on_checkpoint: impl FnMut(&FitCheckpoint),
+) -> Result<Fitted, FitError> {
+    if targets.is_empty() {
+        return Err(FitError::Targets("no target frames".into()));
+    }
+    if opts.loss == TrajectoryLoss::Position {
+        if let Some((f, t)) = targets
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.len() != scene.len())
+        {
+            return Err(FitError::Targets(format!(
+                "target frame {} has {} points but the simulation has {} particles; the position loss needs corresponding particles (use the chamfer loss)",
+                f + 1,
+                t.len(),
+                scene.len()
+            )));
+        }
+    }
+    let per_particle = opts.granularity == Granularity::Particle;
+    let sim = if per_particle {
+        HostSim::new(config, scene)?.per_particle()
+    } else {
+        HostSim::new(config, scene)?
+    };
+    let stepper = KernelAdjoint::new(backend, &sim).map_err(backend_error)?;
+    // Parameter values per slot: per part, or per particle.
+    let mut parts: Vec<PartParams> = if per_particle {
+        scene
+            .part
+            .iter()
+            .map(|&p| config.parts[p as usize])
+            .collect()
+    } else {
+        config.parts.clone()
+    };
+    let summarize = |values: &[PartParams]| {
+        if per_particle {
+            part_means(config, &scene.part, values)
+        } else {
+            values.to_vec()
+        }
+    };
+    // Flat parameter vector: (slot, kind) pairs, or one entry per kind for the whole object.
+    let slots: Vec<(Option<usize>, ParamKind)> = match opts.granularity {
+        Granularity::Part | Granularity::Particle => (0..parts.len())
+            .flat_map(|i| opts.params.iter().map(move |&k| (Some(i), k)))
+            .collect(),
+        Granularity::Object => opts.params.iter().map(|&k| (None, k)).collect(),
+    };
+    let theta: Vec<f64> = slots
+        .iter()
+        .map(|&(i, k)| get(&parts[i.unwrap_or(0)], k))
+        .collect();
+    let bounds: Vec<(f64, f64)> = slots.iter().map(|&(_, k)| k.default_bounds()).collect();
+    let (mut opt, first, mut best) = match resume {
+        Some(ck) => {
+            if ck.optimizer.theta().len() != theta.len() {
+                return Err(FitError::Targets(format!(
+                    "the checkpoint has {} free parameters, this run {}",
+                    ck.optimizer.theta().len(),
+                    theta.len()
+                )));
+            }
+            (ck.optimizer, ck.iters_done, ck.best)
+        }
+        None => (
+            LogDomainOptimizer::new(theta, bounds, opts.adam, opts.clip_norm)?,
+            0,
+            None,
+        ),
+    };
+    let spf = sim.setup.substeps_per_frame;
+    let frames = targets.len().min(config.time.frames.max(1));
+    let substeps = frames as u64 * spf as u64;
+    let apply = |parts: &mut Vec<PartParams>, theta: &[f64]| {
+        for (&(i, k), &v) in slots.iter().zip(theta) {
+            match i {
+                Some(i) => set(&mut parts[i], k, v),
+                None => parts.iter_mut().for_each(|p| set(p, k, v)),
+            }
+        }
+    };
+    // `best` holds the parameters with the lowest loss evaluated so far (Adam's momentum can
+    // carry the last iterate past the minimum).
+    for iter in first..opts.iters {
+        let start = Instant::now();
+        apply(&mut parts, &opt.theta());
+        let sweep = Sweep {
+            sim: &sim,
+            parts: &parts,
+            targets,
+            loss: opts.loss,
+            checkpointing: opts.checkpointing,
+            frames,
+            spf,
+            substeps,
+        };
+        let (loss, grad) = sweep.run(&stepper).map_err(backend_error)?;
+        let g: Vec<f64> = slots
+            .iter()
+            .map(|&(i, k)| match i {
+                Some(i) => grad_of(&grad[i], k),
+                None => grad.iter().map(|gp| grad_of(gp, k)).sum(),
+            })
+            .collect();
+        if !loss.is_finite() || g.iter().any(|x| !x.is_finite()) {
+            return Err(FitError::NonFinite(iter));
+        }
+        if best.as_ref().is_none_or(|(l, _)| loss < *l) {
+            best = Some((loss, parts.clone()));
+        }
+        // Cosine decay of the learning rate to 5% over the run, so Adam settles.
+        let progress = iter as f64 / opts.iters.max(1) as f64;
+        let decay = 0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * progress).cos());
+        opt.adam.lr = opts.adam.lr * decay;
+        let grad_norm = opt.step(&g);
+        on_iter(&IterLog {
+            iter,
+            loss,
+            grad_norm,
+            parts: summarize(&parts)
+                .iter()
+                .enumerate()
+                .map(|(i, p)| PartRecord::of(i, p))
+                .collect(),
+            time_s: start.elapsed().as_secs_f64(),
+        });
+        on_checkpoint(&FitCheckpoint {
+            iters_done: iter + 1,
+            optimizer: opt.clone(),
+            best: best.clone(),
+        });
+    }
+    apply(&mut parts, &opt.theta());
+    let values = best.map(|(_, p)| p).unwrap_or(parts);
+    Ok(Fitted {
+        parts: summarize(&values),
+        per_particle: per_particle.then_some(values),
+    })
+}
+
+/// A backend's error as a [`FitError`].
+fn backend_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> FitError {
+    FitError::Backend(Box::new(e))
+}
+
+/// One evaluation of the loss and of its parameter gradient (per slot, with the yield stress
+/// gradient of the initial state).
+struct Sweep<'a> {
+    sim: &'a HostSim,
+    parts: &'a [PartParams],
+    targets: &'a [Vec<[f32; 3]>],
+    loss: TrajectoryLoss,
+    checkpointing: Checkpointing,
+    frames: usize,
+    spf: u32,
+    substeps: u64,
+}
+
+impl Sweep<'_> {
+    /// One evaluation on any backend. The loss of each frame is evaluated in f64 on the
+    /// downloaded positions during the forward pass; its gradient is kept and added to the
+    /// position adjoint on the backend when the reverse sweep reaches the frame.
+    fn run<B: MpmAdjointKernels>(
+        &self,
+        d: &KernelAdjoint<B>,
+    ) -> Result<(f64, Vec<PhysParams<f64>>), B::Error> {
+        let (sim, targets, loss_kind) = (self.sim, self.targets, self.loss);
+        let b = d.backend();
+        let phys: Vec<PhysParams<B::Scalar>> = self.parts.iter().map(PhysParams::of).collect();
+        let init = d.init(&phys, &vec![[B::Scalar::c(0.0); 3]; sim.len()])?;
+        let scale = 1.0 / self.frames as f64;
+        let error: RefCell<Option<B::Error>> = RefCell::new(None);
+        // Each frame's position gradient, from the forward pass to its reverse hook.
+        type PosGrad<S> = Option<Vec<[S; 3]>>;
+        let frame_grads: RefCell<Vec<PosGrad<B::Scalar>>> =
+            RefCell::new(vec![None; self.frames + 1]);
+        // The loss at frame `f` of the state `s` and its (scaled) gradient.
+        let eval = |f: usize, s: &StateBufs<B>| -> Option<(f64, Vec<[B::Scalar; 3]>)> {
+            let x = match b.download(&s.x) {
+                Ok(v) => v,
+                Err(e) => {
+                    error.borrow_mut().get_or_insert(e);
+                    return None;
+                }
+            };
+            let x: Vec<[f64; 3]> = x.iter().map(|p| p.map(|v| v.f64())).collect();
+            let mut g = vec![[0.0f64; 3]; x.len()];
+            let l = loss_kind.value_and_grad(&x, &targets[f - 1], &mut g);
+            let g = g
+                .iter()
+                .map(|gp| gp.map(|v| B::Scalar::c(scale * v)))
+                .collect();
+            Some((scale * l, g))
+        };
+        let (loss, adj0, grad) = value_and_grad(
+            d,
+            &init,
+            &phys,
+            self.substeps,
+            self.spf,
+            self.checkpointing,
+            d.zero_grad()?,
+            |f, s| match eval(f, s) {
+                Some((l, g)) => {
+                    frame_grads.borrow_mut()[f] = Some(g);
+                    l
+                }
+                None => f64::NAN,
+            },
+            |f, s, adj| {
+                let cached = frame_grads.borrow_mut()[f].take();
+                let Some(g) = cached.or_else(|| eval(f, s).map(|(_, g)| g)) else {
+                    return;
+                };
+                if let Err(e) = adj.add_to_x(b, &g) {
+                    error.borrow_mut().get_or_insert(e);
+                }
+            },
+        )?;
+        if let Some(e) = error.into_inner() {
+            return Err(e);
+        }
+        let mut grad = d.grad_to_host(&grad, &phys)?;
+        d.init_vjp(&adj0, &mut grad)?;
+        Ok((loss, grad.iter().map(PhysParams::to_f64).collect()))
+    }
+}
