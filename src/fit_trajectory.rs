@@ -3,6 +3,7 @@
 
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
+use r4d_mpm::reference::ReferenceBackend;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
 pub use r4d_optim::trajectory::{
     FitCheckpoint, FitError, FitOptions, Fitted, Granularity, IterLog, PartRecord,
@@ -18,6 +19,9 @@ pub enum FitBackend {
     /// f32 on a GPU through wgpu (`WgpuMpm`); the adapter is chosen as by
     /// [`WgpuContext::new`] (`R4D_WGPU_ADAPTER`).
     Wgpu,
+    /// f64 on one core, the reference kernels (`ReferenceBackend<f64>`, the gradient oracle;
+    /// slow, for checking).
+    Reference,
 }
 
 /// [`r4d_optim::trajectory::fit_trajectory`] on `backend`.
@@ -49,6 +53,16 @@ pub fn fit_trajectory_resumable(
     match backend {
         FitBackend::Cpu => fit(
             CpuBackend::<f64>::with_par(Par::Rayon),
+            config,
+            scene,
+            targets,
+            opts,
+            resume,
+            on_iter,
+            on_checkpoint,
+        ),
+        FitBackend::Reference => fit(
+            ReferenceBackend::<f64>::in_scalar(),
             config,
             scene,
             targets,

@@ -136,3 +136,32 @@ fn a_resumed_fit_continues_exactly_where_it_stopped() {
     assert_eq!(full, resumed);
     assert!(full.per_particle.is_none());
 }
+
+/// The fit is generic over the simulator's kernels: its first iteration on the f64 reference
+/// kernels (one core) and on the parallel CPU backend (f64, colour-slab scatter order) gives
+/// the same loss and gradient up to summation order.
+#[test]
+fn the_fit_runs_on_the_reference_kernels_too() {
+    let truth = SimConfig::load(&fixture("fit/beam.toml")).unwrap();
+    let scene = ParticleSet::from_shapes(&truth.shapes, truth.domain.dx());
+    let target = targets(&truth, &scene);
+    let mut start = truth.clone();
+    start.parts[0].youngs_modulus_pa = 2e6;
+    let opts = FitOptions {
+        iters: 1,
+        ..Default::default()
+    };
+    let first = |b: FitBackend| {
+        let mut log = Vec::new();
+        fit_trajectory(b, &start, &scene, &target, &opts, |it| {
+            log.push((it.loss, it.grad_norm))
+        })
+        .unwrap();
+        log[0]
+    };
+    let (lc, gc) = first(FitBackend::Cpu);
+    let (lr, gr) = first(FitBackend::Reference);
+    eprintln!("cpu: loss {lc:.12e} |grad| {gc:.12e}; reference: loss {lr:.12e} |grad| {gr:.12e}");
+    assert!((lc - lr).abs() <= 1e-9 * lc.abs(), "loss {lc} vs {lr}");
+    assert!((gc - gr).abs() <= 1e-6 * gc.abs(), "|grad| {gc} vs {gr}");
+}

@@ -10,8 +10,8 @@ use std::path::PathBuf;
 #[derive(clap::Args, Debug)]
 pub struct BenchScaleArgs {
     /// Where the simulation, rendering and their backward passes run: cpu or wgpu.
-    #[arg(long, default_value = "cpu")]
-    backend: String,
+    #[arg(long, value_enum, default_value_t = super::BackendKind::Cpu)]
+    backend: super::BackendKind,
     /// Cells per side of the simulated block (8 particles per cell; 23: 97 336 particles).
     #[arg(long, default_value_t = 23)]
     cells: usize,
@@ -82,7 +82,7 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
         band_rows: a.band_rows,
         reference_from_simulation,
     };
-    let gpu = super::fit::gpu_for(&a.backend)?;
+    let gpu = super::fit::gpu_for(a.backend)?;
     eprintln!(
         "bench-scale: building the scene and the reference video ({}) ...",
         a.reference

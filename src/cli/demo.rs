@@ -43,8 +43,8 @@ pub struct DemoArgs {
     seed: u64,
     /// Where the fit's simulation and reverse sweep run: cpu or wgpu (f32 on a GPU; the
     /// reference videos are always simulated on the CPU).
-    #[arg(long, default_value = "cpu")]
-    backend: String,
+    #[arg(long, value_enum, default_value_t = super::BackendKind::Cpu)]
+    backend: super::BackendKind,
     /// LPIPS weights for the final report's metrics (as `r4d metrics --lpips-weights`).
     /// Repeatable. Default: $R4D_LPIPS_DIR.
     #[arg(long = "lpips-weights", value_name = "FILE")]
@@ -71,7 +71,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     }
     opts.seed = a.seed;
     let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
-    let gpu = super::fit::gpu_for(&a.backend)?;
+    let gpu = super::fit::gpu_for(a.backend)?;
     let out = a.out.clone().unwrap_or_else(|| match scene {
         DemoScene::Plant => PathBuf::from("out/demo"),
         s => PathBuf::from(format!("out/demo-{}", s.name())),

@@ -61,8 +61,8 @@ pub struct FitArgs {
     /// Where the simulation and its reverse sweep run: cpu (all cores, f64 by default) or
     /// wgpu (WGSL on a GPU, f32; `R4D_WGPU_ADAPTER=name` picks an adapter). Rendering and the
     /// loss run on the CPU either way.
-    #[arg(long, default_value = "cpu")]
-    backend: String,
+    #[arg(long, value_enum, default_value_t = super::BackendKind::Cpu)]
+    backend: super::BackendKind,
     /// Particles (PLY x, y, z[, volume]); default: the sim config's particles.
     #[arg(long)]
     particles: Option<PathBuf>,
@@ -124,18 +124,21 @@ fn is_physgaussian(path: &Path) -> bool {
             .is_some_and(|v| v.get("time").is_none() && v.get("n_grid").is_some())
 }
 
-/// The GPU to simulate on for `--backend`: `None` for cpu.
-pub fn gpu_for(backend: &str) -> Result<Option<resonance4d::video_fit::GpuHandle>> {
+/// The GPU to simulate on for `--backend` of the video fits: `None` for cpu.
+pub fn gpu_for(backend: super::BackendKind) -> Result<Option<resonance4d::video_fit::GpuHandle>> {
     match backend {
-        "cpu" => Ok(None),
-        "wgpu" => {
+        super::BackendKind::Cpu => Ok(None),
+        super::BackendKind::Wgpu => {
             let ctx = r4d_backend_wgpu::context::WgpuContext::new()
                 .map_err(|e| anyhow::anyhow!("--backend wgpu: {e}"))?;
             Ok(Some(resonance4d::video_fit::GpuHandle(
                 std::sync::Arc::new(ctx),
             )))
         }
-        o => bail!("--backend: unknown '{o}' (cpu, wgpu)"),
+        super::BackendKind::Reference => bail!(
+            "--backend reference: the video fits run on cpu or wgpu (the single-threaded \
+             reference kernels are for `simulate`, `render` and `fit-trajectory`)"
+        ),
     }
 }
 
@@ -385,7 +388,7 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
         bail!("--shard splits the initialisation's candidates, and [init] enabled = false in the fit settings");
     }
     let (mut problem, _) = load_problem(a)?;
-    problem.gpu = gpu_for(&a.backend)?;
+    problem.gpu = gpu_for(a.backend)?;
     let dir = out.join(format!("shard-{}-of-{}", shard.i, shard.n));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     // The run the merged shards continue: these arguments without --shard.
@@ -456,7 +459,7 @@ pub fn run(a: FitArgs) -> Result<()> {
             (a, out, None)
         }
     };
-    let gpu = gpu_for(&a.backend)?;
+    let gpu = gpu_for(a.backend)?;
     // Loaded (and checked) before the fit, used by its final report.
     let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
     let cfg = match &a.config {

@@ -60,10 +60,11 @@ pub struct FitTrajectoryArgs {
     /// Continue a killed run from OUT/checkpoint.json (written after every iteration).
     #[arg(long)]
     resume: bool,
-    /// Where the simulation and its reverse sweep run: cpu (f64, all cores) or wgpu (f32 on a
-    /// GPU; `R4D_WGPU_ADAPTER=name` picks the adapter).
-    #[arg(long, default_value = "cpu")]
-    backend: String,
+    /// Where the simulation and its reverse sweep run: cpu (f64, all cores), wgpu (f32 on a
+    /// GPU; `R4D_WGPU_ADAPTER=name` picks the adapter) or reference (f64, one core, the
+    /// gradient oracle; slow).
+    #[arg(long, value_enum, default_value_t = super::BackendKind::Cpu)]
+    backend: super::BackendKind,
 }
 
 fn read_targets(dir: &Path, max: usize) -> Result<Vec<Vec<[f32; 3]>>> {
@@ -132,10 +133,10 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         ),
         o => bail!("--checkpointing: unknown '{o}' (per-frame, store-all, every:N, nested:N)"),
     };
-    let backend = match a.backend.as_str() {
-        "cpu" => FitBackend::Cpu,
-        "wgpu" => FitBackend::Wgpu,
-        o => bail!("--backend: unknown '{o}' (cpu, wgpu)"),
+    let backend = match a.backend {
+        super::BackendKind::Cpu => FitBackend::Cpu,
+        super::BackendKind::Reference => FitBackend::Reference,
+        super::BackendKind::Wgpu => FitBackend::Wgpu,
     };
     let targets = read_targets(&a.target, config.time.frames)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
@@ -221,7 +222,7 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     )
     .map_err(|e| match e {
         e @ FitError::Backend(_) => {
-            anyhow::Error::new(e).context(format!("--backend {}", a.backend))
+            anyhow::Error::new(e).context(format!("--backend {}", a.backend.name()))
         }
         e => e.into(),
     })?;

@@ -61,8 +61,10 @@ enum Command {
     Merge(ablate::MergeArgs),
 }
 
-/// Compute backend.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+/// Compute backend: the one `--backend` of every command (`simulate`, `render`, `fit`,
+/// `demo`, `bench-scale`, `fit-trajectory`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum BackendKind {
     /// Multi-threaded CPU backend (rayon).
     Cpu,
@@ -70,6 +72,17 @@ pub enum BackendKind {
     Reference,
     /// wgpu (WGSL compute on Vulkan, Metal or DX12; `R4D_WGPU_ADAPTER` picks an adapter).
     Wgpu,
+}
+
+impl BackendKind {
+    /// The flag's value.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Cpu => "cpu",
+            BackendKind::Reference => "reference",
+            BackendKind::Wgpu => "wgpu",
+        }
+    }
 }
 
 /// Entry point.

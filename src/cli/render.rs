@@ -2,6 +2,7 @@
 //! or a whole simulated sequence to PNGs plus an animated GIF.
 
 use super::npy::write_npy_f32;
+use super::BackendKind;
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -13,17 +14,6 @@ use r4d_splat::{
 };
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-
-/// Renderer backend.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum RenderBackend {
-    /// Multi-threaded CPU renderer (rayon).
-    Cpu,
-    /// Single-threaded reference renderer (slow; for checking).
-    Reference,
-    /// wgpu (WGSL compute on Vulkan, Metal or DX12; `R4D_WGPU_ADAPTER` picks an adapter).
-    Wgpu,
-}
 
 /// Rasterize mode flag.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -75,8 +65,8 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 24)]
     fps: u32,
     /// Renderer backend.
-    #[arg(long, value_enum, default_value_t = RenderBackend::Cpu)]
-    backend: RenderBackend,
+    #[arg(long, value_enum, default_value_t = BackendKind::Cpu)]
+    backend: BackendKind,
 }
 
 /// Runs the command.
@@ -109,9 +99,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
         },
     };
     let mut renderer: Box<dyn Renderer> = match a.backend {
-        RenderBackend::Cpu => Box::new(SplatRenderer::new(CpuSplat)),
-        RenderBackend::Reference => Box::new(SplatRenderer::new(ReferenceSplat)),
-        RenderBackend::Wgpu => {
+        BackendKind::Cpu => Box::new(SplatRenderer::new(CpuSplat)),
+        BackendKind::Reference => Box::new(SplatRenderer::new(ReferenceSplat)),
+        BackendKind::Wgpu => {
             let ctx = r4d_backend_wgpu::WgpuContext::new()?;
             eprintln!("wgpu adapter: {} ({:?})", ctx.info.name, ctx.info.backend);
             Box::new(SplatRenderer::new(r4d_backend_wgpu::WgpuSplat::new(
