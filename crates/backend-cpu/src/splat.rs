@@ -113,12 +113,16 @@ impl SplatKernels for CpuSplat {
         let mut rgb = vec![0f32; w * h * 3];
         let mut alpha = vec![0f32; w * h];
         let mut depth = vec![0f32; w * h];
+        let mut t_final = vec![0f32; w * h];
+        let mut last = vec![0u32; w * h];
         let band = 16 * w;
         rgb.par_chunks_mut(band * 3)
             .zip(alpha.par_chunks_mut(band))
             .zip(depth.par_chunks_mut(band))
+            .zip(t_final.par_chunks_mut(band))
+            .zip(last.par_chunks_mut(band))
             .enumerate()
-            .for_each(|(ty, ((rgb, alpha), depth))| {
+            .for_each(|(ty, ((((rgb, alpha), depth), t_final), last))| {
                 let rows = alpha.len() / w;
                 let mut tile = TileSplats::default();
                 for tx in 0..tiles_x {
@@ -130,17 +134,25 @@ impl SplatKernels for CpuSplat {
                     for r in 0..rows {
                         let j = ty * 16 + r;
                         for i in tx * 16..((tx + 1) * 16).min(w) {
-                            let (px, _) =
+                            let (px, tf) =
                                 raster::composite_pixel(i as u32, j as u32, &tile, &bg, None);
                             let k = r * w + i;
                             rgb[3 * k..3 * k + 3].copy_from_slice(&px.rgb);
                             alpha[k] = px.alpha;
                             depth[k] = px.depth;
+                            t_final[k] = tf;
+                            last[k] = px.last;
                         }
                     }
                 }
             });
-        Ok(ImageBufs { rgb, alpha, depth })
+        Ok(ImageBufs {
+            rgb,
+            alpha,
+            depth,
+            t_final,
+            last,
+        })
     }
 
     fn rasterize_vjp(
@@ -148,6 +160,7 @@ impl SplatKernels for CpuSplat {
         proj: &Vec<Projected<f32>>,
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
+        img: &ImageBufs<Self>,
         d_rgb: &Vec<f32>,
     ) -> Result<Vec<ProjectedGrad<f32>>, Infallible> {
         let [w, h] = cam.size;
@@ -175,13 +188,15 @@ impl SplatKernels for CpuSplat {
                                 if d == [0.0; 3] {
                                     continue;
                                 }
-                                trace.clear();
-                                let (_, tf) = raster::composite_pixel(
+                                let p = j * w + i;
+                                let tf = img.t_final[p];
+                                raster::trace_back(
                                     i as u32,
                                     j as u32,
                                     &tile,
-                                    &bg,
-                                    Some(&mut trace),
+                                    tf,
+                                    img.last[p],
+                                    &mut trace,
                                 );
                                 raster::composite_pixel_vjp(&trace, tf, &tile, &bg, &d, |id, g| {
                                     acc[id as usize].add(g)

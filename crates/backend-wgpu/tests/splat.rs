@@ -645,13 +645,26 @@ fn synthetic_rasterize_vjp_matches_cpu() {
             let d_rgb: Vec<f32> = (0..w * h * 3).map(|_| 2.0 * r.next() - 1.0).collect();
             let what = format!("synthetic {w}x{h} n={n} (native atomics: {native})");
             let cpu_bins = cb.bin_tiles(&proj, &cc).unwrap();
-            let want = cb.rasterize_vjp(&proj, &cpu_bins, &cc, &d_rgb).unwrap();
+            let cpu_img = cb.rasterize(&proj, &cpu_bins, &cc).unwrap();
+            let want = cb
+                .rasterize_vjp(&proj, &cpu_bins, &cc, &cpu_img, &d_rgb)
+                .unwrap();
             let up = gb.upload(&proj).unwrap();
             let bins = gb.bin_tiles(&up, &cc).unwrap();
+            let img = gb.rasterize(&up, &bins, &cc).unwrap();
+            // The tapes agree: the same Gaussians end every pixel's compositing.
+            let (cl, gl) = (&cpu_img.last, gb.download(&img.last).unwrap());
+            let same = cl.iter().zip(&gl).filter(|(a, b)| a == b).count();
+            assert!(
+                same as f64 >= 0.999 * cl.len() as f64,
+                "{what}: last position differs at {} of {} pixels",
+                cl.len() - same,
+                cl.len()
+            );
             let d = gb.upload(&d_rgb).unwrap();
             let t0 = std::time::Instant::now();
             let got = gb
-                .download(&gb.rasterize_vjp(&up, &bins, &cc, &d).unwrap())
+                .download(&gb.rasterize_vjp(&up, &bins, &cc, &img, &d).unwrap())
                 .unwrap();
             let dt = t0.elapsed();
             let field = |v: &[r4d_splat::project::ProjectedGrad<f32>], f: usize| -> Vec<f64> {

@@ -23,9 +23,9 @@
 //!   staged 256 at a time in workgroup memory (`rasterize.wgsl`).
 //!
 //! * `rasterize_vjp`: one workgroup per tile, one thread per pixel (`rasterize_vjp.wgsl`).
-//!   The trait hands it no forward image, so each pixel first replays its compositing (as the
-//!   CPU reference does) for its final transmittance and the position of its last composited
-//!   Gaussian; then the tile's list is staged 128 Gaussians at a time from that position down
+//!   Each pixel reads the forward's tape (`ImageBufs::t_final`, `ImageBufs::last`: its final
+//!   transmittance and one past the position of its last composited Gaussian); then the
+//!   tile's list is staged 128 Gaussians at a time from that position down
 //!   and each pixel runs [`r4d_splat::raster::composite_pixel_vjp`]'s recursion back to front,
 //!   recovering the transmittance in front of each Gaussian as `T / (1 - alpha)`. Pixels add
 //!   their per-Gaussian gradients (mean2d, conic, opacity, colour) into workgroup memory
@@ -284,6 +284,8 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
             rgb: self.zeros::<f32>("splat_rgb", w * h * 3)?,
             alpha: self.zeros::<f32>("splat_alpha", w * h)?,
             depth: self.zeros::<f32>("splat_depth", w * h)?,
+            t_final: self.zeros::<f32>("splat_t_final", w * h)?,
+            last: self.zeros::<u32>("splat_last", w * h)?,
         };
         let [tx, ty] = cam.tiles;
         if w == 0 || h == 0 || tx == 0 || ty == 0 {
@@ -304,19 +306,23 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
             r.buf(&img.rgb.raw),
             r.buf(&img.alpha.raw),
             r.buf(&img.depth.raw),
+            r.buf(&img.t_final.raw),
+            r.buf(&img.last.raw),
         ];
         r.dispatch_groups(&k::RASTERIZE, [tx, ty, 1], &bind);
         self.engine.execute(r)?;
         Ok(img)
     }
 
-    /// `rasterize_vjp.wgsl`: one workgroup per tile replays each pixel's compositing, walks it
-    /// back to front and adds the per-Gaussian sums of each batch with float atomics.
+    /// `rasterize_vjp.wgsl`: one workgroup per tile reads each pixel's tape (final T, last
+    /// position), walks it back to front and adds the per-Gaussian sums of each batch with
+    /// float atomics.
     fn rasterize_vjp(
         &self,
         proj: &GpuBuf<E, Projected<f32>>,
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
+        img: &ImageBufs<Self>,
         d_rgb: &GpuBuf<E, f32>,
     ) -> Result<GpuBuf<E, ProjectedGrad<f32>>, E::Error> {
         let out = self.zeros_bindable::<ProjectedGrad<f32>>("splat_d_projected", proj.len)?;
@@ -336,6 +342,8 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
             r.buf(&proj.raw),
             r.buf(&bins.offsets.raw),
             r.buf(&bins.ids.raw),
+            r.buf(&img.t_final.raw),
+            r.buf(&img.last.raw),
             r.buf(&d_rgb.raw),
             r.buf(&out.raw),
         ];

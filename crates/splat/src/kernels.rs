@@ -116,7 +116,7 @@ pub struct TileBufs<B: SplatKernels> {
     pub intersections: usize,
 }
 
-/// Rendered images in backend buffers.
+/// Rendered images in backend buffers, with what the VJP reads back (the forward's tape).
 pub struct ImageBufs<B: SplatKernels> {
     /// `[H][W][3]`.
     pub rgb: B::Buf<f32>,
@@ -124,6 +124,12 @@ pub struct ImageBufs<B: SplatKernels> {
     pub alpha: B::Buf<f32>,
     /// `[H][W]`.
     pub depth: B::Buf<f32>,
+    /// Final transmittance per pixel, `[H][W]` (kept exactly: `1 - alpha` loses digits when
+    /// it is small).
+    pub t_final: B::Buf<f32>,
+    /// Per pixel, one past the tile-list position of the last Gaussian composited
+    /// ([`crate::raster::PixelOut::last`]), `[H][W]`.
+    pub last: B::Buf<u32>,
 }
 
 /// Scene gradients in backend buffers.
@@ -179,12 +185,15 @@ pub trait SplatKernels: Sized + Send + Sync + 'static {
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
     ) -> Result<ImageBufs<Self>, Self::Error>;
-    /// VJP of [`SplatKernels::rasterize`] for `dL/drgb`.
+    /// VJP of [`SplatKernels::rasterize`] for `dL/drgb`, reading the forward's tape
+    /// (`img.t_final`, `img.last`: each pixel is walked back to front without being
+    /// composited again).
     fn rasterize_vjp(
         &self,
         proj: &Self::Buf<Projected<f32>>,
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
+        img: &ImageBufs<Self>,
         d_rgb: &Self::Buf<f32>,
     ) -> Result<Self::Buf<ProjectedGrad<f32>>, Self::Error>;
     /// VJP of [`SplatKernels::project`].

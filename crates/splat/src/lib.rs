@@ -65,7 +65,7 @@ pub use gaussians::{Deformation, GaussianGrads, Gaussians};
 pub use kernels::{CameraConsts, SplatKernels};
 pub use link::SimLink;
 pub use prepare::{prepare, prepare_with, PrepareConfig, Prepared};
-pub use renderer::{Image, RenderStats, Renderer, SplatRenderer};
+pub use renderer::{Image, RenderStats, RenderTape, Renderer, SplatRenderer};
 
 #[cfg(test)]
 mod tests;

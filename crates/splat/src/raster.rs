@@ -107,6 +107,10 @@ pub struct PixelOut<T> {
     pub alpha: T,
     /// Expected depth (0 where nothing was hit).
     pub depth: T,
+    /// One past the tile-list position of the last Gaussian composited (0: none): with the
+    /// final transmittance, what the VJP needs to walk the pixel back to front
+    /// ([`trace_back`]) without compositing it again.
+    pub last: u32,
 }
 
 /// The Gaussians of one tile, front to back, gathered into contiguous arrays (the pixels of a
@@ -194,31 +198,21 @@ pub fn composite_pixel<T: Real>(
 ) -> (PixelOut<T>, T) {
     let c = T::c;
     let (px, py) = (c(i as f64 + 0.5), c(j as f64 + 0.5));
-    let (amax, amin, tmin) = (c(consts::ALPHA_MAX), c(consts::ALPHA_MIN), c(consts::T_MIN));
-    let half = c(0.5);
+    let tmin = c(consts::T_MIN);
     let mut t = T::one();
     let mut rgb = [T::zero(); 3];
     let mut depth = T::zero();
+    let mut last = 0u32;
     for k in 0..tile.len() {
-        let m = tile.mean2d[k];
-        let q = tile.conic[k];
-        let dx = m[0] - px;
-        let dy = m[1] - py;
-        let s = half * (q[0] * dx * dx + q[2] * dy * dy) + q[1] * dx * dy;
-        if s < T::zero() || s > tile.s_cut[k] {
+        let Some(h) = hit(tile, k, px, py) else {
             continue;
-        }
-        let g = (-s).exp();
-        let raw = tile.opacity[k] * g;
-        let capped = raw > amax;
-        let alpha = if capped { amax } else { raw };
-        if alpha < amin {
-            continue;
-        }
+        };
+        let (alpha, g, capped, [dx, dy]) = (h.alpha, h.g, h.capped, h.d);
         let t_next = t * (T::one() - alpha);
         if t_next <= tmin {
             break;
         }
+        last = k as u32 + 1;
         let w = alpha * t;
         let col = tile.color[k];
         for ch in 0..3 {
@@ -242,7 +236,86 @@ pub fn composite_pixel<T: Real>(
     }
     let alpha = T::one() - t;
     let depth = depth / alpha.max(c(1e-10));
-    (PixelOut { rgb, alpha, depth }, t)
+    (
+        PixelOut {
+            rgb,
+            alpha,
+            depth,
+            last,
+        },
+        t,
+    )
+}
+
+/// A Gaussian that passes the per-pixel tests: its alpha (capped), `exp(-s)`, whether the
+/// cap applied, and the offsets `(u - px, v - py)`.
+struct Hit<T> {
+    alpha: T,
+    g: T,
+    capped: bool,
+    d: [T; 2],
+}
+
+/// The per-Gaussian rule of compositing, once for [`composite_pixel`] and [`trace_back`]
+/// (and mirrored by `r4d-shaders`' `lib/composite.wgsl`): skipped when the power is negative
+/// or above the cut-off, or when the capped alpha is below 1/255.
+#[inline(always)]
+fn hit<T: Real>(tile: &TileSplats<T>, k: usize, px: T, py: T) -> Option<Hit<T>> {
+    let (amax, amin) = (T::c(consts::ALPHA_MAX), T::c(consts::ALPHA_MIN));
+    let m = tile.mean2d[k];
+    let q = tile.conic[k];
+    let dx = m[0] - px;
+    let dy = m[1] - py;
+    let s = T::c(0.5) * (q[0] * dx * dx + q[2] * dy * dy) + q[1] * dx * dy;
+    if s < T::zero() || s > tile.s_cut[k] {
+        return None;
+    }
+    let g = (-s).exp();
+    let raw = tile.opacity[k] * g;
+    let capped = raw > amax;
+    let alpha = if capped { amax } else { raw };
+    if alpha < amin {
+        return None;
+    }
+    Some(Hit {
+        alpha,
+        g,
+        capped,
+        d: [dx, dy],
+    })
+}
+
+/// Rebuilds pixel `(i, j)`'s composited contributions (front to back, as
+/// [`composite_pixel`]'s trace) from what its forward pass kept: the final transmittance
+/// `t_final` and [`PixelOut::last`]. Walks the tile's Gaussians back to front from `last`,
+/// recovering the transmittance in front of each as `T / (1 - alpha)` (gsplat's and the GPU
+/// kernel's recursion), so the VJP does not composite the pixel again.
+pub fn trace_back<T: Real>(
+    i: u32,
+    j: u32,
+    tile: &TileSplats<T>,
+    t_final: T,
+    last: u32,
+    trace: &mut Vec<Contribution<T>>,
+) {
+    trace.clear();
+    let (px, py) = (T::c(i as f64 + 0.5), T::c(j as f64 + 0.5));
+    let mut t = t_final;
+    for k in (0..(last as usize).min(tile.len())).rev() {
+        let Some(h) = hit(tile, k, px, py) else {
+            continue;
+        };
+        t = t / (T::one() - h.alpha);
+        trace.push(Contribution {
+            k: k as u32,
+            alpha: h.alpha,
+            t,
+            g: h.g,
+            d: h.d,
+            capped: h.capped,
+        });
+    }
+    trace.reverse();
 }
 
 /// VJP of [`composite_pixel`] for the colour output: `trace` is the forward's list and

@@ -90,6 +90,10 @@ pub struct Image<T> {
     pub alpha: Vec<T>,
     /// Expected depth, `[H][W]`.
     pub depth: Vec<T>,
+    /// Final transmittance, `[H][W]` (the VJP's tape).
+    pub t_final: Vec<T>,
+    /// One past the last composited tile-list position, `[H][W]` (the VJP's tape).
+    pub last: Vec<u32>,
 }
 
 /// Gradients of the raw scene parameters, in `T` (layouts as [`GaussianGrads`]), plus
@@ -165,6 +169,8 @@ pub fn rasterize<T: Real>(
         rgb: vec![T::zero(); (w * h * 3) as usize],
         alpha: vec![T::zero(); (w * h) as usize],
         depth: vec![T::zero(); (w * h) as usize],
+        t_final: vec![T::zero(); (w * h) as usize],
+        last: vec![0; (w * h) as usize],
     };
     let mut tile = TileSplats::default();
     for ty in 0..bins.tiles_y {
@@ -172,11 +178,13 @@ pub fn rasterize<T: Real>(
             tile.gather(bins.tile((ty * bins.tiles_x + tx) as usize), proj);
             for j in ty * 16..((ty + 1) * 16).min(h) {
                 for i in tx * 16..((tx + 1) * 16).min(w) {
-                    let (px, _) = raster::composite_pixel(i, j, &tile, background, None);
+                    let (px, t) = raster::composite_pixel(i, j, &tile, background, None);
                     let k = (j * w + i) as usize;
                     img.rgb[3 * k..3 * k + 3].copy_from_slice(&px.rgb);
                     img.alpha[k] = px.alpha;
                     img.depth[k] = px.depth;
+                    img.t_final[k] = t;
+                    img.last[k] = px.last;
                 }
             }
         }
@@ -185,11 +193,14 @@ pub fn rasterize<T: Real>(
 }
 
 /// VJP of [`rasterize`] for `dL/drgb` (`[H][W][3]`): per-Gaussian gradients of the projection.
+/// `t_final` and `last` are the forward's per-pixel tape ([`Image::t_final`], [`Image::last`]).
 pub fn rasterize_vjp<T: Real>(
     proj: &[Projected<T>],
     bins: &TileBins,
     cam: &CamParams<T>,
     background: &[T; 3],
+    t_final: &[T],
+    last: &[u32],
     d_rgb: &[T],
 ) -> Vec<ProjectedGrad<T>> {
     let mut out = vec![ProjectedGrad::default(); proj.len()];
@@ -201,10 +212,9 @@ pub fn rasterize_vjp<T: Real>(
             tile.gather(bins.tile((ty * bins.tiles_x + tx) as usize), proj);
             for j in ty * 16..((ty + 1) * 16).min(h) {
                 for i in tx * 16..((tx + 1) * 16).min(w) {
-                    trace.clear();
-                    let (_, tf) =
-                        raster::composite_pixel(i, j, &tile, background, Some(&mut trace));
                     let k = (j * w + i) as usize;
+                    let tf = t_final[k];
+                    raster::trace_back(i, j, &tile, tf, last[k], &mut trace);
                     let d = [d_rgb[3 * k], d_rgb[3 * k + 1], d_rgb[3 * k + 2]];
                     raster::composite_pixel_vjp(&trace, tf, &tile, background, &d, |id, g| {
                         out[id as usize].add(g)
@@ -287,7 +297,8 @@ pub fn render_vjp<T: Real>(
     let bg = settings.background.map(|x| T::c(x as f64));
     let proj = project(scene, &cp);
     let bins = bin_tiles(&proj, &cp);
-    let d_proj = rasterize_vjp(&proj, &bins, &cp, &bg, d_rgb);
+    let img = rasterize(&proj, &bins, &cp, &bg);
+    let d_proj = rasterize_vjp(&proj, &bins, &cp, &bg, &img.t_final, &img.last, d_rgb);
     project_vjp(scene, &cp, &proj, &d_proj)
 }
 
@@ -352,6 +363,8 @@ impl crate::SplatKernels for ReferenceSplat {
             rgb: img.rgb,
             alpha: img.alpha,
             depth: img.depth,
+            t_final: img.t_final,
+            last: img.last,
         })
     }
     fn rasterize_vjp(
@@ -359,6 +372,7 @@ impl crate::SplatKernels for ReferenceSplat {
         proj: &Vec<Projected<f32>>,
         bins: &crate::kernels::TileBufs<Self>,
         cam: &crate::CameraConsts,
+        img: &crate::kernels::ImageBufs<Self>,
         d_rgb: &Vec<f32>,
     ) -> Result<Vec<ProjectedGrad<f32>>, Self::Error> {
         let tb = TileBins {
@@ -367,7 +381,15 @@ impl crate::SplatKernels for ReferenceSplat {
             offsets: bins.offsets.clone(),
             ids: bins.ids.clone(),
         };
-        Ok(rasterize_vjp(proj, &tb, &cam.params(), &cam.bg(), d_rgb))
+        Ok(rasterize_vjp(
+            proj,
+            &tb,
+            &cam.params(),
+            &cam.bg(),
+            &img.t_final,
+            &img.last,
+            d_rgb,
+        ))
     }
     fn project_vjp(
         &self,

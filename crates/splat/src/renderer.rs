@@ -4,7 +4,8 @@
 use crate::camera::{Camera, RenderSettings};
 use crate::error::{Error, Result};
 use crate::gaussians::{Deformation, GaussianGrads, Gaussians};
-use crate::kernels::{CameraConsts, SceneBufs, SplatKernels};
+use crate::kernels::{CameraConsts, ImageBufs, SceneBufs, SplatKernels, TileBufs};
+use crate::project::Projected;
 
 /// A rendered image, row 0 at the top.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -95,14 +96,38 @@ impl<B: SplatKernels> SplatRenderer<B> {
     }
 }
 
-impl<B: SplatKernels> Renderer for SplatRenderer<B> {
-    fn render(
+/// What a render keeps for its VJP, in backend buffers: the uploaded scene, the projection,
+/// the tile lists and the per-pixel tape (final transmittance, last composited position).
+/// [`SplatRenderer::render_taped`] returns it, [`SplatRenderer::render_vjp_taped`] consumes
+/// it: the VJP then neither projects, bins nor composites again. It holds the scene on the
+/// backend (about 60 bytes per Gaussian plus the SH) and 8 bytes per pixel besides the image:
+/// keep one only while its gradient is still to come.
+pub struct RenderTape<B: SplatKernels> {
+    bufs: SceneBufs<B>,
+    cc: CameraConsts,
+    proj: B::Buf<Projected<f32>>,
+    bins: TileBufs<B>,
+    img: ImageBufs<B>,
+    width: u32,
+    height: u32,
+}
+
+impl<B: SplatKernels> RenderTape<B> {
+    /// Image width and height.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+}
+
+impl<B: SplatKernels> SplatRenderer<B> {
+    /// Uploads, projects, bins and composites: the forward pass with its tape.
+    fn forward(
         &mut self,
         scene: &Gaussians,
         deform: Option<&Deformation>,
         cam: &Camera,
         settings: &RenderSettings,
-    ) -> Result<Image> {
+    ) -> Result<RenderTape<B>> {
         cam.validate("camera").map_err(Error::Mismatch)?;
         let bufs = self.upload(scene, deform)?;
         let be = |e: B::Error| Error::Backend(Box::new(e));
@@ -111,21 +136,119 @@ impl<B: SplatKernels> Renderer for SplatRenderer<B> {
         let proj = b.project(&bufs, &cc).map_err(be)?;
         let bins = b.bin_tiles(&proj, &cc).map_err(be)?;
         let img = b.rasterize(&proj, &bins, &cc).map_err(be)?;
-        let out = Image {
+        Ok(RenderTape {
+            bufs,
+            cc,
+            proj,
+            bins,
+            img,
             width: cam.width,
             height: cam.height,
-            rgb: b.download_owned(img.rgb).map_err(be)?,
-            alpha: b.download_owned(img.alpha).map_err(be)?,
-            depth: b.download_owned(img.depth).map_err(be)?,
-        };
-        self.stats.intersections = bins.intersections;
-        self.stats.visible = b
-            .download(&proj)
+        })
+    }
+
+    /// Records the statistics of a render (reads the projection back).
+    fn record_stats(&mut self, tape: &RenderTape<B>) -> Result<()> {
+        let be = |e: B::Error| Error::Backend(Box::new(e));
+        self.stats.intersections = tape.bins.intersections;
+        self.stats.visible = self
+            .backend
+            .download(&tape.proj)
             .map_err(be)?
             .iter()
             .filter(|p| p.radii != [0, 0])
             .count();
-        Ok(out)
+        Ok(())
+    }
+
+    /// Renders as [`Renderer::render`] and keeps what the VJP needs
+    /// ([`SplatRenderer::render_vjp_taped`]).
+    pub fn render_taped(
+        &mut self,
+        scene: &Gaussians,
+        deform: Option<&Deformation>,
+        cam: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<(Image, RenderTape<B>)> {
+        let tape = self.forward(scene, deform, cam, settings)?;
+        self.record_stats(&tape)?;
+        let be = |e: B::Error| Error::Backend(Box::new(e));
+        let b = &self.backend;
+        let out = Image {
+            width: tape.width,
+            height: tape.height,
+            rgb: b.download(&tape.img.rgb).map_err(be)?,
+            alpha: b.download(&tape.img.alpha).map_err(be)?,
+            depth: b.download(&tape.img.depth).map_err(be)?,
+        };
+        Ok((out, tape))
+    }
+
+    /// The gradient of `sum(d_rgb * rgb)` for the render that made `tape` (as
+    /// [`Renderer::render_vjp`], without projecting, binning or compositing again).
+    pub fn render_vjp_taped(
+        &mut self,
+        tape: RenderTape<B>,
+        d_rgb: &[f32],
+    ) -> Result<GaussianGrads> {
+        let want = tape.width as usize * tape.height as usize * 3;
+        if d_rgb.len() != want {
+            return Err(Error::Mismatch(format!(
+                "dL/drgb has {} values, the {}x{} image needs {want}",
+                d_rgb.len(),
+                tape.width,
+                tape.height
+            )));
+        }
+        let be = |e: B::Error| Error::Backend(Box::new(e));
+        let b = &self.backend;
+        let RenderTape {
+            bufs,
+            cc,
+            proj,
+            bins,
+            img,
+            ..
+        } = tape;
+        let d = b.upload(d_rgb).map_err(be)?;
+        let d_proj = b.rasterize_vjp(&proj, &bins, &cc, &img, &d).map_err(be)?;
+        drop((img, bins, d));
+        let g = b.project_vjp(&bufs, &cc, &proj, &d_proj).map_err(be)?;
+        // The scene's buffers and the intermediates are freed before the gradients come back.
+        drop((bufs, proj, d_proj));
+        Ok(GaussianGrads {
+            means: b.download_owned(g.means).map_err(be)?,
+            log_scales: b.download_owned(g.log_scales).map_err(be)?,
+            quats: b.download_owned(g.quats).map_err(be)?,
+            opacity_logits: b.download_owned(g.opacity_logits).map_err(be)?,
+            sh: b.download_owned(g.sh).map_err(be)?,
+            f: match g.f {
+                Some(f) => b.download_owned(f).map_err(be)?,
+                None => Vec::new(),
+            },
+        })
+    }
+}
+
+impl<B: SplatKernels> Renderer for SplatRenderer<B> {
+    fn render(
+        &mut self,
+        scene: &Gaussians,
+        deform: Option<&Deformation>,
+        cam: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<Image> {
+        let tape = self.forward(scene, deform, cam, settings)?;
+        self.record_stats(&tape)?;
+        let be = |e: B::Error| Error::Backend(Box::new(e));
+        let b = &self.backend;
+        Ok(Image {
+            width: tape.width,
+            height: tape.height,
+            rgb: b.download_owned(tape.img.rgb).map_err(be)?,
+            alpha: b.download_owned(tape.img.alpha).map_err(be)?,
+            depth: b.download_owned(tape.img.depth).map_err(be)?,
+        })
     }
 
     fn render_vjp(
@@ -146,27 +269,7 @@ impl<B: SplatKernels> Renderer for SplatRenderer<B> {
                 cam.height
             )));
         }
-        let bufs = self.upload(scene, deform)?;
-        let be = |e: B::Error| Error::Backend(Box::new(e));
-        let cc = CameraConsts::new(cam, settings, scene.sh_degree);
-        let b = &self.backend;
-        let proj = b.project(&bufs, &cc).map_err(be)?;
-        let bins = b.bin_tiles(&proj, &cc).map_err(be)?;
-        let d = b.upload(d_rgb).map_err(be)?;
-        let d_proj = b.rasterize_vjp(&proj, &bins, &cc, &d).map_err(be)?;
-        let g = b.project_vjp(&bufs, &cc, &proj, &d_proj).map_err(be)?;
-        // The scene's buffers and the intermediates are freed before the gradients come back.
-        drop((bufs, proj, bins, d, d_proj));
-        Ok(GaussianGrads {
-            means: b.download_owned(g.means).map_err(be)?,
-            log_scales: b.download_owned(g.log_scales).map_err(be)?,
-            quats: b.download_owned(g.quats).map_err(be)?,
-            opacity_logits: b.download_owned(g.opacity_logits).map_err(be)?,
-            sh: b.download_owned(g.sh).map_err(be)?,
-            f: match g.f {
-                Some(f) => b.download_owned(f).map_err(be)?,
-                None => Vec::new(),
-            },
-        })
+        let tape = self.forward(scene, deform, cam, settings)?;
+        self.render_vjp_taped(tape, d_rgb)
     }
 }

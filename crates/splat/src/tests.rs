@@ -247,3 +247,50 @@ fn a_crop_beyond_the_image_is_refused() {
     c.height = 20;
     assert!(c.validate("t").unwrap_err().contains("crop rows"));
 }
+
+/// A render's tape gives the VJP without projecting, binning or compositing again, and the
+/// same gradients, bit for bit, as the one-call VJP; a wrong-sized dL/drgb is refused.
+#[test]
+fn the_taped_vjp_equals_the_one_call_vjp() {
+    use crate::gaussians::{Deformation, Gaussians};
+    use crate::reference::ReferenceSplat;
+    use crate::{Renderer, SplatRenderer};
+    let cam = Camera::look_at(40, 24, 50.0, [0.3, -3.0, 0.8], [0.0; 3], [0.0, 0.0, 1.0]);
+    let set = RenderSettings {
+        background: [0.2, 0.5, 0.9],
+        ..Default::default()
+    };
+    let s = scene(60, 1, true, 9);
+    let f32v = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
+    let g = Gaussians {
+        means: s.means.iter().map(|m| m.map(|x| x as f32)).collect(),
+        log_scales: s.log_scales.iter().map(|m| m.map(|x| x as f32)).collect(),
+        quats: s.quats.iter().map(|m| m.map(|x| x as f32)).collect(),
+        opacity_logits: f32v(&s.opacity_logits),
+        sh: f32v(&s.sh),
+        sh_degree: s.sh_degree,
+    };
+    let d = Deformation {
+        means: g.means.clone(),
+        f: s.f
+            .as_ref()
+            .unwrap()
+            .iter()
+            .map(|m| m.map(|r| r.map(|x| x as f32)))
+            .collect(),
+    };
+    let mut r = Lcg(4);
+    let w: Vec<f32> = (0..cam.width * cam.height * 3)
+        .map(|_| r.range(-1.0, 1.0) as f32)
+        .collect();
+    let mut ren = SplatRenderer::new(ReferenceSplat);
+    let one = ren.render_vjp(&g, Some(&d), &cam, &set, &w).unwrap();
+    let (img, tape) = ren.render_taped(&g, Some(&d), &cam, &set).unwrap();
+    assert_eq!(img, ren.render(&g, Some(&d), &cam, &set).unwrap());
+    assert_eq!(tape.size(), (40, 24));
+    let taped = ren.render_vjp_taped(tape, &w).unwrap();
+    assert_eq!(one, taped);
+    let (_, tape) = ren.render_taped(&g, Some(&d), &cam, &set).unwrap();
+    let e = ren.render_vjp_taped(tape, &w[1..]).unwrap_err();
+    assert!(e.to_string().contains("40x24"), "{e}");
+}

@@ -1,7 +1,9 @@
 // Composites every pixel: one workgroup per 16x16 tile, one thread per pixel, the tile's
 // Gaussians (front to back) loaded 256 at a time into workgroup memory; per pixel exactly
 // `r4d_splat::raster::composite_pixel` (the per-Gaussian rule is lib/composite.wgsl, shared
-// with the VJP); rgb + T * background, alpha = 1 - T, depth = D / max(1 - T, 1e-10).
+// with the VJP); rgb + T * background, alpha = 1 - T, depth = D / max(1 - T, 1e-10), and the
+// VJP's tape: the final T and one past the tile-list position of the last Gaussian
+// composited (`PixelOut::last`).
 // The workgroup stops loading once every pixel of the tile has stopped.
 #import lib/composite.wgsl
 
@@ -12,6 +14,8 @@
 @group(0) @binding(4) var<storage, read_write> out_rgb: array<f32>;
 @group(0) @binding(5) var<storage, read_write> out_alpha: array<f32>;
 @group(0) @binding(6) var<storage, read_write> out_depth: array<f32>;
+@group(0) @binding(7) var<storage, read_write> out_t: array<f32>;
+@group(0) @binding(8) var<storage, read_write> out_last: array<u32>;
 
 const BATCH: u32 = 256u;
 
@@ -46,6 +50,7 @@ fn main(
     let px = f32(i) + 0.5;
     let py = f32(j) + 0.5;
     var t = 1.0;
+    var last = 0u;
     var rgb = vec3<f32>(0.0);
     var depth = 0.0;
     let total = select(0u, range.y - range.x, range.y > range.x);
@@ -81,6 +86,7 @@ fn main(
                     done = true;
                     break;
                 }
+                last = start + q + 1u;
                 let wgt = h.alpha * t;
                 let col = s_color[q];
                 rgb.x += wgt * col.x;
@@ -102,5 +108,7 @@ fn main(
         let a = 1.0 - t;
         out_alpha[pix] = a;
         out_depth[pix] = depth / max(a, 1e-10);
+        out_t[pix] = t;
+        out_last[pix] = last;
     }
 }

@@ -1,12 +1,10 @@
 // VJP of `rasterize.wgsl` for dL/drgb: one workgroup per 16x16 tile, one thread per pixel,
-// per pixel exactly `r4d_splat::raster::composite_pixel` then `composite_pixel_vjp` (the
+// per pixel exactly `r4d_splat::raster::trace_back` then `composite_pixel_vjp` (the
 // per-Gaussian rule is lib/composite.wgsl, shared with the forward).
 //
-// 1. Replay: the pixel composites its tile's Gaussians front to back as the forward does
-//    (same tests, same order) and keeps its final transmittance T and `last`, one past the
-//    tile-list position of the last Gaussian it composited. (The trait's `rasterize_vjp` gets
-//    no forward image, so, like the CPU reference, the kernel recomputes these instead of
-//    reading them back.) Pixels outside the image or with dL/drgb = 0 take no part.
+// 1. The forward's tape: each pixel reads its final transmittance T and `last`, one past the
+//    tile-list position of the last Gaussian it composited (written by `rasterize.wgsl`), so
+//    nothing is composited again. Pixels outside the image or with dL/drgb = 0 take no part.
 // 2. Back to front: from the workgroup's largest `last` down, the tile's Gaussians are staged
 //    BATCH at a time in workgroup memory; each pixel walks them in reverse, skips those past
 //    its `last` or that fail the same tests as the forward, recovers the transmittance in front
@@ -26,9 +24,11 @@
 @group(0) @binding(1) var<storage, read> proj: array<Projected>;
 @group(0) @binding(2) var<storage, read> offsets: array<u32>;
 @group(0) @binding(3) var<storage, read> ids: array<u32>;
-@group(0) @binding(4) var<storage, read> d_rgb: array<f32>;
+@group(0) @binding(4) var<storage, read> t_final: array<f32>;
+@group(0) @binding(5) var<storage, read> last_of: array<u32>;
+@group(0) @binding(6) var<storage, read> d_rgb: array<f32>;
 // `ProjectedGrad` records as 9 f32 each, zeroed by the host.
-@group(0) @binding(5) var<storage, read_write> grid_atomic: array<AtomicF32>;
+@group(0) @binding(7) var<storage, read_write> grid_atomic: array<AtomicF32>;
 
 const BATCH: u32 = 128u;
 const THREADS: u32 = 256u;
@@ -43,8 +43,6 @@ var<workgroup> s_id: array<u32, BATCH>;
 // Per staged Gaussian, its 9 gradient sums (f32 bits).
 var<workgroup> s_grad: array<atomic<u32>, BATCH * PG_LEN>;
 var<workgroup> s_range: vec2<u32>;
-var<workgroup> s_done: atomic<u32>;
-var<workgroup> s_done_copy: u32;
 var<workgroup> s_last: atomic<u32>;
 var<workgroup> s_last_copy: u32;
 
@@ -60,17 +58,15 @@ fn wg_add(i: u32, v: f32) {
 }
 
 // Stages tile-list positions `start ..` (up to `end`) of the tile starting at `base`.
-fn stage(lid: u32, base: u32, start: u32, end: u32, with_color: bool) {
+fn stage(lid: u32, base: u32, start: u32, end: u32) {
     let k = start + lid;
     if lid < BATCH && k < end {
         let id = ids[base + k];
         let p = proj[id];
         s_geo[lid] = staged_geometry(p);
         s_conic[lid] = vec4<f32>(p.conic_a, p.conic_b, p.conic_c, 0.0);
-        if with_color {
-            s_color[lid] = vec4<f32>(p.color_r, p.color_g, p.color_b, 0.0);
-            s_id[lid] = id;
-        }
+        s_color[lid] = vec4<f32>(p.color_r, p.color_g, p.color_b, 0.0);
+        s_id[lid] = id;
     }
 }
 
@@ -83,7 +79,6 @@ fn main(
     let tile = wid.x + wid.y * cam.tiles.x;
     if lid == 0u {
         s_range = vec2<u32>(offsets[tile], offsets[tile + 1u]);
-        atomicStore(&s_done, 0u);
         atomicStore(&s_last, 0u);
     }
     for (var e = lid; e < BATCH * PG_LEN; e += THREADS) {
@@ -99,48 +94,16 @@ fn main(
         let pix = j * cam.size.x + i;
         d = vec3<f32>(d_rgb[3u * pix], d_rgb[3u * pix + 1u], d_rgb[3u * pix + 2u]);
     }
-    var done = !inside || all(d == vec3<f32>(0.0));
-    if done {
-        atomicAdd(&s_done, 1u);
+    // 1. The forward's tape.
+    var t = 1.0;
+    var last = 0u;
+    if inside && any(d != vec3<f32>(0.0)) {
+        let pix = j * cam.size.x + i;
+        t = t_final[pix];
+        last = min(last_of[pix], total);
     }
     let px = f32(i) + 0.5;
     let py = f32(j) + 0.5;
-
-    // 1. Replay the forward: final T and one past the last composited position.
-    var t = 1.0;
-    var last = 0u;
-    let batches = (total + BATCH - 1u) / BATCH;
-    for (var b = 0u; b < batches; b++) {
-        workgroupBarrier();
-        if lid == 0u {
-            s_done_copy = atomicLoad(&s_done);
-        }
-        if workgroupUniformLoad(&s_done_copy) >= THREADS {
-            break;
-        }
-        let start = b * BATCH;
-        stage(lid, range.x, start, total, false);
-        workgroupBarrier();
-        if !done {
-            let cnt = min(BATCH, total - start);
-            for (var q = 0u; q < cnt; q++) {
-                let h = composite_hit(s_geo[q], s_conic[q].xyz, px, py);
-                if !h.hit {
-                    continue;
-                }
-                let t_next = t * (1.0 - h.alpha);
-                if composite_stops(t_next) {
-                    done = true;
-                    break;
-                }
-                t = t_next;
-                last = start + q + 1u;
-            }
-            if done {
-                atomicAdd(&s_done, 1u);
-            }
-        }
-    }
     atomicMax(&s_last, last);
     workgroupBarrier();
     if lid == 0u {
@@ -155,7 +118,7 @@ fn main(
         let start = (bb - 1u) * BATCH;
         // The previous batch's flush is done with the staging arrays.
         workgroupBarrier();
-        stage(lid, range.x, start, wg_last, true);
+        stage(lid, range.x, start, wg_last);
         workgroupBarrier();
         let hi = min(BATCH, select(0u, last - start, last > start));
         for (var qq = hi; qq > 0u; qq--) {
