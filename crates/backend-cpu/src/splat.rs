@@ -160,7 +160,7 @@ impl SplatKernels for CpuSplat {
         proj: &Vec<Projected<f32>>,
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
-        img: &ImageBufs<Self>,
+        tape: Option<&ImageBufs<Self>>,
         d_rgb: &Vec<f32>,
     ) -> Result<Vec<ProjectedGrad<f32>>, Infallible> {
         let [w, h] = cam.size;
@@ -189,15 +189,32 @@ impl SplatKernels for CpuSplat {
                                     continue;
                                 }
                                 let p = j * w + i;
-                                let tf = img.t_final[p];
-                                raster::trace_back(
-                                    i as u32,
-                                    j as u32,
-                                    &tile,
-                                    tf,
-                                    img.last[p],
-                                    &mut trace,
-                                );
+                                let (i, j) = (i as u32, j as u32);
+                                let tf = match tape {
+                                    Some(img) => {
+                                        let tf = img.t_final[p];
+                                        raster::trace_back(
+                                            i,
+                                            j,
+                                            &tile,
+                                            tf,
+                                            img.last[p],
+                                            &mut trace,
+                                        );
+                                        tf
+                                    }
+                                    None => {
+                                        trace.clear();
+                                        let c = raster::composite_pixel(
+                                            i,
+                                            j,
+                                            &tile,
+                                            &bg,
+                                            Some(&mut trace),
+                                        );
+                                        c.1
+                                    }
+                                };
                                 raster::composite_pixel_vjp(&trace, tf, &tile, &bg, &d, |id, g| {
                                     acc[id as usize].add(g)
                                 });

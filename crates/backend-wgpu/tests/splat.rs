@@ -647,7 +647,7 @@ fn synthetic_rasterize_vjp_matches_cpu() {
             let cpu_bins = cb.bin_tiles(&proj, &cc).unwrap();
             let cpu_img = cb.rasterize(&proj, &cpu_bins, &cc).unwrap();
             let want = cb
-                .rasterize_vjp(&proj, &cpu_bins, &cc, &cpu_img, &d_rgb)
+                .rasterize_vjp(&proj, &cpu_bins, &cc, Some(&cpu_img), &d_rgb)
                 .unwrap();
             let up = gb.upload(&proj).unwrap();
             let bins = gb.bin_tiles(&up, &cc).unwrap();
@@ -664,7 +664,7 @@ fn synthetic_rasterize_vjp_matches_cpu() {
             let d = gb.upload(&d_rgb).unwrap();
             let t0 = std::time::Instant::now();
             let got = gb
-                .download(&gb.rasterize_vjp(&up, &bins, &cc, &img, &d).unwrap())
+                .download(&gb.rasterize_vjp(&up, &bins, &cc, Some(&img), &d).unwrap())
                 .unwrap();
             let dt = t0.elapsed();
             let field = |v: &[r4d_splat::project::ProjectedGrad<f32>], f: usize| -> Vec<f64> {

@@ -322,7 +322,7 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
         proj: &GpuBuf<E, Projected<f32>>,
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
-        img: &ImageBufs<Self>,
+        tape: Option<&ImageBufs<Self>>,
         d_rgb: &GpuBuf<E, f32>,
     ) -> Result<GpuBuf<E, ProjectedGrad<f32>>, E::Error> {
         let out = self.zeros_bindable::<ProjectedGrad<f32>>("splat_d_projected", proj.len)?;
@@ -336,6 +336,15 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
             w * h * 3,
             "rasterize_vjp: dL/drgb must have 3 values per pixel"
         );
+        // Without the forward's tape, the forward writes one (the kernel does not composite).
+        let own;
+        let img = match tape {
+            Some(t) => t,
+            None => {
+                own = self.rasterize(proj, bins, cam)?;
+                &own
+            }
+        };
         let mut r = Recording::new();
         let bind = [
             r.uniform(cam),

@@ -185,15 +185,16 @@ pub trait SplatKernels: Sized + Send + Sync + 'static {
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
     ) -> Result<ImageBufs<Self>, Self::Error>;
-    /// VJP of [`SplatKernels::rasterize`] for `dL/drgb`, reading the forward's tape
-    /// (`img.t_final`, `img.last`: each pixel is walked back to front without being
-    /// composited again).
+    /// VJP of [`SplatKernels::rasterize`] for `dL/drgb`. With the forward's image (`tape`:
+    /// its `t_final` and `last`) each pixel is walked back to front without being composited
+    /// again; without it the backend composites what it needs itself (the CPU backends one
+    /// pass per pixel keeping the trace, a GPU backend its `rasterize`).
     fn rasterize_vjp(
         &self,
         proj: &Self::Buf<Projected<f32>>,
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
-        img: &ImageBufs<Self>,
+        tape: Option<&ImageBufs<Self>>,
         d_rgb: &Self::Buf<f32>,
     ) -> Result<Self::Buf<ProjectedGrad<f32>>, Self::Error>;
     /// VJP of [`SplatKernels::project`].

@@ -193,14 +193,15 @@ pub fn rasterize<T: Real>(
 }
 
 /// VJP of [`rasterize`] for `dL/drgb` (`[H][W][3]`): per-Gaussian gradients of the projection.
-/// `t_final` and `last` are the forward's per-pixel tape ([`Image::t_final`], [`Image::last`]).
+/// `tape` is the forward's per-pixel `(t_final, last)` ([`Image::t_final`], [`Image::last`]):
+/// with it each pixel is walked back to front ([`raster::trace_back`]), without it each pixel
+/// is composited once more keeping its trace.
 pub fn rasterize_vjp<T: Real>(
     proj: &[Projected<T>],
     bins: &TileBins,
     cam: &CamParams<T>,
     background: &[T; 3],
-    t_final: &[T],
-    last: &[u32],
+    tape: Option<(&[T], &[u32])>,
     d_rgb: &[T],
 ) -> Vec<ProjectedGrad<T>> {
     let mut out = vec![ProjectedGrad::default(); proj.len()];
@@ -213,8 +214,18 @@ pub fn rasterize_vjp<T: Real>(
             for j in ty * 16..((ty + 1) * 16).min(h) {
                 for i in tx * 16..((tx + 1) * 16).min(w) {
                     let k = (j * w + i) as usize;
-                    let tf = t_final[k];
-                    raster::trace_back(i, j, &tile, tf, last[k], &mut trace);
+                    let tf = match tape {
+                        Some((t_final, last)) => {
+                            raster::trace_back(i, j, &tile, t_final[k], last[k], &mut trace);
+                            t_final[k]
+                        }
+                        None => {
+                            trace.clear();
+                            let c =
+                                raster::composite_pixel(i, j, &tile, background, Some(&mut trace));
+                            c.1
+                        }
+                    };
                     let d = [d_rgb[3 * k], d_rgb[3 * k + 1], d_rgb[3 * k + 2]];
                     raster::composite_pixel_vjp(&trace, tf, &tile, background, &d, |id, g| {
                         out[id as usize].add(g)
@@ -297,8 +308,7 @@ pub fn render_vjp<T: Real>(
     let bg = settings.background.map(|x| T::c(x as f64));
     let proj = project(scene, &cp);
     let bins = bin_tiles(&proj, &cp);
-    let img = rasterize(&proj, &bins, &cp, &bg);
-    let d_proj = rasterize_vjp(&proj, &bins, &cp, &bg, &img.t_final, &img.last, d_rgb);
+    let d_proj = rasterize_vjp(&proj, &bins, &cp, &bg, None, d_rgb);
     project_vjp(scene, &cp, &proj, &d_proj)
 }
 
@@ -372,7 +382,7 @@ impl crate::SplatKernels for ReferenceSplat {
         proj: &Vec<Projected<f32>>,
         bins: &crate::kernels::TileBufs<Self>,
         cam: &crate::CameraConsts,
-        img: &crate::kernels::ImageBufs<Self>,
+        tape: Option<&crate::kernels::ImageBufs<Self>>,
         d_rgb: &Vec<f32>,
     ) -> Result<Vec<ProjectedGrad<f32>>, Self::Error> {
         let tb = TileBins {
@@ -386,8 +396,7 @@ impl crate::SplatKernels for ReferenceSplat {
             &tb,
             &cam.params(),
             &cam.bg(),
-            &img.t_final,
-            &img.last,
+            tape.map(|i| (&i.t_final[..], &i.last[..])),
             d_rgb,
         ))
     }

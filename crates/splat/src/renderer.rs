@@ -200,8 +200,6 @@ impl<B: SplatKernels> SplatRenderer<B> {
                 tape.height
             )));
         }
-        let be = |e: B::Error| Error::Backend(Box::new(e));
-        let b = &self.backend;
         let RenderTape {
             bufs,
             cc,
@@ -210,8 +208,25 @@ impl<B: SplatKernels> SplatRenderer<B> {
             img,
             ..
         } = tape;
+        self.backward(bufs, cc, proj, bins, Some(img), d_rgb)
+    }
+
+    /// The reverse stages from the forward's buffers (`img`: its per-pixel tape, when kept).
+    fn backward(
+        &mut self,
+        bufs: SceneBufs<B>,
+        cc: CameraConsts,
+        proj: B::Buf<Projected<f32>>,
+        bins: TileBufs<B>,
+        img: Option<ImageBufs<B>>,
+        d_rgb: &[f32],
+    ) -> Result<GaussianGrads> {
+        let be = |e: B::Error| Error::Backend(Box::new(e));
+        let b = &self.backend;
         let d = b.upload(d_rgb).map_err(be)?;
-        let d_proj = b.rasterize_vjp(&proj, &bins, &cc, &img, &d).map_err(be)?;
+        let d_proj = b
+            .rasterize_vjp(&proj, &bins, &cc, img.as_ref(), &d)
+            .map_err(be)?;
         drop((img, bins, d));
         let g = b.project_vjp(&bufs, &cc, &proj, &d_proj).map_err(be)?;
         // The scene's buffers and the intermediates are freed before the gradients come back.
@@ -269,7 +284,12 @@ impl<B: SplatKernels> Renderer for SplatRenderer<B> {
                 cam.height
             )));
         }
-        let tape = self.forward(scene, deform, cam, settings)?;
-        self.render_vjp_taped(tape, d_rgb)
+        // No image is needed: the backend composites what the VJP needs itself.
+        let bufs = self.upload(scene, deform)?;
+        let be = |e: B::Error| Error::Backend(Box::new(e));
+        let cc = CameraConsts::new(cam, settings, scene.sh_degree);
+        let proj = self.backend.project(&bufs, &cc).map_err(be)?;
+        let bins = self.backend.bin_tiles(&proj, &cc).map_err(be)?;
+        self.backward(bufs, cc, proj, bins, None, d_rgb)
     }
 }

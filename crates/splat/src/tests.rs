@@ -249,7 +249,8 @@ fn a_crop_beyond_the_image_is_refused() {
 }
 
 /// A render's tape gives the VJP without projecting, binning or compositing again, and the
-/// same gradients, bit for bit, as the one-call VJP; a wrong-sized dL/drgb is refused.
+/// one-call VJP's gradients up to the transmittance's rounding (recovered by division there,
+/// tracked forward here); a wrong-sized dL/drgb is refused.
 #[test]
 fn the_taped_vjp_equals_the_one_call_vjp() {
     use crate::gaussians::{Deformation, Gaussians};
@@ -289,7 +290,26 @@ fn the_taped_vjp_equals_the_one_call_vjp() {
     assert_eq!(img, ren.render(&g, Some(&d), &cam, &set).unwrap());
     assert_eq!(tape.size(), (40, 24));
     let taped = ren.render_vjp_taped(tape, &w).unwrap();
-    assert_eq!(one, taped);
+    let flat = |g: &crate::GaussianGrads| -> Vec<f32> {
+        let mut v: Vec<f32> = g.means.iter().flatten().copied().collect();
+        v.extend(g.log_scales.iter().flatten());
+        v.extend(g.quats.iter().flatten());
+        v.extend(&g.opacity_logits);
+        v.extend(&g.sh);
+        v.extend(g.f.iter().flatten().flatten());
+        v
+    };
+    let (a, b) = (flat(&one), flat(&taped));
+    assert_eq!(a.len(), b.len());
+    let scale = a.iter().fold(0f32, |m, x| m.max(x.abs()));
+    let worst = a
+        .iter()
+        .zip(&b)
+        .fold(0f32, |m, (x, y)| m.max((x - y).abs()));
+    assert!(
+        scale > 0.0 && worst <= 1e-4 * scale,
+        "worst {worst} of {scale}"
+    );
     let (_, tape) = ren.render_taped(&g, Some(&d), &cam, &set).unwrap();
     let e = ren.render_vjp_taped(tape, &w[1..]).unwrap_err();
     assert!(e.to_string().contains("40x24"), "{e}");
