@@ -49,16 +49,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// Learning-rate schedule.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum LrSchedule {
-    /// The same rate every iteration.
-    Constant,
-    /// Cosine decay from `lr` to 5% of it over the run (default).
-    #[default]
-    Cosine,
-}
+pub use r4d_optim::LrSchedule;
 
 /// The optimiser of a fit.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

@@ -1,7 +1,7 @@
 //! The fit loop: simulation-driven initialisation, then AdamW on `xi = log(theta)` with bound
 //! and gradient clipping; a record per iteration and a resumable checkpoint.
 
-use super::config::{FitConfig, LrSchedule, OptimizerKind};
+use super::config::{FitConfig, OptimizerKind};
 use super::problem::{Evaluation, Objective, VideoProblem};
 use super::FitError;
 use crate::fit_trajectory::PartRecord;
@@ -99,13 +99,7 @@ fn iterate(
     space.apply(&mut slots, &theta);
     let (ev, g) = obj.value_and_grad(&slots)?;
     let gtheta = space.gather(&g);
-    let lr = match cfg.lr_schedule {
-        LrSchedule::Constant => cfg.lr,
-        LrSchedule::Cosine => {
-            let p = iter as f64 / iters.max(1) as f64;
-            cfg.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * p).cos()))
-        }
-    };
+    let lr = cfg.lr_schedule.lr(cfg.lr, iter, iters);
     let grad_norm = opt.step(ev.total, &gtheta, lr);
     let probes = flat_probes(
         obj,

@@ -313,6 +313,38 @@ impl LogDomainOptimizer {
     }
 }
 
+/// Learning-rate schedule of a fit (one for every fit: `FIT.toml`'s `lr_schedule`, the
+/// trajectory fit's [`trajectory::FitOptions::schedule`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LrSchedule {
+    /// The same rate every iteration.
+    Constant,
+    /// Cosine decay from `lr` to 5% of it over the run (default), so Adam settles.
+    #[default]
+    Cosine,
+}
+
+impl LrSchedule {
+    /// The rate of iteration `iter` (0-based) of `iters`, from the base rate `lr`.
+    ///
+    /// ```
+    /// use r4d_optim::LrSchedule;
+    /// assert_eq!(LrSchedule::Cosine.lr(0.3, 0, 10), 0.3);
+    /// assert!((LrSchedule::Cosine.lr(0.3, 10, 10) - 0.015).abs() < 1e-12);
+    /// assert_eq!(LrSchedule::Constant.lr(0.3, 7, 10), 0.3);
+    /// ```
+    pub fn lr(self, lr: f64, iter: usize, iters: usize) -> f64 {
+        match self {
+            LrSchedule::Constant => lr,
+            LrSchedule::Cosine => {
+                let p = iter as f64 / iters.max(1) as f64;
+                lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * p).cos()))
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -11,7 +11,7 @@
 //! back for the loss and its gradient goes back to the position adjoint on the backend.
 
 use crate::space::{get, grad_of, part_summary, set};
-use crate::{AdamW, LogDomainOptimizer, ParamKind};
+use crate::{AdamW, LogDomainOptimizer, LrSchedule, ParamKind};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing};
 use r4d_mpm::adjoint::engine::{KernelAdjoint, MpmAdjointKernels, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
@@ -61,8 +61,10 @@ pub struct FitOptions {
     pub params: Vec<ParamKind>,
     /// Iterations.
     pub iters: usize,
-    /// AdamW settings; the learning rate decays along a cosine to 5% of `adam.lr`.
+    /// AdamW settings; `adam.lr` is the base rate of `schedule`.
     pub adam: AdamW,
+    /// Learning-rate schedule (default: cosine decay to 5% of `adam.lr`).
+    pub schedule: LrSchedule,
     /// Gradient-norm clip in log space.
     pub clip_norm: Option<f64>,
     /// Loss.
@@ -84,6 +86,7 @@ impl Default for FitOptions {
                 ..Default::default()
             },
             clip_norm: Some(1.0),
+            schedule: LrSchedule::Cosine,
             loss: TrajectoryLoss::Position,
             checkpointing: Checkpointing::PerFrame,
             granularity: Granularity::Part,
@@ -300,10 +303,7 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
         if best.as_ref().is_none_or(|(l, _)| loss < *l) {
             best = Some((loss, parts.clone()));
         }
-        // Cosine decay of the learning rate to 5% over the run, so Adam settles.
-        let progress = iter as f64 / opts.iters.max(1) as f64;
-        let decay = 0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * progress).cos());
-        opt.adam.lr = opts.adam.lr * decay;
+        opt.adam.lr = opts.schedule.lr(opts.adam.lr, iter, opts.iters);
         let grad_norm = opt.step(&g);
         on_iter(&IterLog {
             iter,
