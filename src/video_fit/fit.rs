@@ -9,8 +9,8 @@ use r4d_loss::{ssim::ms_ssim, MsSsimConfig, Video};
 use r4d_mpm::PartParams;
 use r4d_optim::space::{part_summary, Granularity, ParamSpace};
 use r4d_optim::{
-    Candidate, InitOutcome, LatinHypercubeInit, LogDomainOptimizer, ParamKind, SearchSpace,
-    TrustRegion, TrustRegionBfgs,
+    evaluate_candidate, Candidate, InitOutcome, Initializer, LatinHypercubeInit,
+    LogDomainOptimizer, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs,
 };
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -395,7 +395,15 @@ fn init_space(cfg: &FitConfig, parts: &[PartParams]) -> Result<ParamSpace, FitEr
 fn init_setup<'a>(
     problem: &'a VideoProblem,
     cfg: &FitConfig,
-) -> Result<(ParamSpace, Objective<'a>, SearchSpace, LatinHypercubeInit), FitError> {
+) -> Result<
+    (
+        ParamSpace,
+        Objective<'a>,
+        SearchSpace,
+        Box<dyn Initializer + Send>,
+    ),
+    FitError,
+> {
     let parts = &problem.config.parts;
     let space = init_space(cfg, parts)?;
     let mut obj = Objective::new(problem, Some(cfg.init.frames), &cfg.loss, false)?;
@@ -405,7 +413,7 @@ fn init_setup<'a>(
         names: space.names(),
         bounds: space.bounds(),
     };
-    let init = LatinHypercubeInit {
+    let init = Box::new(LatinHypercubeInit {
         candidates: cfg.init.candidates,
         seed: cfg.init.seed,
         top_k: cfg.init.top_k,
@@ -415,7 +423,7 @@ fn init_setup<'a>(
         } else {
             Vec::new()
         },
-    };
+    });
     Ok((space, obj, search, init))
 }
 
@@ -484,7 +492,7 @@ pub fn initialize_shard(
     }
     let (space, obj, search, init) = init_setup(problem, cfg)?;
     let points = init
-        .sample(&search)
+        .candidates(&search)
         .map_err(|e| FitError::Input(format!("initialisation: {e}")))?;
     let total = points.len();
     let mine: Vec<(usize, Vec<f64>)> = points
@@ -492,21 +500,10 @@ pub fn initialize_shard(
         .enumerate()
         .filter(|(i, _)| i % of == shard)
         .collect();
+    let evaluate = |_i: usize, theta: &[f64]| score_candidate(problem, &obj, &space, theta);
     let candidates: Vec<Candidate> = mine
         .into_par_iter()
-        .map(|(index, theta)| {
-            let (score, error) = match score_candidate(problem, &obj, &space, &theta) {
-                Ok(s) if s.is_nan() => (None, Some("score is NaN".to_string())),
-                Ok(s) => (Some(s), None),
-                Err(e) => (None, Some(e)),
-            };
-            Candidate {
-                index,
-                theta,
-                score,
-                error,
-            }
-        })
+        .map(|(index, theta)| evaluate_candidate(index, theta, &evaluate))
         .collect();
     for c in &candidates {
         hooks.on_candidate(c);

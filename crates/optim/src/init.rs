@@ -172,8 +172,55 @@ impl InitOutcome {
 /// `&(dyn Fn(usize, &[f64]) -> Result<f64, String> + Sync)`; closures may borrow.
 pub type Evaluate<'a> = dyn Fn(usize, &[f64]) -> Result<f64, String> + Sync + 'a;
 
-/// Chooses a starting point for the fit by evaluating candidates over a [`SearchSpace`].
-pub trait Initializer {
+/// Evaluates candidate `index` at `theta` as every [`Initializer`] does: a NaN score or an
+/// `Err` make a failed candidate with the reason recorded.
+pub fn evaluate_candidate(index: usize, theta: Vec<f64>, evaluate: &Evaluate<'_>) -> Candidate {
+    let (score, error) = match evaluate(index, &theta) {
+        Ok(s) if s.is_nan() => (None, Some("score is NaN".to_string())),
+        Ok(s) => (Some(s), None),
+        Err(e) => (None, Some(e)),
+    };
+    Candidate {
+        index,
+        theta,
+        score,
+        error,
+    }
+}
+
+/// Chooses a starting point for the fit by evaluating candidates over a [`SearchSpace`] (the
+/// video fit's start runs through this trait, so another sampler plugs in unchanged).
+pub trait Initializer: Sync {
+    /// The candidate points, in index order, before any evaluation (deterministic: a cluster
+    /// can evaluate them in shards and rank the union with
+    /// [`InitOutcome::from_candidates`]).
+    fn candidates(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error>;
+
+    /// How many of the best candidates [`InitOutcome::top_k`] keeps.
+    fn top_k(&self) -> usize;
+
+    /// [`Initializer::initialize`] with a progress hook: `on_done` is called once per
+    /// candidate as soon as its evaluation finishes (from the evaluating thread, so in
+    /// completion order when candidates run in parallel).
+    fn initialize_with(
+        &self,
+        space: &SearchSpace,
+        evaluate: &Evaluate<'_>,
+        on_done: &(dyn Fn(&Candidate) + Sync),
+    ) -> Result<InitOutcome, Error> {
+        let candidates: Vec<Candidate> = self
+            .candidates(space)?
+            .into_iter()
+            .enumerate()
+            .map(|(index, theta)| {
+                let c = evaluate_candidate(index, theta, evaluate);
+                on_done(&c);
+                c
+            })
+            .collect();
+        InitOutcome::from_candidates(candidates, self.top_k())
+    }
+
     /// Evaluates candidates with `evaluate(index, theta)`, which returns a score (higher is
     /// better, e.g. MS-SSIM of the simulated render against the reference video) or an error
     /// message. A failed candidate (an `Err`, or a NaN score) is recorded and skipped; the
@@ -183,7 +230,9 @@ pub trait Initializer {
         &self,
         space: &SearchSpace,
         evaluate: &Evaluate<'_>,
-    ) -> Result<InitOutcome, Error>;
+    ) -> Result<InitOutcome, Error> {
+        self.initialize_with(space, evaluate, &|_| {})
+    }
 }
 
 /// Latin hypercube initialisation: `candidates` points of a seeded Latin hypercube
@@ -268,11 +317,20 @@ impl LatinHypercubeInit {
         }
         Ok(points)
     }
+}
 
-    /// [`Initializer::initialize`] with a progress hook: `on_done` is called once per
-    /// candidate as soon as its evaluation finishes (from the evaluating thread, so in
-    /// completion order when `parallel`).
-    pub fn initialize_with(
+impl Initializer for LatinHypercubeInit {
+    fn candidates(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
+        self.sample(space)
+    }
+
+    fn top_k(&self) -> usize {
+        self.top_k
+    }
+
+    /// Evaluates on rayon's pool when `parallel`; candidates are collected in index order
+    /// either way.
+    fn initialize_with(
         &self,
         space: &SearchSpace,
         evaluate: &Evaluate<'_>,
@@ -280,21 +338,10 @@ impl LatinHypercubeInit {
     ) -> Result<InitOutcome, Error> {
         let points = self.sample(space)?;
         let run = |(index, theta): (usize, Vec<f64>)| -> Candidate {
-            let (score, error) = match evaluate(index, &theta) {
-                Ok(s) if s.is_nan() => (None, Some("score is NaN".to_string())),
-                Ok(s) => (Some(s), None),
-                Err(e) => (None, Some(e)),
-            };
-            let c = Candidate {
-                index,
-                theta,
-                score,
-                error,
-            };
+            let c = evaluate_candidate(index, theta, evaluate);
             on_done(&c);
             c
         };
-        // Both paths collect in index order.
         let candidates: Vec<Candidate> = if self.parallel {
             points.into_par_iter().enumerate().map(&run).collect()
         } else {
@@ -304,21 +351,53 @@ impl LatinHypercubeInit {
     }
 }
 
-impl Initializer for LatinHypercubeInit {
-    fn initialize(
-        &self,
-        space: &SearchSpace,
-        evaluate: &Evaluate<'_>,
-    ) -> Result<InitOutcome, Error> {
-        self.initialize_with(space, evaluate, &|_| {})
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use std::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Mutex;
+
+    /// Any sampler is an initializer: the trait's evaluation, failure handling and ranking
+    /// come with `candidates` and `top_k`.
+    #[test]
+    fn a_custom_sampler_plugs_into_the_trait() {
+        struct Grid;
+        impl Initializer for Grid {
+            fn candidates(&self, _space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
+                Ok(vec![vec![1.0], vec![10.0], vec![100.0], vec![f64::NAN]])
+            }
+            fn top_k(&self) -> usize {
+                2
+            }
+        }
+        let space = SearchSpace::new(vec!["E".into()], vec![(1.0, 1e3)]).unwrap();
+        let seen = Mutex::new(Vec::new());
+        let init: &dyn Initializer = &Grid;
+        let out = init
+            .initialize_with(
+                &space,
+                &|_, t| {
+                    if t[0].is_nan() {
+                        Err("no value".into())
+                    } else {
+                        Ok(-(t[0].log10() - 1.2).abs())
+                    }
+                },
+                &|c| seen.lock().unwrap().push(c.index),
+            )
+            .unwrap();
+        assert_eq!(out.best, vec![10.0]);
+        assert_eq!(out.top_k, vec![1, 2]);
+        assert_eq!(out.failed().count(), 1);
+        assert_eq!(*seen.lock().unwrap(), vec![0, 1, 2, 3]);
+        assert_eq!(
+            init.initialize(&space, &|_, _| Ok(0.0))
+                .unwrap()
+                .ranking
+                .len(),
+            4
+        );
+    }
 
     fn space3() -> SearchSpace {
         SearchSpace::new(

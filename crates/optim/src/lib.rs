@@ -57,7 +57,10 @@ pub mod trajectory;
 mod trust_bfgs;
 
 pub use heap::{HeapProbe, HeapSpan};
-pub use init::{Candidate, Evaluate, InitOutcome, Initializer, LatinHypercubeInit, SearchSpace};
+pub use init::{
+    evaluate_candidate, Candidate, Evaluate, InitOutcome, Initializer, LatinHypercubeInit,
+    SearchSpace,
+};
 pub use lhs::{latin_hypercube, log_space};
 pub use trust_bfgs::{TrustRegion, TrustRegionBfgs};
 
