@@ -199,25 +199,33 @@ pub trait Initializer: Sync {
     /// How many of the best candidates [`InitOutcome::top_k`] keeps.
     fn top_k(&self) -> usize;
 
+    /// Whether candidates are evaluated concurrently (on rayon's current pool); the outcome
+    /// does not depend on it. Default: no.
+    fn parallel(&self) -> bool {
+        false
+    }
+
     /// [`Initializer::initialize`] with a progress hook: `on_done` is called once per
     /// candidate as soon as its evaluation finishes (from the evaluating thread, so in
-    /// completion order when candidates run in parallel).
+    /// completion order when [`Initializer::parallel`]); candidates are collected in index
+    /// order either way.
     fn initialize_with(
         &self,
         space: &SearchSpace,
         evaluate: &Evaluate<'_>,
         on_done: &(dyn Fn(&Candidate) + Sync),
     ) -> Result<InitOutcome, Error> {
-        let candidates: Vec<Candidate> = self
-            .candidates(space)?
-            .into_iter()
-            .enumerate()
-            .map(|(index, theta)| {
-                let c = evaluate_candidate(index, theta, evaluate);
-                on_done(&c);
-                c
-            })
-            .collect();
+        let points = self.candidates(space)?;
+        let run = |(index, theta): (usize, Vec<f64>)| -> Candidate {
+            let c = evaluate_candidate(index, theta, evaluate);
+            on_done(&c);
+            c
+        };
+        let candidates: Vec<Candidate> = if self.parallel() {
+            points.into_par_iter().enumerate().map(&run).collect()
+        } else {
+            points.into_iter().enumerate().map(&run).collect()
+        };
         InitOutcome::from_candidates(candidates, self.top_k())
     }
 
@@ -328,26 +336,8 @@ impl Initializer for LatinHypercubeInit {
         self.top_k
     }
 
-    /// Evaluates on rayon's pool when `parallel`; candidates are collected in index order
-    /// either way.
-    fn initialize_with(
-        &self,
-        space: &SearchSpace,
-        evaluate: &Evaluate<'_>,
-        on_done: &(dyn Fn(&Candidate) + Sync),
-    ) -> Result<InitOutcome, Error> {
-        let points = self.sample(space)?;
-        let run = |(index, theta): (usize, Vec<f64>)| -> Candidate {
-            let c = evaluate_candidate(index, theta, evaluate);
-            on_done(&c);
-            c
-        };
-        let candidates: Vec<Candidate> = if self.parallel {
-            points.into_par_iter().enumerate().map(&run).collect()
-        } else {
-            points.into_iter().enumerate().map(&run).collect()
-        };
-        InitOutcome::from_candidates(candidates, self.top_k)
+    fn parallel(&self) -> bool {
+        self.parallel
     }
 }
 
