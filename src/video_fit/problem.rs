@@ -454,13 +454,14 @@ impl<'a> Objective<'a> {
             .init(&phys, &vec![[zero; 3]; self.sim.len()])
             .map_err(err)?;
         let grad0 = stepper.zero_grad().map_err(err)?;
+        // Each field is converted before the next is read back, so at most one host copy in
+        // the backend's scalar is alive (the frame reads run inside the forward pass's peak).
         let read = |s: &StateBufs<B>| -> Result<Frame, FitError> {
             let x = be.download(&s.x).map_err(err)?;
+            let x = x.iter().map(|p| p.map(|c| c.f64() as f32)).collect();
             let f = be.download(&s.f).map_err(err)?;
-            Ok(Frame {
-                x: x.iter().map(|p| p.map(|c| c.f64() as f32)).collect(),
-                f: f.iter().map(|m| m.map(|c| c.f64() as f32)).collect(),
-            })
+            let f = f.iter().map(|m| m.map(|c| c.f64() as f32)).collect();
+            Ok(Frame { x, f })
         };
         let add = |adj: &mut StateBufs<B>, g: &FrameGrad| -> Result<(), FitError> {
             let cast = |v: &f32| B::Scalar::c(*v as f64);
