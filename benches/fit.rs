@@ -19,7 +19,9 @@ static GLOBAL: Counting = Counting;
 
 fn bench_fit_iteration(c: &mut Criterion) {
     let spec = resonance4d::demo::DemoScene::Plant.spec(resonance4d::demo::Size::Full);
-    let problem = spec.problem().expect("demo problem");
+    let problem = spec
+        .problem(resonance4d::compute::cpu())
+        .expect("demo problem");
     let cfg = spec.fit_config(&Default::default());
     let start = problem.config.parts.clone();
     let mut group = c.benchmark_group("fit_iteration_demo");

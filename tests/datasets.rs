@@ -399,7 +399,8 @@ fn broken_folders_are_typed_errors_naming_the_file() {
 /// Renders the dataset's views with its own config's parameters into its video files (the
 /// fixtures' frames are test patterns).
 fn render_references(ds: &Dataset) {
-    let problem = resonance4d::video_fit::problem_from_dataset(ds).unwrap();
+    let problem =
+        resonance4d::video_fit::problem_from_dataset(ds, resonance4d::compute::cpu()).unwrap();
     let obj = resonance4d::video_fit::Objective::new(
         &problem,
         None,

@@ -52,7 +52,7 @@ fn check(spec: &SceneSpec, o: &FitOutcome, kinds: &[(ParamKind, f64)]) {
 
 fn small(scene: DemoScene) -> (SceneSpec, VideoProblem, FitConfig) {
     let spec = scene.spec(Size::Small);
-    let problem = spec.problem().expect("problem");
+    let problem = spec.problem(resonance4d::compute::cpu()).expect("problem");
     let mut cfg = spec.fit_config(&Default::default());
     cfg.init.candidates = 12;
     cfg.iters = 30;

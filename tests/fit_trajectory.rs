@@ -7,7 +7,8 @@ use common::fixture;
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{MpmSim, ParticleSet, SimConfig, Simulator};
 use r4d_optim::ParamKind;
-use resonance4d::fit_trajectory::{fit_trajectory, FitBackend, FitOptions};
+use resonance4d::compute::{self, Compute};
+use resonance4d::fit_trajectory::{fit_trajectory, FitOptions};
 
 /// Simulates `cfg` on the CPU backend (as `r4d simulate` does) and returns frames 1 ...
 fn targets(cfg: &SimConfig, scene: &ParticleSet) -> Vec<Vec<[f32; 3]>> {
@@ -29,7 +30,7 @@ fn recovers_a_jelly_beams_youngs_modulus_from_10x_off() {
     let mut start = truth.clone();
     start.parts[0].youngs_modulus_pa = 2e6;
     let fitted = fit_trajectory(
-        FitBackend::Cpu,
+        &*compute::cpu(),
         &start,
         &scene,
         &target,
@@ -66,7 +67,7 @@ fn recovers_both_parts_stiffness_to_density_ratios() {
         iters: 70,
         ..Default::default()
     };
-    let fitted = fit_trajectory(FitBackend::Cpu, &start, &scene, &target, &opts, |it| {
+    let fitted = fit_trajectory(&*compute::cpu(), &start, &scene, &target, &opts, |it| {
         eprintln!(
             "iter {:2}: loss {:.3e} E/rho {:.1} {:.1}",
             it.iter,
@@ -104,7 +105,7 @@ fn a_resumed_fit_continues_exactly_where_it_stopped() {
     };
     let mut at2: Option<FitCheckpoint> = None;
     let full = fit_trajectory_resumable(
-        FitBackend::Cpu,
+        &*compute::cpu(),
         &start,
         &scene,
         &target,
@@ -122,7 +123,7 @@ fn a_resumed_fit_continues_exactly_where_it_stopped() {
     .unwrap();
     let mut iters_run = Vec::new();
     let resumed = fit_trajectory_resumable(
-        FitBackend::Cpu,
+        &*compute::cpu(),
         &start,
         &scene,
         &target,
@@ -151,7 +152,7 @@ fn the_fit_runs_on_the_reference_kernels_too() {
         iters: 1,
         ..Default::default()
     };
-    let first = |b: FitBackend| {
+    let first = |b: &dyn Compute| {
         let mut log = Vec::new();
         fit_trajectory(b, &start, &scene, &target, &opts, |it| {
             log.push((it.loss, it.grad_norm))
@@ -159,8 +160,8 @@ fn the_fit_runs_on_the_reference_kernels_too() {
         .unwrap();
         log[0]
     };
-    let (lc, gc) = first(FitBackend::Cpu);
-    let (lr, gr) = first(FitBackend::Reference);
+    let (lc, gc) = first(&*compute::cpu());
+    let (lr, gr) = first(&*compute::reference());
     eprintln!("cpu: loss {lc:.12e} |grad| {gc:.12e}; reference: loss {lr:.12e} |grad| {gr:.12e}");
     assert!((lc - lr).abs() <= 1e-9 * lc.abs(), "loss {lc} vs {lr}");
     assert!((gc - gr).abs() <= 1e-6 * gc.abs(), "|grad| {gc} vs {gr}");

@@ -9,7 +9,8 @@ use common::fixture;
 use r4d_backend_cpu::CpuBackend;
 use r4d_backend_wgpu::testing::gpu_or_skip;
 use r4d_mpm::{MpmSim, ParticleSet, SimConfig, Simulator};
-use resonance4d::fit_trajectory::{fit_trajectory, FitBackend, FitOptions, IterLog};
+use resonance4d::compute::{self, Compute};
+use resonance4d::fit_trajectory::{fit_trajectory, FitOptions, IterLog};
 
 /// Simulates `cfg` on the CPU backend (as `r4d simulate` does) and returns frames 1 ...
 fn targets(cfg: &SimConfig, scene: &ParticleSet) -> Vec<Vec<[f32; 3]>> {
@@ -32,8 +33,7 @@ fn wgpu_fit_matches_the_cpu_fit() {
     let Some(ctx) = gpu_or_skip("wgpu_fit_matches_the_cpu_fit") else {
         return;
     };
-    // The fit makes its own context (as `r4d fit-trajectory --backend wgpu`).
-    drop(ctx);
+    let gpu = compute::wgpu(std::sync::Arc::new(ctx));
     // The sagging beam of tests/fit_trajectory.rs, over two frames, from E 10x off (as there).
     let mut truth = SimConfig::load(&fixture("fit/beam.toml")).unwrap();
     truth.time.frames = 2;
@@ -41,7 +41,7 @@ fn wgpu_fit_matches_the_cpu_fit() {
     let target = targets(&truth, &scene);
     let mut start = truth.clone();
     start.parts[0].youngs_modulus_pa = 2e6;
-    let run = |backend: FitBackend| {
+    let run = |backend: &dyn Compute| {
         let opts = FitOptions {
             iters: 4,
             ..Default::default()
@@ -59,8 +59,8 @@ fn wgpu_fit_matches_the_cpu_fit() {
         eprintln!("{backend:?}: {:.1} s", t.elapsed().as_secs_f64());
         (fitted, log)
     };
-    let (cpu, cpu_log) = run(FitBackend::Cpu);
-    let (gpu, gpu_log) = run(FitBackend::Wgpu);
+    let (cpu, cpu_log) = run(&*compute::cpu());
+    let (gpu, gpu_log) = run(&*gpu);
     let (l0, g0) = (rel(cpu_log[0].loss, gpu_log[0].loss), {
         rel(cpu_log[0].grad_norm, gpu_log[0].grad_norm)
     });
@@ -90,7 +90,7 @@ fn wgpu_yield_stress_gradient_matches_the_cpu() {
     let Some(ctx) = gpu_or_skip("wgpu_yield_stress_gradient_matches_the_cpu") else {
         return;
     };
-    drop(ctx);
+    let gpu = compute::wgpu(std::sync::Arc::new(ctx));
     let mut truth = SimConfig::load(&fixture("fit/beam.toml")).unwrap();
     truth.time.frames = 2;
     truth.parts[0].material = r4d_mpm::Material::Metal;
@@ -99,7 +99,7 @@ fn wgpu_yield_stress_gradient_matches_the_cpu() {
     let target = targets(&truth, &scene);
     let mut start = truth.clone();
     start.parts[0].yield_stress_pa = 120.0;
-    let first = |backend: FitBackend| {
+    let first = |backend: &dyn Compute| {
         let opts = FitOptions {
             params: vec![r4d_optim::ParamKind::YieldStress],
             iters: 1,
@@ -116,8 +116,8 @@ fn wgpu_yield_stress_gradient_matches_the_cpu() {
         );
         (log[0].loss, log[0].grad_norm)
     };
-    let (lc, gc) = first(FitBackend::Cpu);
-    let (lg, gg) = first(FitBackend::Wgpu);
+    let (lc, gc) = first(&*compute::cpu());
+    let (lg, gg) = first(&*gpu);
     eprintln!(
         "yield stress: loss rel {:.2e}, gradient rel {:.2e}",
         rel(lc, lg),

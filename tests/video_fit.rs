@@ -99,7 +99,7 @@ num_dt = 8
             camera,
         }],
         fps: 1.0 / 12e-3,
-        gpu: None,
+        compute: resonance4d::compute::cpu(),
     };
     let obj = Objective::new(&p, None, &fit_config(0).loss, false).unwrap();
     p.views[0].video = obj.render(truth).unwrap().remove(0).into();
@@ -452,6 +452,85 @@ fn row_bands_give_the_whole_frame_loss_and_gradient() {
     assert!(rel(v.total, ev.total) < 1e-5);
 }
 
+/// Another loss plugs into the objective through `r4d_loss::VideoLoss` / `BandedLoss`: a loss
+/// that is the DMS scaled by 3 gives 3x the DMS objective's value and gradient (the objective
+/// evaluates, differentiates and pulls back whatever loss it is given).
+#[test]
+fn the_objective_runs_any_banded_loss() {
+    use r4d_loss::bands::ReferenceVideo;
+    use r4d_loss::{BandedLoss, DmsConfig, DmsTerms, LossError, Video, VideoLoss};
+    use std::ops::Range;
+
+    #[derive(Debug)]
+    struct Tripled(DmsConfig);
+    struct TripledBands<'r>(Box<dyn BandedLoss + 'r>);
+    fn triple(mut t: DmsTerms) -> DmsTerms {
+        t.total *= 3.0;
+        t
+    }
+    impl BandedLoss for TripledBands<'_> {
+        fn frames(&self) -> usize {
+            self.0.frames()
+        }
+        fn band_rows(&self) -> Vec<Range<usize>> {
+            self.0.band_rows()
+        }
+        fn band_terms(&self, b: usize, x: &Video<f32>) -> Result<DmsTerms, LossError> {
+            self.0.band_terms(b, x).map(triple)
+        }
+        fn band_terms_and_grad_into(
+            &self,
+            b: usize,
+            x: &Video<f32>,
+            g: &mut [f32],
+        ) -> Result<DmsTerms, LossError> {
+            let t = self.0.band_terms_and_grad_into(b, x, g)?;
+            g.iter_mut().for_each(|v| *v *= 3.0);
+            Ok(triple(t))
+        }
+    }
+    impl VideoLoss for Tripled {
+        fn banded<'r>(
+            &self,
+            reference: &'r ReferenceVideo,
+            frames: usize,
+            band_rows: usize,
+        ) -> Result<Box<dyn BandedLoss + 'r>, LossError> {
+            Ok(Box::new(TripledBands(
+                self.0.banded(reference, frames, band_rows)?,
+            )))
+        }
+    }
+
+    let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
+    let p = small_problem(&truth, 3);
+    let start = [jelly(1.4e4, 1000.0), jelly(1.1e4, 1200.0)];
+    let dms = fit_config(0).loss;
+    let a = Objective::new(&p, None, &dms, false).unwrap();
+    let b = Objective::with_loss(&p, None, std::sync::Arc::new(Tripled(dms)), false).unwrap();
+    let (ev, g) = a.value_and_grad(&start).unwrap();
+    let (ev3, g3) = b.value_and_grad(&start).unwrap();
+    let rel = |x: f64, y: f64| (x - y).abs() / y.abs().max(1e-30);
+    assert!(ev.total > 0.0);
+    assert!(
+        rel(ev3.total, 3.0 * ev.total) < 1e-12,
+        "{} vs 3 x {}",
+        ev3.total,
+        ev.total
+    );
+    for part in 0..2 {
+        for (x, y) in [
+            (g3[part].youngs_modulus, g[part].youngs_modulus),
+            (g3[part].density, g[part].density),
+        ] {
+            assert!(
+                y != 0.0 && rel(x, 3.0 * y) < 1e-5,
+                "part {part}: {x} vs 3 x {y}"
+            );
+        }
+    }
+}
+
 /// The video fit on the GPU: simulation and reverse sweep (`KernelAdjoint<WgpuMpm>`, f32), rendering and
 /// render VJP (`WgpuSplat`), the loss on the CPU. Loss and every parameter gradient agree with
 /// the CPU's f32 run, and a few fit iterations reach the same parameters within 1% (issue 9's
@@ -468,9 +547,14 @@ fn gpu_simulation_matches_the_cpu_in_the_video_fit() {
     let mut cpu = Objective::new(&p, None, &loss, false).unwrap();
     cpu.precision = Precision::F32;
     let (ev, g) = cpu.value_and_grad(&start).unwrap();
-    p.gpu = Some(resonance4d::video_fit::GpuHandle(std::sync::Arc::new(ctx)));
+    let wgpu = resonance4d::compute::WgpuCompute::new(std::sync::Arc::new(ctx));
+    assert!(
+        wgpu.render_on_gpu,
+        "the wgpu backend renders on the GPU by default"
+    );
+    p.compute = std::sync::Arc::new(wgpu);
     let gpu = Objective::new(&p, None, &loss, false).unwrap();
-    assert!(gpu.render_on_gpu, "a GPU problem renders on the GPU");
+    assert_eq!(gpu.compute.name(), "wgpu");
     let (ev2, g2) = gpu.value_and_grad(&start).unwrap();
     let prof = gpu.profile();
     assert!(prof.device_peak_bytes.unwrap_or(0) > 0, "{prof:?}");
@@ -492,7 +576,7 @@ fn gpu_simulation_matches_the_cpu_in_the_video_fit() {
     cfg.precision = Precision::F32;
     p.config.parts = start.to_vec();
     let on_gpu = run_fit(&p, &cfg, None, &mut NoHooks).unwrap();
-    p.gpu = None;
+    p.compute = resonance4d::compute::cpu();
     let on_cpu = run_fit(&p, &cfg, None, &mut NoHooks).unwrap();
     for part in 0..2 {
         for (a, b) in [

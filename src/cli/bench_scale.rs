@@ -82,14 +82,14 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
         band_rows: a.band_rows,
         reference_from_simulation,
     };
-    let gpu = super::fit::gpu_for(a.backend)?;
+    let backend = a.backend.compute()?;
     eprintln!(
         "bench-scale: building the scene and the reference video ({}) ...",
         a.reference
     );
     let heap: std::sync::Arc<dyn r4d_optim::HeapProbe> =
         std::sync::Arc::new(resonance4d::alloc::CountingProbe);
-    let (_, report) = run(&scale, gpu, Some(heap))?;
+    let (_, report) = run(&scale, backend, Some(heap))?;
     println!("{}", table(&report));
     if let Some(path) = &a.json {
         let text = serde_json::to_string_pretty(&report)?;

@@ -71,7 +71,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     }
     opts.seed = a.seed;
     let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
-    let gpu = super::fit::gpu_for(a.backend)?;
+    let backend = a.backend.compute()?;
     let out = a.out.clone().unwrap_or_else(|| match scene {
         DemoScene::Plant => PathBuf::from("out/demo"),
         s => PathBuf::from(format!("out/demo-{}", s.name())),
@@ -85,7 +85,14 @@ pub fn run(a: DemoArgs) -> Result<()> {
         spec.description, cfg.init.candidates, cfg.iters
     );
     let mut hooks = RunHooks::new(&out, &cfg, None)?;
-    let mut run = run_demo(scene, size, &opts, &mut hooks, gpu)?;
+    let mut run = run_demo(
+        scene,
+        size,
+        &opts,
+        &mut hooks,
+        resonance4d::compute::cpu(),
+        backend,
+    )?;
     hooks.finish()?;
     let files = write_results(
         &out,

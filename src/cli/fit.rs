@@ -2,6 +2,7 @@
 
 use super::run_hooks::RunHooks;
 use anyhow::{bail, Context, Result};
+use resonance4d::compute;
 use resonance4d::video_fit::report::{write_json, write_results};
 use resonance4d::video_fit::{run_fit, FitConfig, FitState, PartLabels, VideoProblem, View};
 use serde::{Deserialize, Serialize};
@@ -58,9 +59,10 @@ pub struct FitArgs {
     /// Fit settings (TOML; see the README's `r4d fit` section).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Where the simulation and its reverse sweep run: cpu (all cores, f64 by default) or
-    /// wgpu (WGSL on a GPU, f32; `R4D_WGPU_ADAPTER=name` picks an adapter). Rendering and the
-    /// loss run on the CPU either way.
+    /// Where the simulation, its reverse sweep and the rendering run: cpu (all cores, f64 by
+    /// default), wgpu (WGSL on a GPU, f32; `R4D_WGPU_ADAPTER=name` picks an adapter) or
+    /// reference (the single-threaded reference kernels; slow, for checking). The loss runs
+    /// on the CPU either way.
     #[arg(long, value_enum, default_value_t = super::BackendKind::Cpu)]
     backend: super::BackendKind,
     /// Particles (PLY x, y, z[, volume]); default: the sim config's particles.
@@ -122,24 +124,6 @@ fn is_physgaussian(path: &Path) -> bool {
             .ok()
             .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
             .is_some_and(|v| v.get("time").is_none() && v.get("n_grid").is_some())
-}
-
-/// The GPU to simulate on for `--backend` of the video fits: `None` for cpu.
-pub fn gpu_for(backend: super::BackendKind) -> Result<Option<resonance4d::video_fit::GpuHandle>> {
-    match backend {
-        super::BackendKind::Cpu => Ok(None),
-        super::BackendKind::Wgpu => {
-            let ctx = r4d_backend_wgpu::context::WgpuContext::new()
-                .map_err(|e| anyhow::anyhow!("--backend wgpu: {e}"))?;
-            Ok(Some(resonance4d::video_fit::GpuHandle(
-                std::sync::Arc::new(ctx),
-            )))
-        }
-        super::BackendKind::Reference => bail!(
-            "--backend reference: the video fits run on cpu or wgpu (the single-threaded \
-             reference kernels are for `simulate`, `render` and `fit-trajectory`)"
-        ),
-    }
 }
 
 /// The views of `--video` / `--video-camera` pairs over the cameras of `cams_path`.
@@ -234,7 +218,7 @@ fn load_dataset_problem(a: &FitArgs, dir: &Path) -> Result<(VideoProblem, bool)>
     }
     ds.select_views(&a.camera)?;
     let mut problem = if a.video.is_empty() {
-        resonance4d::video_fit::problem_from_dataset(&ds)?
+        resonance4d::video_fit::problem_from_dataset(&ds, compute::cpu())?
     } else {
         let cams = need(&a.cameras, "--cameras (with --video)")?;
         let fps = match a.fps {
@@ -242,7 +226,12 @@ fn load_dataset_problem(a: &FitArgs, dir: &Path) -> Result<(VideoProblem, bool)>
             None => mp4_fps(&a.video)?.or(ds.views.first().map(|v| v.video.fps)),
         };
         let fps = fps.context("--fps is required with --video when the dataset has no video")?;
-        resonance4d::video_fit::problem_with_views(&ds, video_views(a, cams)?.0, fps)?
+        resonance4d::video_fit::problem_with_views(
+            &ds,
+            video_views(a, cams)?.0,
+            fps,
+            compute::cpu(),
+        )?
     };
     if let Some(p) = &a.parts {
         assign_parts(
@@ -366,7 +355,7 @@ pub fn load_problem(a: &FitArgs) -> Result<(VideoProblem, bool)> {
         },
         views,
         fps,
-        gpu: None,
+        compute: compute::cpu(),
     };
     problem.validate()?;
     note_small_frames(&problem);
@@ -388,7 +377,7 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
         bail!("--shard splits the initialisation's candidates, and [init] enabled = false in the fit settings");
     }
     let (mut problem, _) = load_problem(a)?;
-    problem.gpu = gpu_for(a.backend)?;
+    problem.compute = a.backend.compute()?;
     let dir = out.join(format!("shard-{}-of-{}", shard.i, shard.n));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     // The run the merged shards continue: these arguments without --shard.
@@ -459,7 +448,7 @@ pub fn run(a: FitArgs) -> Result<()> {
             (a, out, None)
         }
     };
-    let gpu = gpu_for(a.backend)?;
+    let backend = a.backend.compute()?;
     // Loaded (and checked) before the fit, used by its final report.
     let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
     let cfg = match &a.config {
@@ -467,7 +456,7 @@ pub fn run(a: FitArgs) -> Result<()> {
         None => FitConfig::default(),
     };
     let (mut problem, physflow_units) = load_problem(&a)?;
-    problem.gpu = gpu;
+    problem.compute = backend;
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     write_json(&out.join("invocation.json"), &a)?;
     write_json(&out.join("fit_config.json"), &cfg)?;

@@ -7,8 +7,7 @@ use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
 use r4d_mpm::ply::read_ply;
 use r4d_optim::{AdamW, ParamKind};
 use resonance4d::fit_trajectory::{
-    fit_trajectory_resumable, FitBackend, FitCheckpoint, FitError, FitOptions, Granularity,
-    PartRecord,
+    fit_trajectory_resumable, FitCheckpoint, FitError, FitOptions, Granularity, PartRecord,
 };
 use serde_json::json;
 use std::io::{IsTerminal, Write};
@@ -133,11 +132,7 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         ),
         o => bail!("--checkpointing: unknown '{o}' (per-frame, store-all, every:N, nested:N)"),
     };
-    let backend = match a.backend {
-        super::BackendKind::Cpu => FitBackend::Cpu,
-        super::BackendKind::Reference => FitBackend::Reference,
-        super::BackendKind::Wgpu => FitBackend::Wgpu,
-    };
+    let backend = a.backend.compute()?;
     let targets = read_targets(&a.target, config.time.frames)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let log_path = a.out.join("log.jsonl");
@@ -198,7 +193,7 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         Ok(())
     };
     let fitted = fit_trajectory_resumable(
-        backend,
+        &*backend,
         &config,
         &loaded.scene,
         &targets,
@@ -221,7 +216,7 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         },
     )
     .map_err(|e| match e {
-        e @ FitError::Backend(_) => {
+        e @ FitError::Backend { .. } => {
             anyhow::Error::new(e).context(format!("--backend {}", a.backend.name()))
         }
         e => e.into(),

@@ -75,6 +75,20 @@ pub enum BackendKind {
 }
 
 impl BackendKind {
+    /// The backend for the fits, evaluations and benchmarks (a wgpu device is opened here).
+    pub fn compute(self) -> anyhow::Result<std::sync::Arc<dyn resonance4d::compute::Compute>> {
+        use resonance4d::compute;
+        Ok(match self {
+            BackendKind::Cpu => compute::cpu(),
+            BackendKind::Reference => compute::reference(),
+            BackendKind::Wgpu => {
+                let ctx = r4d_backend_wgpu::context::WgpuContext::new()
+                    .map_err(|e| anyhow::anyhow!("--backend wgpu: {e}"))?;
+                compute::wgpu(std::sync::Arc::new(ctx))
+            }
+        })
+    }
+
     /// The flag's value.
     pub fn name(self) -> &'static str {
         match self {

@@ -55,6 +55,7 @@
 //! assert_eq!(grad.data().len(), 4 * 32 * 32 * 3);
 //! ```
 
+pub mod banded_loss;
 pub mod bands;
 pub mod dms;
 mod error;
@@ -69,6 +70,7 @@ pub mod ssim;
 pub mod trajectory;
 mod video;
 
+pub use banded_loss::{BandedLoss, VideoLoss};
 pub use dms::{Ablation, Dms, DmsConfig, DmsTerms, DmsWeights, L1Loss, SsimLoss};
 pub use error::{Input, LossError};
 pub use real::Real;

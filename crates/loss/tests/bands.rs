@@ -191,3 +191,45 @@ fn bad_settings_are_typed_errors() {
         Err(LossError::NonFinite { .. })
     ));
 }
+
+/// The traits the video objective uses: [`r4d_loss::VideoLoss`] makes the banded DMS of a
+/// view, and that [`r4d_loss::BandedLoss`] as a whole-video [`r4d_loss::Loss`] (its bands
+/// stitched by `whole_video_terms`) gives the whole video's DMS value and gradient.
+#[test]
+fn the_banded_loss_traits_give_the_whole_video_dms() {
+    use r4d_loss::{Loss, VideoLoss};
+    let (frames, h, w) = (4, 70, 36);
+    let reference = video::<f32>(frames, h, w, 3, 2.0);
+    let rendered = video::<f32>(frames, h, w, 9, 1.2);
+    let cfg = DmsConfig::default();
+    let whole = Dms::new(reference.clone(), cfg.clone()).unwrap();
+    let mut g_whole = vec![0.0f32; rendered.data().len()];
+    let v_whole = whole.value_and_grad_into(&rendered, &mut g_whole).unwrap();
+    let reference = ReferenceVideo::F32(reference);
+    let made = cfg.banded(&reference, frames, 16).unwrap();
+    assert!(made.band_rows().len() > 2, "several bands");
+    let direct = BandedDms::new(&reference, frames, cfg, 16).unwrap();
+    let v = direct.value(&rendered).unwrap();
+    let mut g = vec![0.0f32; rendered.data().len()];
+    let v2 = direct.value_and_grad_into(&rendered, &mut g).unwrap();
+    let v3 = r4d_loss::banded_loss::whole_video_terms(&*made, &rendered, None)
+        .unwrap()
+        .total;
+    assert!(rel(v, v_whole) < 1e-5, "banded {v} vs whole {v_whole}");
+    assert_eq!(v, v2);
+    assert_eq!(v, v3, "the VideoLoss-made loss is the same banded DMS");
+    let num: f64 = g
+        .iter()
+        .zip(&g_whole)
+        .map(|(a, b)| (*a as f64 - *b as f64).powi(2))
+        .sum();
+    let den: f64 = g_whole.iter().map(|b| (*b as f64).powi(2)).sum();
+    assert!(
+        den > 0.0 && (num / den).sqrt() < 1e-4,
+        "gradient rel L2 {}",
+        (num / den).sqrt()
+    );
+    // A video of the wrong length is refused, not read out of bounds.
+    let short = video::<f32>(frames - 1, h, w, 9, 1.2);
+    assert!(direct.value(&short).is_err());
+}

@@ -49,13 +49,19 @@
 
 use serde::{Deserialize, Serialize};
 
+pub mod compute;
+mod descent;
+mod error;
 mod heap;
 mod init;
 mod lhs;
 pub mod space;
 pub mod trajectory;
 mod trust_bfgs;
+pub mod video;
 
+pub use compute::{Compute, Precision, ReferenceCompute};
+pub use error::FitError;
 pub use heap::{HeapProbe, HeapSpan};
 pub use init::{
     evaluate_candidate, Candidate, Evaluate, InitOutcome, Initializer, LatinHypercubeInit,

@@ -5,12 +5,15 @@
 //! Each iteration runs the simulation forward with checkpoints, evaluates a
 //! [`TrajectoryLoss`] at every frame against the targets, sweeps backward through every
 //! substep (`r4d_mpm::adjoint`, the one stepper `KernelAdjoint` on the given kernels) and
-//! updates the free parameters with AdamW in the log domain. The caller picks the kernels:
+//! updates the free parameters with AdamW in the log domain — the iteration the video fit
+//! runs too (`descent::iterate`: one parameter mapping, [`crate::space::ParamSpace`], one
+//! step, one best-so-far rule, one error type). The caller picks the kernels:
 //! the CPU backend in f64 (`CpuBackend<f64>`, the default of `r4d fit-trajectory`) or a GPU
 //! in f32 (`WgpuMpm`); the states stay on the backend, only the positions of each frame come
 //! back for the loss and its gradient goes back to the position adjoint on the backend.
 
-use crate::space::{get, grad_of, part_summary, set};
+use crate::descent::{self, keep_best, Rate, Stepper};
+use crate::space::{part_summary, ParamSpace};
 use crate::{AdamW, LogDomainOptimizer, LrSchedule, ParamKind};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing};
 use r4d_mpm::adjoint::engine::{KernelAdjoint, MpmAdjointKernels, StateBufs};
@@ -22,27 +25,8 @@ use serde::Serialize;
 use std::cell::RefCell;
 use std::time::Instant;
 
-/// Errors of the fitting pipeline.
-#[derive(Debug, thiserror::Error)]
-pub enum FitError {
-    /// The simulator refused the setup.
-    #[error(transparent)]
-    Mpm(#[from] r4d_mpm::Error),
-    /// The optimiser refused a value or bound.
-    #[error(transparent)]
-    Optim(#[from] crate::Error),
-    /// Targets don't fit the simulation.
-    #[error("{0}")]
-    Targets(String),
-    /// The loss or a gradient became NaN.
-    #[error("iteration {0}: the loss or its gradient is not finite")]
-    NonFinite(usize),
-    /// The backend failed (a GPU: no adapter, no device, a transfer).
-    #[error(transparent)]
-    Backend(Box<dyn std::error::Error + Send + Sync>),
-}
-
 pub use crate::space::Granularity;
+pub use crate::FitError;
 
 /// The result of a fit.
 #[derive(Clone, Debug, PartialEq)]
@@ -194,7 +178,7 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
     mut on_checkpoint: impl FnMut(&FitCheckpoint),
 ) -> Result<Fitted, FitError> {
     if targets.is_empty() {
-        return Err(FitError::Targets("no target frames".into()));
+        return Err(FitError::Input("no target frames".into()));
     }
     if opts.loss == TrajectoryLoss::Position {
         if let Some((f, t)) = targets
@@ -202,7 +186,7 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
             .enumerate()
             .find(|(_, t)| t.len() != scene.len())
         {
-            return Err(FitError::Targets(format!(
+            return Err(FitError::Input(format!(
                 "target frame {} has {} points but the simulation has {} particles; the position loss needs corresponding particles (use the chamfer loss)",
                 f + 1,
                 t.len(),
@@ -216,9 +200,11 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
     } else {
         HostSim::new(config, scene)?
     };
+    let name = backend.name();
+    let backend_error = |e: B::Error| FitError::backend(name, e);
     let stepper = KernelAdjoint::new(backend, &sim).map_err(backend_error)?;
     // Parameter values per slot: per part, or per particle.
-    let mut parts: Vec<PartParams> = if per_particle {
+    let base: Vec<PartParams> = if per_particle {
         scene
             .part
             .iter()
@@ -227,6 +213,11 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
     } else {
         config.parts.clone()
     };
+    let slot_parts: Vec<u32> = if per_particle {
+        scene.part.clone()
+    } else {
+        (0..config.parts.len() as u32).collect()
+    };
     let summarize = |values: &[PartParams]| {
         if per_particle {
             part_means(config, &scene.part, values)
@@ -234,22 +225,23 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
             values.to_vec()
         }
     };
-    // Flat parameter vector: (slot, kind) pairs, or one entry per kind for the whole object.
-    let slots: Vec<(Option<usize>, ParamKind)> = match opts.granularity {
-        Granularity::Part | Granularity::Particle => (0..parts.len())
-            .flat_map(|i| opts.params.iter().map(move |&k| (Some(i), k)))
-            .collect(),
-        Granularity::Object => opts.params.iter().map(|&k| (None, k)).collect(),
-    };
-    let theta: Vec<f64> = slots
-        .iter()
-        .map(|&(i, k)| get(&parts[i.unwrap_or(0)], k))
-        .collect();
-    let bounds: Vec<(f64, f64)> = slots.iter().map(|&(_, k)| k.default_bounds()).collect();
-    let (mut opt, first, mut best) = match resume {
+    // The free parameters (one mapping for every fit): `opts.params` of every slot, or of
+    // the whole object, in the order given.
+    let free = vec![opts.params.clone(); config.parts.len()];
+    let mut space = ParamSpace::new(opts.granularity, &free, &slot_parts, |_, k| {
+        k.default_bounds()
+    });
+    space.entries.sort_by_key(|e| {
+        (
+            e.slot,
+            opts.params.iter().position(|&k| k == e.kind).unwrap_or(0),
+        )
+    });
+    let theta = space.values(&base);
+    let (opt, first, mut best) = match resume {
         Some(ck) => {
             if ck.optimizer.theta().len() != theta.len() {
-                return Err(FitError::Targets(format!(
+                return Err(FitError::Resume(format!(
                     "the checkpoint has {} free parameters, this run {}",
                     ck.optimizer.theta().len(),
                     theta.len()
@@ -258,81 +250,65 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
             (ck.optimizer, ck.iters_done, ck.best)
         }
         None => (
-            LogDomainOptimizer::new(theta, bounds, opts.adam, opts.clip_norm)?,
+            LogDomainOptimizer::new(theta, space.bounds(), opts.adam, opts.clip_norm)?,
             0,
             None,
         ),
     };
+    let mut opt = Stepper::Adam(opt);
     let spf = sim.setup.substeps_per_frame;
     let frames = targets.len().min(config.time.frames.max(1));
     let substeps = frames as u64 * spf as u64;
-    let apply = |parts: &mut Vec<PartParams>, theta: &[f64]| {
-        for (&(i, k), &v) in slots.iter().zip(theta) {
-            match i {
-                Some(i) => set(&mut parts[i], k, v),
-                None => parts.iter_mut().for_each(|p| set(p, k, v)),
-            }
-        }
+    let rate = Rate {
+        schedule: opts.schedule,
+        base: opts.adam.lr,
+        iters: opts.iters,
     };
-    // `best` holds the parameters with the lowest loss evaluated so far (Adam's momentum can
-    // carry the last iterate past the minimum).
     for iter in first..opts.iters {
         let start = Instant::now();
-        apply(&mut parts, &opt.theta());
-        let sweep = Sweep {
-            sim: &sim,
-            parts: &parts,
-            targets,
-            loss: opts.loss,
-            checkpointing: opts.checkpointing,
-            frames,
-            spf,
-            substeps,
-        };
-        let (loss, grad) = sweep.run(&stepper).map_err(backend_error)?;
-        let g: Vec<f64> = slots
-            .iter()
-            .map(|&(i, k)| match i {
-                Some(i) => grad_of(&grad[i], k),
-                None => grad.iter().map(|gp| grad_of(gp, k)).sum(),
-            })
-            .collect();
-        if !loss.is_finite() || g.iter().any(|x| !x.is_finite()) {
-            return Err(FitError::NonFinite(iter));
-        }
-        if best.as_ref().is_none_or(|(l, _)| loss < *l) {
-            best = Some((loss, parts.clone()));
-        }
-        opt.adam.lr = opts.schedule.lr(opts.adam.lr, iter, opts.iters);
-        let grad_norm = opt.step(&g);
+        let it = descent::iterate(&space, &base, &mut opt, rate, iter, |slots| {
+            let sweep = Sweep {
+                sim: &sim,
+                parts: slots,
+                targets,
+                loss: opts.loss,
+                checkpointing: opts.checkpointing,
+                frames,
+                spf,
+                substeps,
+            };
+            let (loss, grad) = sweep.run(&stepper).map_err(backend_error)?;
+            Ok(((), loss, grad))
+        })?;
+        keep_best(&mut best, it.loss, &it.slots);
         on_iter(&IterLog {
             iter,
-            loss,
-            grad_norm,
-            parts: summarize(&parts)
+            loss: it.loss,
+            grad_norm: it.grad_norm,
+            parts: summarize(&it.slots)
                 .iter()
                 .enumerate()
                 .map(|(i, p)| PartRecord::of(i, p))
                 .collect(),
             time_s: start.elapsed().as_secs_f64(),
         });
-        on_checkpoint(&FitCheckpoint {
-            iters_done: iter + 1,
-            optimizer: opt.clone(),
-            best: best.clone(),
-        });
+        if let Stepper::Adam(optimizer) = &opt {
+            on_checkpoint(&FitCheckpoint {
+                iters_done: iter + 1,
+                optimizer: optimizer.clone(),
+                best: best.clone(),
+            });
+        }
     }
-    apply(&mut parts, &opt.theta());
-    let values = best.map(|(_, p)| p).unwrap_or(parts);
+    let values = best.map(|(_, p)| p).unwrap_or_else(|| {
+        let mut v = base.clone();
+        space.apply(&mut v, &opt.theta());
+        v
+    });
     Ok(Fitted {
         parts: summarize(&values),
         per_particle: per_particle.then_some(values),
     })
-}
-
-/// A backend's error as a [`FitError`].
-fn backend_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> FitError {
-    FitError::Backend(Box::new(e))
 }
 
 /// One evaluation of the loss and of its parameter gradient (per slot, with the yield stress

@@ -30,9 +30,10 @@
 //! the fit's number is not a measurement. A pair with a marginal share below
 //! [`TRADE_OFF_SHARE`] is reported as a trade-off; `E/density` gets its own verdict.
 
-use crate::video_fit::params::{get, set, ParamSpace};
-use crate::video_fit::{FitConfig, FitError, Objective, VideoProblem};
 use r4d_mpm::PartParams;
+use r4d_optim::space::{get, set, ParamSpace};
+use r4d_optim::video::{FitConfig, Objective, VideoProblem};
+use r4d_optim::FitError;
 use r4d_optim::ParamKind;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

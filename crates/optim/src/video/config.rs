@@ -38,18 +38,18 @@
 //! bounds = { E = [1e4, 1e6] }
 //! ```
 
-use super::problem::Precision;
-use super::FitError;
+use crate::compute::Precision;
+use crate::space::{default_free, Granularity};
+use crate::FitError;
+use crate::{AdamW, ParamKind};
 use r4d_loss::DmsConfig;
 use r4d_mpm::adjoint::checkpoint::Checkpointing;
 use r4d_mpm::PartParams;
-use r4d_optim::space::{default_free, Granularity};
-use r4d_optim::{AdamW, ParamKind};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
-pub use r4d_optim::LrSchedule;
+pub use crate::LrSchedule;
 
 /// The optimiser of a fit.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

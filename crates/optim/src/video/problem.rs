@@ -8,22 +8,18 @@
 //! rendered video is resampled linearly in time between the two nearest simulated frames
 //! ([`TimeMap`]), and the gradient is split back with the same weights.
 
-use super::FitError;
-use r4d_backend_cpu::splat::CpuSplat;
-use r4d_backend_cpu::CpuBackend;
-use r4d_backend_wgpu::context::WgpuContext;
-use r4d_backend_wgpu::WgpuMpm;
-use r4d_backend_wgpu::WgpuSplat;
-use r4d_loss::bands::{BandedDms, ReferenceVideo};
-use r4d_loss::{DmsConfig, DmsTerms, Video};
+use crate::compute::{Compute, JobOut, MpmJob, Precision};
+use crate::FitError;
+use crate::{HeapProbe, HeapSpan};
+use r4d_loss::bands::ReferenceVideo;
+use r4d_loss::{BandedLoss, DmsConfig, DmsTerms, Video, VideoLoss};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
 use r4d_mpm::adjoint::engine::{KernelAdjoint, MpmAdjointKernels, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::math::Real;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
-use r4d_optim::{HeapProbe, HeapSpan};
-use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SimLink, SplatRenderer};
-use serde::{Deserialize, Serialize};
+use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SimLink};
+use serde::Serialize;
 use std::cell::RefCell;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -57,30 +53,10 @@ pub struct VideoProblem {
     pub views: Vec<View>,
     /// Frame rate of the reference videos.
     pub fps: f64,
-    /// Simulate (forward and reverse) and render on this GPU; `None`: on the CPU. The loss
-    /// stays on the CPU ([`Objective::render_on_gpu`]).
-    pub gpu: Option<GpuHandle>,
-}
-
-/// A wgpu device to simulate on ([`VideoProblem::gpu`]).
-#[derive(Clone)]
-pub struct GpuHandle(pub Arc<WgpuContext>);
-
-impl std::fmt::Debug for GpuHandle {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("GpuHandle(wgpu device)")
-    }
-}
-
-/// Floating-point type of the simulation and its reverse sweep.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Precision {
-    /// Single precision (faster; gradients agree with f64 to a few 1e-3 relative).
-    F32,
-    /// Double precision (default).
-    #[default]
-    F64,
+    /// Where the simulation (forward and reverse) and the rendering run (the loss runs on
+    /// the host): any backend ([`Compute`]; [`crate::compute::ReferenceCompute`] without a
+    /// backend crate, the `resonance4d` facade's `compute::cpu()` / `compute::wgpu()`).
+    pub compute: Arc<dyn Compute>,
 }
 
 /// Where each video frame lies on the simulation's frame grid.
@@ -197,8 +173,8 @@ pub struct Evaluation {
 
 /// Where the time and memory of the last evaluation went ([`Objective::profile`]). Peaks are
 /// the process's live heap bytes at the highest point of each stage, read from the counting
-/// allocator ([`crate::alloc`]; 0 when it is not installed); on a GPU, the device's own
-/// accounting of its buffers.
+/// allocator the caller supplies ([`Objective::heap`]; 0 without one); on a GPU, the
+/// device's own accounting of its buffers ([`Compute::device_peak_bytes`]).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct StageProfile {
     /// Forward simulation (with checkpointing), reading the frames back excluded.
@@ -231,7 +207,8 @@ pub const DEFAULT_BAND_ROWS: usize = 128;
 /// # Memory
 /// The forward pass keeps only the simulated frames' positions and deformation gradients
 /// (`12` floats per particle per frame). The loss is then evaluated in row bands of every
-/// view ([`r4d_loss::bands::BandedDms`]): each band of every frame is rendered with a
+/// view ([`BandedLoss`]; the paper's DMS by default, [`r4d_loss::bands::BandedDms`]): each
+/// band of every frame is rendered with a
 /// cropped camera, its loss and gradient evaluated, and the gradient pulled back through the
 /// renderer at once, so no whole rendered video, video gradient or f32 reference is held;
 /// 8-bit references stay bytes. The result equals the whole-frame loss up to rounding.
@@ -239,22 +216,20 @@ pub struct Objective<'a> {
     problem: &'a VideoProblem,
     sim: HostSim,
     time: TimeMap,
-    dms_config: DmsConfig,
-    dms: Vec<BandedDms<'a>>,
+    loss: Arc<dyn VideoLoss>,
+    /// Rows per band (a multiple of 16).
+    band_rows: usize,
     /// Checkpointing of the reverse sweep.
     pub checkpointing: Checkpointing,
-    /// Simulation precision (CPU; the GPU simulates in f32).
+    /// Simulation precision where the backend has a choice (the CPU; a GPU simulates in
+    /// f32).
     pub precision: Precision,
-    /// Simulate on this GPU instead of the CPU (`None`: the CPU).
-    pub gpu: Option<Arc<WgpuContext>>,
-    /// Render (and differentiate the renderer) on [`Objective::gpu`] too (default `true`
-    /// when a GPU is given); the loss runs on the CPU.
-    pub render_on_gpu: bool,
-    gpu_renderer: Mutex<Option<SplatRenderer<WgpuSplat>>>,
+    /// Where it simulates and renders (from [`VideoProblem::compute`]).
+    pub compute: Arc<dyn Compute>,
     profile: Mutex<StageProfile>,
     /// Measures the heap peaks of [`Objective::profile`] (`None`: peaks are 0). The caller
-    /// supplies it (the `r4d` binary: its counting allocator,
-    /// [`crate::alloc::CountingProbe`]); the objective never touches a global counter.
+    /// supplies it (the `r4d` binary: its counting allocator); the objective never touches a
+    /// global counter.
     pub heap: Option<Arc<dyn HeapProbe>>,
 }
 
@@ -280,11 +255,22 @@ impl<'a> Objective<'a> {
     }
 
     /// The objective of `problem` on its first `frames` video frames (all when `None`), with
-    /// per-particle parameter slots when `per_particle`.
+    /// per-particle parameter slots when `per_particle`, on the DMS loss `dms` (the paper's).
     pub fn new(
         problem: &'a VideoProblem,
         frames: Option<usize>,
         dms: &DmsConfig,
+        per_particle: bool,
+    ) -> Result<Self, FitError> {
+        Self::with_loss(problem, frames, Arc::new(dms.clone()), per_particle)
+    }
+
+    /// As [`Objective::new`], on any video loss that splits by row bands ([`VideoLoss`]
+    /// makes each view's [`BandedLoss`]; a [`DmsConfig`] makes the DMS).
+    pub fn with_loss(
+        problem: &'a VideoProblem,
+        frames: Option<usize>,
+        loss: Arc<dyn VideoLoss>,
         per_particle: bool,
     ) -> Result<Self, FitError> {
         problem.validate()?;
@@ -299,18 +285,15 @@ impl<'a> Objective<'a> {
         let t = &problem.config.time;
         let frame_dt = t.substeps() as f64 * t.substep_dt;
         let time = TimeMap::new(frames, problem.fps, frame_dt);
-        let gpu = problem.gpu.as_ref().map(|h| h.0.clone());
         let mut obj = Objective {
             problem,
             sim,
             time,
-            dms_config: dms.clone(),
-            dms: Vec::new(),
+            loss,
+            band_rows: DEFAULT_BAND_ROWS,
             checkpointing: Checkpointing::PerFrame,
             precision: Precision::F64,
-            render_on_gpu: gpu.is_some(),
-            gpu,
-            gpu_renderer: Mutex::new(None),
+            compute: problem.compute.clone(),
             profile: Mutex::new(StageProfile::default()),
             heap: None,
         };
@@ -322,18 +305,22 @@ impl<'a> Objective<'a> {
     /// 16-px patch and tile size). Smaller bands hold less memory and re-project the
     /// Gaussians more often; the value does not change (up to rounding).
     pub fn set_band_rows(&mut self, rows: usize) -> Result<(), FitError> {
-        let frames = self.time.taps.len();
-        let rows = rows.max(1).div_ceil(16) * 16;
-        self.dms = self
-            .problem
-            .views
-            .iter()
-            .map(|v| {
-                BandedDms::new(&v.video, frames, self.dms_config.clone(), rows)
-                    .map_err(|e| FitError::Input(format!("{}: reference video: {e}", v.name)))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+        self.band_rows = rows.max(1).div_ceil(16) * 16;
+        // Each view's loss is made once here to refuse a bad reference or configuration
+        // before any simulation; the evaluations make their own (the loss borrows the
+        // reference for the evaluation only).
+        for v in &self.problem.views {
+            self.view_loss(v)?;
+        }
         Ok(())
+    }
+
+    /// The loss of view `v` ([`Objective::with_loss`]'s [`VideoLoss`]) on the evaluated
+    /// frames in bands of [`Objective::set_band_rows`] rows.
+    fn view_loss<'v>(&self, v: &'v View) -> Result<Box<dyn BandedLoss + 'v>, FitError> {
+        self.loss
+            .banded(&v.video, self.time.taps.len(), self.band_rows)
+            .map_err(|e| FitError::Input(format!("{}: reference video: {e}", v.name)))
     }
 
     /// The host simulator (its `slot` gives each particle's parameter slot).
@@ -400,52 +387,33 @@ impl<'a> Objective<'a> {
         Ok((r.0, r.1.expect("gradient requested")))
     }
 
-    /// Runs on the chosen simulator: the CPU (`KernelAdjoint<CpuBackend<T>>`, f32 or f64) or the
-    /// GPU (`KernelAdjoint<WgpuMpm>`, f32).
+    /// Runs on the objective's backend ([`Objective::compute`]).
     fn dispatch(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
         for (i, p) in slots.iter().enumerate() {
             p.validate(&format!("parameters of slot {i}"))?;
         }
-        if let Some(ctx) = &self.gpu {
-            ctx.reset_peak();
-            let r = self.run_gpu(ctx.clone(), slots, mode);
-            if let Ok(mut p) = self.profile.lock() {
-                p.device_peak_bytes = Some(ctx.peak_bytes());
-            }
-            return r;
+        self.compute.reset_device_peak();
+        let r = self
+            .compute
+            .run_mpm(self.precision, MpmJob::video(self, slots, mode))
+            .and_then(JobOut::into_video);
+        if let Ok(mut p) = self.profile.lock() {
+            p.device_peak_bytes = self.compute.device_peak_bytes();
         }
-        match self.precision {
-            Precision::F32 => self.run_cpu::<f32>(slots, mode),
-            Precision::F64 => self.run_cpu::<f64>(slots, mode),
-        }
-    }
-
-    fn run_cpu<T: Real>(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
-        let b = CpuBackend::<T>::with_par(r4d_backend_cpu::Par::Rayon);
-        self.run_on(b, slots, mode, |e| match e {})
-    }
-
-    fn run_gpu(
-        &self,
-        ctx: Arc<WgpuContext>,
-        slots: &[PartParams],
-        mode: Mode,
-    ) -> Result<RunOut, FitError> {
-        self.run_on(WgpuMpm::new(ctx), slots, mode, |e| {
-            FitError::Gpu(e.to_string())
-        })
+        r
     }
 
     /// Runs on any backend: the simulation and its reverse sweep on `b` (the one stepper,
     /// `KernelAdjoint`), each frame's positions and deformation gradients downloaded for the
     /// renderer and the loss, the loss's gradient added to the adjoint state on `b`.
-    fn run_on<B: MpmAdjointKernels>(
+    pub(crate) fn run_on<B: MpmAdjointKernels>(
         &self,
         b: B,
         slots: &[PartParams],
         mode: Mode,
-        err: fn(B::Error) -> FitError,
     ) -> Result<RunOut, FitError> {
+        let name = b.name();
+        let err = |e: B::Error| FitError::backend(name, e);
         let phys: Vec<PhysParams<B::Scalar>> = slots.iter().map(PhysParams::of).collect();
         let stepper = KernelAdjoint::new(b, &self.sim).map_err(err)?;
         let be = stepper.backend();
@@ -470,7 +438,8 @@ impl<'a> Objective<'a> {
             adj.add_to_x(be, &x).map_err(err)?;
             adj.add_to_f(be, &f).map_err(err)
         };
-        let (ev, back, videos) = self.run_with(&stepper, &init, &phys, grad0, mode, &read, &add)?;
+        let (ev, back, videos) =
+            self.run_with(name, &stepper, &init, &phys, grad0, mode, &read, &add)?;
         let g = match back {
             Some((adj0, g)) => {
                 let mut g = stepper.grad_to_host(&g, &phys).map_err(err)?;
@@ -482,23 +451,25 @@ impl<'a> Objective<'a> {
         Ok((ev, check_grad(g)?, videos))
     }
 
-    /// Runs `f` with the renderer of this objective: the GPU's (built once) or the CPU's.
+    /// Runs `f` with the renderer of this objective's backend.
     fn with_renderer<R>(
         &self,
         f: impl FnOnce(&mut dyn Renderer) -> Result<R, FitError>,
     ) -> Result<R, FitError> {
-        match (&self.gpu, self.render_on_gpu) {
-            (Some(ctx), true) => {
-                let mut guard = self
-                    .gpu_renderer
-                    .lock()
-                    .map_err(|_| FitError::Gpu("the GPU renderer panicked earlier".into()))?;
-                let r =
-                    guard.get_or_insert_with(|| SplatRenderer::new(WgpuSplat::new(ctx.clone())));
-                f(r)
+        let mut f = Some(f);
+        let mut out = None;
+        self.compute.with_renderer(&mut |r| {
+            if let Some(f) = f.take() {
+                out = Some(f(r)?);
             }
-            _ => f(&mut SplatRenderer::new(CpuSplat)),
-        }
+            Ok(())
+        })?;
+        out.ok_or_else(|| {
+            FitError::backend_msg(
+                self.compute.name(),
+                "with_renderer did not call the renderer",
+            )
+        })
     }
 
     /// Renders one simulated frame from `cam` (a view's camera or a band of it).
@@ -559,30 +530,10 @@ impl<'a> Objective<'a> {
             .map_err(FitError::from)
         })?;
         drop(d);
-        let link = &self.problem.link;
-        let rot = link.rotation;
-        // x_world = R^T ((x_sim - shift) / scale + centre): dL/dx_sim = R dL/dx_world / scale.
-        // F_world = R^T F_sim R: dL/dF_sim = R dL/dF_world R^T.
-        for (p, &gi) in link.simulated.iter().enumerate() {
-            let gm = gr.means[gi as usize];
-            for a in 0..3 {
-                out.x[p][a] +=
-                    ((0..3).map(|b| rot[a][b] * gm[b] as f64).sum::<f64>() / link.scale) as f32;
-            }
-            let gf = gr.f[gi as usize];
-            for a in 0..3 {
-                for b in 0..3 {
-                    let mut v = 0.0;
-                    for c in 0..3 {
-                        for e in 0..3 {
-                            v += rot[a][c] * gf[c][e] as f64 * rot[b][e];
-                        }
-                    }
-                    out.f[p][a * 3 + b] += v as f32;
-                }
-            }
-        }
-        Ok(())
+        Ok(self
+            .problem
+            .link
+            .deformation_vjp(&gr, &mut out.x, &mut out.f)?)
     }
 
     /// A video (or a band of one, `len` values per frame) from per-simulated-frame renders
@@ -689,12 +640,14 @@ impl<'a> Objective<'a> {
         let mut ev = Evaluation::default();
         let nt = self.time.taps.len();
         let n = self.sim.len();
-        prof.bands = self.dms.iter().map(|d| d.len()).max().unwrap_or(0);
-        for (v, (dms, view)) in self.dms.iter().zip(&self.problem.views).enumerate() {
+        prof.bands = 0;
+        for (v, view) in self.problem.views.iter().enumerate() {
+            let dms = self.view_loss(view)?;
+            let band_rows = dms.band_rows();
+            prof.bands = prof.bands.max(band_rows.len());
             let w = view.video.width();
             let mut terms = DmsTerms::default();
-            for (b, band) in dms.bands().enumerate() {
-                let rows = band.rows.clone();
+            for (b, rows) in band_rows.into_iter().enumerate() {
                 let len = rows.len() * w * 3;
                 let cam = view.camera.crop_rows(rows.start as u32..rows.end as u32);
                 let t0 = Instant::now();
@@ -773,6 +726,7 @@ impl<'a> Objective<'a> {
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn run_with<D: Differentiable>(
         &self,
+        name: &str,
         d: &D,
         init: &D::State,
         params: &D::Params,
@@ -805,7 +759,7 @@ impl<'a> Objective<'a> {
         let t_start = Instant::now();
         let saved = self.stage_begin();
         store(0, init);
-        let sim_err = |e: D::Error| FitError::Gpu(e.to_string());
+        let sim_err = |e: D::Error| FitError::backend(name, e);
         if mode != Mode::Grad {
             let mut s = d.clone_state(init).map_err(sim_err)?;
             for j in 0..substeps {
@@ -943,7 +897,7 @@ impl<'a> Objective<'a> {
 
 /// What a run computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Mode {
+pub(crate) enum Mode {
     /// Render the videos only.
     RenderOnly,
     /// Render the videos and evaluate the loss.
@@ -956,7 +910,7 @@ enum Mode {
 
 /// What a run returns: the loss, the parameter gradient (when asked) and the rendered videos
 /// (forward-only runs).
-type RunOut = (Evaluation, Option<Vec<PhysParams<f64>>>, Vec<Video<f32>>);
+pub(crate) type RunOut = (Evaluation, Option<Vec<PhysParams<f64>>>, Vec<Video<f32>>);
 
 /// A simulated frame on the host: positions and row-major deformation gradients.
 struct Frame {

@@ -1,14 +1,14 @@
 //! The files a finished fit leaves in its run directory: `params.json`, the fitted video,
 //! side-by-side comparison, w-t slices and their temporal spectra, and the loss curve.
 
-use super::fit::{FitOutcome, IterRecord, Terms};
-use super::problem::{Objective, VideoProblem};
-use super::{FitConfig, FitError};
-use crate::fit_diagnostics::{loss_curve_png, write_fit_diagnostics, DiagnosticFiles};
-use crate::fit_trajectory::PartRecord;
+use crate::diagnostics::{loss_curve_png, write_fit_diagnostics, DiagnosticFiles};
 use r4d_loss::lpips::{Lpips, LpipsError, LpipsNet, LpipsValue};
 use r4d_loss::Video;
 use r4d_mpm::PartParams;
+use r4d_optim::trajectory::PartRecord;
+use r4d_optim::video::fit::{FitOutcome, IterRecord, Terms};
+use r4d_optim::video::{FitConfig, Objective, VideoProblem};
+use r4d_optim::FitError;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 

@@ -3,15 +3,16 @@
 
 use super::config::{FitConfig, OptimizerKind};
 use super::problem::{Evaluation, Objective, VideoProblem};
-use super::FitError;
-use crate::fit_trajectory::PartRecord;
-use r4d_loss::{ssim::ms_ssim, MsSsimConfig, Video};
-use r4d_mpm::PartParams;
-use r4d_optim::space::{part_summary, Granularity, ParamSpace};
-use r4d_optim::{
+use crate::descent::{self, keep_best, Rate, Stepper};
+use crate::space::{part_summary, Granularity, ParamSpace};
+use crate::trajectory::PartRecord;
+use crate::FitError;
+use crate::{
     evaluate_candidate, Candidate, InitOutcome, Initializer, LatinHypercubeInit,
     LogDomainOptimizer, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs,
 };
+use r4d_loss::{ssim::ms_ssim, MsSsimConfig, Video};
+use r4d_mpm::PartParams;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -84,8 +85,9 @@ fn new_stepper(cfg: &FitConfig, space: &ParamSpace, theta: Vec<f64>) -> Result<S
     })
 }
 
-/// Evaluates `opt`'s point, steps, and runs the flat-direction probes; iteration `iter` of
-/// `iters` (for the learning-rate schedule).
+/// Evaluates `opt`'s point and steps (the shared iteration, [`crate::descent::iterate`]),
+/// then runs the flat-direction probes; iteration `iter` of `iters` (for the learning-rate
+/// schedule).
 fn iterate(
     obj: &Objective,
     space: &ParamSpace,
@@ -94,20 +96,23 @@ fn iterate(
     cfg: &FitConfig,
     (iter, iters): (usize, usize),
 ) -> Result<Step, FitError> {
-    let theta = opt.theta();
-    let mut slots = base_slots.to_vec();
-    space.apply(&mut slots, &theta);
-    let (ev, g) = obj.value_and_grad(&slots)?;
-    let gtheta = space.gather(&g);
-    let lr = cfg.lr_schedule.lr(cfg.lr, iter, iters);
-    let grad_norm = opt.step(ev.total, &gtheta, lr);
+    let rate = Rate {
+        schedule: cfg.lr_schedule,
+        base: cfg.lr,
+        iters,
+    };
+    let it = descent::iterate(space, base_slots, opt, rate, iter, |slots| {
+        let (ev, g) = obj.value_and_grad(slots)?;
+        let total = ev.total;
+        Ok((ev, total, g))
+    })?;
     let probes = flat_probes(
         obj,
         space,
         base_slots,
-        &theta,
-        &gtheta,
-        ev.total,
+        &it.theta,
+        &it.gtheta,
+        it.loss,
         cfg.flat_probe,
     )?;
     for (i, p) in &probes {
@@ -116,50 +121,21 @@ fn iterate(
         }
     }
     Ok(Step {
-        ev,
-        theta,
-        gtheta,
-        slots,
-        grad_norm,
-        lr,
+        ev: it.eval,
+        theta: it.theta,
+        gtheta: it.gtheta,
+        slots: it.slots,
+        grad_norm: it.grad_norm,
+        lr: it.lr,
         probes: probes.into_iter().map(|(_, p)| p).collect(),
     })
 }
 
-/// The optimiser a fit steps with.
-enum Stepper {
-    Adam(LogDomainOptimizer),
-    Trust(TrustRegionBfgs),
-}
-
-impl Stepper {
-    fn theta(&self) -> Vec<f64> {
-        match self {
-            Stepper::Adam(o) => o.theta(),
-            Stepper::Trust(o) => o.theta(),
-        }
-    }
-    fn step(&mut self, loss: f64, g: &[f64], lr: f64) -> f64 {
-        match self {
-            Stepper::Adam(o) => {
-                o.adam.lr = lr;
-                o.step(g)
-            }
-            Stepper::Trust(o) => o.step(loss, g),
-        }
-    }
-    fn set_theta(&mut self, i: usize, v: f64) {
-        match self {
-            Stepper::Adam(o) => o.set_theta(i, v),
-            Stepper::Trust(o) => o.set_theta(i, v),
-        }
-    }
-    /// Stores the optimiser in the checkpoint state.
-    fn save(&self, state: &mut FitState) {
-        match self {
-            Stepper::Adam(o) => state.optimizer = Some(o.clone()),
-            Stepper::Trust(o) => state.trust = Some(o.clone()),
-        }
+/// Stores the optimiser in the checkpoint state.
+fn save(opt: &Stepper, state: &mut FitState) {
+    match opt {
+        Stepper::Adam(o) => state.optimizer = Some(o.clone()),
+        Stepper::Trust(o) => state.trust = Some(o.clone()),
     }
 }
 
@@ -324,7 +300,7 @@ pub trait FitHooks {
     fn on_start(&mut self, _r: &StartResult) {}
     /// Measures heap peaks (the stage profile, [`IterRecord::peak_host_bytes`]); `None`:
     /// they are reported as 0.
-    fn heap(&self) -> Option<std::sync::Arc<dyn r4d_optim::HeapProbe>> {
+    fn heap(&self) -> Option<std::sync::Arc<dyn crate::HeapProbe>> {
         None
     }
 }
@@ -596,9 +572,7 @@ pub fn run_fit(
                     cfg,
                     (it, cfg.multi_start_iters),
                 )?;
-                if best.as_ref().is_none_or(|(l, _)| st.ev.total < *l) {
-                    best = Some((st.ev.total, st.theta));
-                }
+                keep_best(&mut best, st.ev.total, &st.theta);
             }
             let (loss, theta) = best.unwrap_or((f64::INFINITY, space.values(&slots0)));
             let r = StartResult {
@@ -644,9 +618,7 @@ pub fn run_fit(
         let start = Instant::now();
         let st = iterate(&obj, &space, &base_slots, &mut opt, cfg, (iter, cfg.iters))?;
         let (ev, theta, gtheta) = (&st.ev, &st.theta, &st.gtheta);
-        if state.best.as_ref().is_none_or(|(l, _)| ev.total < *l) {
-            state.best = Some((ev.total, theta.clone()));
-        }
+        keep_best(&mut state.best, ev.total, theta);
         let rec = IterRecord {
             iter,
             loss: Terms::of(ev),
@@ -670,7 +642,7 @@ pub fn run_fit(
         hooks.on_iter(&rec);
         state.iters_done = iter + 1;
         if state.iters_done % cfg.checkpoint_every == 0 || state.iters_done == cfg.iters {
-            opt.save(&mut state);
+            save(&opt, &mut state);
             hooks.on_checkpoint(&state);
             state.optimizer = None;
             state.trust = None;

@@ -4,9 +4,10 @@
 //! fixed at its default). Two views.
 
 use super::{bounds_around, push_force, sim_config, stage, with, SceneSpec, Size};
-use crate::video_fit::{FitConfig, OptimizerKind, Precision};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
+use r4d_optim::video::{FitConfig, OptimizerKind};
 use r4d_optim::ParamKind;
+use r4d_optim::Precision;
 
 /// The true parameters.
 pub fn truth() -> PartParams {

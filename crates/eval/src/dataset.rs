@@ -1,20 +1,28 @@
 //! A video-fitting problem straight from a dataset folder ([`r4d_datasets`]).
 
-use super::{FitError, VideoProblem, View};
 use r4d_datasets::Dataset;
+use r4d_optim::video::{VideoProblem, View};
+use r4d_optim::{Compute, FitError};
+use std::sync::Arc;
 
 /// Builds the problem of a loaded dataset: its scene, particles, link and config, one view per
-/// reference video (frames decoded here). Every video must have the same frame rate.
-pub fn problem_from_dataset(ds: &Dataset) -> Result<VideoProblem, FitError> {
+/// reference video (frames decoded here), simulated and rendered on `compute`. Every video
+/// must have the same frame rate.
+pub fn problem_from_dataset(
+    ds: &Dataset,
+    compute: Arc<dyn Compute>,
+) -> Result<VideoProblem, FitError> {
     let (views, fps) = dataset_views(ds)?;
-    problem_with_views(ds, views, fps)
+    problem_with_views(ds, views, fps, compute)
 }
 
-/// The dataset's scene, particles, link and config with the given views (videos at `fps`).
+/// The dataset's scene, particles, link and config with the given views (videos at `fps`),
+/// simulated and rendered on `compute`.
 pub fn problem_with_views(
     ds: &Dataset,
     views: Vec<View>,
     fps: f64,
+    compute: Arc<dyn Compute>,
 ) -> Result<VideoProblem, FitError> {
     let problem = VideoProblem {
         config: ds.config.clone(),
@@ -27,7 +35,7 @@ pub fn problem_with_views(
         },
         views,
         fps,
-        gpu: None,
+        compute,
     };
     problem.validate()?;
     Ok(problem)

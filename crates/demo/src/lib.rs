@@ -25,15 +25,17 @@ pub mod profiles;
 pub mod sand;
 pub mod stage;
 
-use crate::video_fit::fit::{run_fit, FitHooks, FitOutcome, Terms};
-use crate::video_fit::params::{get, set};
-use crate::video_fit::{FitConfig, FitError, Objective, VideoProblem, View};
 use profiles::{Profile, Profile2d, Verdict};
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
+use r4d_optim::space::{get, set};
+use r4d_optim::video::fit::{run_fit, FitHooks, FitOutcome, Terms};
+use r4d_optim::video::{FitConfig, Objective, VideoProblem, View};
 use r4d_optim::ParamKind;
+use r4d_optim::{Compute, FitError};
 use r4d_splat::{Camera, RenderSettings, SimLink};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// The built-in demo scenes.
@@ -152,9 +154,10 @@ impl SceneSpec {
         self.config.parts.clone()
     }
 
-    /// The problem with its reference videos rendered from the truth; the config's parts
-    /// hold [`SceneSpec::start`] (the initialisation replaces them).
-    pub fn problem(&self) -> Result<VideoProblem, FitError> {
+    /// The problem with its reference videos rendered from the truth on `compute` (which
+    /// the problem then keeps); the config's parts hold [`SceneSpec::start`] (the
+    /// initialisation replaces them).
+    pub fn problem(&self, compute: Arc<dyn Compute>) -> Result<VideoProblem, FitError> {
         let config = self.config.clone();
         let dx = config.domain.dx();
         let scene = stage::scene(&self.particles, dx, &self.palettes, self.floor_z);
@@ -182,7 +185,7 @@ impl SceneSpec {
             },
             views,
             fps: 1.0 / (self.config.time.substeps() as f64 * self.config.time.substep_dt),
-            gpu: None,
+            compute,
         };
         let obj = Objective::new(&p, None, &r4d_loss::DmsConfig::default(), false)?;
         let videos = obj.render(&self.truth())?;
@@ -206,7 +209,7 @@ impl SceneSpec {
         c.init.frames = c.init.frames.min(self.config.time.frames);
         c.free = None;
         c.parts = (0..self.free.len())
-            .map(|id| crate::video_fit::config::PartFit {
+            .map(|id| r4d_optim::video::config::PartFit {
                 id,
                 free: Some(self.free[id].iter().map(|k| k.name().to_string()).collect()),
                 bounds: self.bounds[id].clone(),
@@ -401,14 +404,16 @@ pub fn recovery(
     out
 }
 
-/// Runs a demo: reference videos (always simulated on the CPU), profiles, initialisation and
-/// fit (simulated on `gpu` when given).
+/// Runs a demo: reference videos (simulated and rendered on `reference`; the `r4d` binary
+/// passes the CPU in f64 whatever `--backend` says), profiles, initialisation and fit
+/// (simulated and rendered on `fit`).
 pub fn run_demo(
     scene: DemoScene,
     size: Size,
     opts: &DemoOptions,
     hooks: &mut dyn FitHooks,
-    gpu: Option<crate::video_fit::GpuHandle>,
+    reference: Arc<dyn Compute>,
+    fit: Arc<dyn Compute>,
 ) -> Result<DemoRun, FitError> {
     let t0 = Instant::now();
     let mut times = BTreeMap::new();
@@ -417,8 +422,8 @@ pub fn run_demo(
         spec.profile_offsets = vec![-0.15, 0.15];
         spec.profile2d_offsets = vec![-0.15, 0.15];
     }
-    let mut problem = spec.problem()?;
-    problem.gpu = gpu;
+    let mut problem = spec.problem(reference)?;
+    problem.compute = fit;
     times.insert("reference".to_string(), t0.elapsed().as_secs_f64());
     let cfg = spec.fit_config(opts);
     let truth = spec.truth();
@@ -437,7 +442,7 @@ pub fn run_demo(
     let outcome = run_fit(&problem, &cfg, None, hooks)?;
     times.insert("fit".to_string(), t2.elapsed().as_secs_f64());
     let recovery = recovery(&spec, &outcome.init_parts, &outcome.parts, &verdicts);
-    let pj = crate::video_fit::report::params_json;
+    let pj = r4d_eval::report::params_json;
     let summary = DemoSummary {
         scene,
         truth: pj(&truth),

@@ -5,9 +5,10 @@
 //! gravity. Free: `E` and density of both parts, one view.
 
 use super::{sim_config, stage, SceneSpec, Size};
-use crate::video_fit::{FitConfig, Precision};
 use r4d_mpm::{PartParams, ParticleSet, Shape};
+use r4d_optim::video::FitConfig;
 use r4d_optim::ParamKind;
+use r4d_optim::Precision;
 
 /// The true parameters of the stem and the head.
 pub fn truth() -> Vec<PartParams> {

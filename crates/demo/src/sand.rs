@@ -5,9 +5,10 @@
 //! density. Free: `E`, `nu`, friction angle, density. Two views.
 
 use super::{bounds_around, sim_config, stage, with, SceneSpec, Size};
-use crate::video_fit::{FitConfig, OptimizerKind, Precision};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
+use r4d_optim::video::{FitConfig, OptimizerKind};
 use r4d_optim::ParamKind;
+use r4d_optim::Precision;
 
 /// The true parameters.
 pub fn truth() -> PartParams {

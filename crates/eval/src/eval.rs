@@ -10,25 +10,25 @@
 //!   means over views.
 //! * **Trajectories** (Table 3), where the dataset has ground-truth point clouds (PhysFlow's
 //!   `pcd/<k>.ply` = frame `k - 1`, in world coordinates): the fitted parameters are simulated
-//!   with the fit's own simulator (`KernelAdjoint<CpuBackend<f64>>`); ground-truth frame `j` is at
+//!   with the fit's own simulator (`KernelAdjoint` on the problem's backend, f64 where it has
+//!   the choice); ground-truth frame `j` is at
 //!   `j / fps_fit` (the video's frame rate; the positions are linear in time between simulated
 //!   frames when the grids differ); every particle is mapped to world coordinates by the
 //!   simulation link; then Chamfer distance (`cd_sq_sum`), HD95 (`hd95_max_of_directed`) and
 //!   F-score at `tau` = 0.04 ([`r4d_loss::trajectory`]'s defaults, those of `r4d
 //!   metrics-trajectory`), means over frames, frame 0 included.
 
-use super::problem::{Objective, VideoProblem};
-use super::report::video_metrics;
-use super::{FitConfig, FitError, View};
-use r4d_backend_cpu::CpuBackend;
+use crate::report::video_metrics;
 use r4d_loss::bands::{ReferenceVideo, Video8};
 use r4d_loss::lpips::Lpips;
 use r4d_loss::trajectory::{trajectory_metrics, TrajectoryMetrics, DEFAULT_TAU};
 use r4d_loss::Video;
-use r4d_mpm::adjoint::checkpoint::Differentiable;
-use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint};
-use r4d_mpm::adjoint::host::{HostSim, PhysParams};
+use r4d_mpm::adjoint::host::HostSim;
 use r4d_mpm::PartParams;
+use r4d_optim::compute::simulate_frames;
+use r4d_optim::video::{FitConfig, Objective, VideoProblem, View};
+use r4d_optim::FitError;
+use r4d_optim::Precision;
 use std::path::PathBuf;
 
 /// The evaluation frame rate of the paper.
@@ -184,13 +184,6 @@ pub fn evaluate_trajectory(
         )));
     }
     let last = last_f as usize;
-    let phys: Vec<PhysParams<f64>> = slots.iter().map(PhysParams::of).collect();
-    let stepper = infallible(KernelAdjoint::new(
-        CpuBackend::<f64>::with_par(r4d_backend_cpu::Par::Rayon),
-        &sim,
-    ));
-    let mut s = infallible(stepper.init(&phys, &vec![[0.0; 3]; sim.len()]));
-    let spf = sim.setup.substeps_per_frame as u64;
     // World coordinates, rounded to f32 as the exported PLY frames hold them (so
     // `r4d metrics-trajectory` on those files gives the same numbers).
     let world = |x: &[[f64; 3]]| -> Vec<[f64; 3]> {
@@ -198,21 +191,23 @@ pub fn evaluate_trajectory(
             .map(|&p| problem.link.to_world(p).map(|c| c as f32 as f64))
             .collect()
     };
-    let mut frames = vec![world(&s.x)];
-    let mut k = 0u64;
-    for _ in 0..last {
-        for _ in 0..spf {
-            infallible(stepper.step(&mut s, &phys, k));
-            k += 1;
-        }
-        if s.x.iter().flatten().any(|c| !c.is_finite()) {
-            return Err(FitError::Input(format!(
-                "the simulation with the fitted parameters diverged by frame {}",
-                frames.len()
-            )));
-        }
-        frames.push(world(&s.x));
-    }
+    let mut frames: Vec<Vec<[f64; 3]>> = Vec::with_capacity(last + 1);
+    simulate_frames(
+        &*problem.compute,
+        Precision::F64,
+        &sim,
+        slots,
+        last,
+        &mut |j, x| {
+            if x.iter().flatten().any(|c| !c.is_finite()) {
+                return Err(FitError::Input(format!(
+                    "the simulation with the fitted parameters diverged by frame {j}"
+                )));
+            }
+            frames.push(world(x));
+            Ok(())
+        },
+    )?;
     let simulated: Vec<Vec<[f64; 3]>> = at
         .iter()
         .map(|&a| {

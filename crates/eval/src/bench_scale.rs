@@ -14,16 +14,18 @@
 //! The reference video is rendered from the simulation at other parameters (`truth`) or is
 //! the rest frame repeated (`rest`, cheaper: no extra simulation), stored as 8-bit frames,
 //! like a video read from PNG files. The measured iteration is
-//! [`crate::video_fit::Objective::value_and_grad`] itself: nothing is special-cased.
+//! [`Objective::value_and_grad`] itself: nothing is special-cased.
 
-use crate::video_fit::{FitError, GpuHandle, Objective, StageProfile, VideoProblem, View};
 use r4d_loss::bands::{ReferenceVideo, Video8};
 use r4d_loss::{DmsConfig, Video};
 use r4d_mpm::adjoint::checkpoint::{memory_plan, Checkpointing};
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
-use r4d_splat::{Camera, Gaussians, RenderSettings, Renderer, SimLink, SplatRenderer};
+use r4d_optim::video::{Objective, StageProfile, VideoProblem, View};
+use r4d_optim::{Compute, FitError, Precision};
+use r4d_splat::{Camera, Gaussians, RenderSettings, SimLink};
 use serde::Serialize;
 use std::path::Path;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Size of the benchmark.
@@ -60,7 +62,7 @@ impl Default for BenchScale {
             width: 1920,
             height: 1080,
             checkpointing: Checkpointing::Nested(20),
-            band_rows: crate::video_fit::problem::DEFAULT_BAND_ROWS,
+            band_rows: r4d_optim::video::problem::DEFAULT_BAND_ROWS,
             reference_from_simulation: true,
         }
     }
@@ -284,8 +286,8 @@ fn camera(s: &BenchScale) -> Camera {
 }
 
 impl BenchScene {
-    /// Builds the scene and its reference video (on `gpu` if given).
-    pub fn build(s: &BenchScale, gpu: Option<GpuHandle>) -> Result<BenchScene, FitError> {
+    /// Builds the scene and its reference video (on `compute`).
+    pub fn build(s: &BenchScale, compute: Arc<dyn Compute>) -> Result<BenchScene, FitError> {
         let truth = vec![
             PartParams {
                 youngs_modulus_pa: 2e5,
@@ -342,8 +344,7 @@ impl BenchScene {
             small.fy /= 4.0;
             small.cx /= 4.0;
             small.cy /= 4.0;
-            let img = SplatRenderer::new(r4d_backend_cpu::splat::CpuSplat)
-                .render(&block, None, &small, &settings)?;
+            let img = compute.render(&block, None, &small, &settings)?;
             img.alpha.iter().filter(|&&a| a > 0.5).count() as f64 / img.alpha.len() as f64
         };
         let t0 = Instant::now();
@@ -360,23 +361,18 @@ impl BenchScene {
                 video: ReferenceVideo::U8(placeholder),
             }],
             fps: 1.0 / (s.substeps as f64 * DT),
-            gpu,
+            compute,
         };
         let reference = if s.reference_from_simulation {
             // Validation needs a video of the right size: a one-byte-per-value placeholder.
             problem.views[0].video =
                 ReferenceVideo::U8(Video8::quantize(&Video::zeros(s.frames + 1, h, w)));
             let mut obj = Objective::new(&problem, None, &DmsConfig::default(), false)?;
-            obj.precision = crate::video_fit::Precision::F32;
+            obj.precision = Precision::F32;
             let mut v = obj.render(&truth)?;
             Video8::quantize(&v.remove(0))
         } else {
-            let img = SplatRenderer::new(r4d_backend_cpu::splat::CpuSplat).render(
-                &problem.scene,
-                None,
-                &cam,
-                &problem.settings,
-            )?;
+            let img = (problem.compute).render(&problem.scene, None, &cam, &problem.settings)?;
             let frame = Video::new(1, h, w, img.rgb).map_err(FitError::from)?;
             let one = Video8::quantize(&frame);
             let data: Vec<f32> = (0..s.frames + 1)
@@ -446,17 +442,17 @@ pub struct BenchReport {
 
 /// Runs one iteration (f32 simulation) and measures it.
 /// Heap peaks come from `heap` (the `r4d` binary passes its counting allocator's
-/// [`crate::alloc::CountingProbe`]; `None`: 0).
+/// `CountingProbe`; `None`: 0).
 pub fn run(
     s: &BenchScale,
-    gpu: Option<GpuHandle>,
-    heap: Option<std::sync::Arc<dyn r4d_optim::HeapProbe>>,
+    compute: Arc<dyn Compute>,
+    heap: Option<Arc<dyn r4d_optim::HeapProbe>>,
 ) -> Result<(BenchScene, BenchReport), FitError> {
-    let backend = if gpu.is_some() { "wgpu" } else { "cpu" };
-    let scene = BenchScene::build(s, gpu)?;
+    let backend = compute.name().to_string();
+    let scene = BenchScene::build(s, compute)?;
     let p = &scene.problem;
-    let mut obj = Objective::new(p, None, &crate::video_fit::FitConfig::default().loss, false)?;
-    obj.precision = crate::video_fit::Precision::F32;
+    let mut obj = Objective::new(p, None, &r4d_optim::video::FitConfig::default().loss, false)?;
+    obj.precision = Precision::F32;
     obj.checkpointing = s.checkpointing;
     obj.set_band_rows(s.band_rows)?;
     obj.heap = heap.clone();
@@ -483,7 +479,7 @@ pub fn run(
         substeps_per_frame: s.substeps,
         width: s.width,
         height: s.height,
-        backend: backend.into(),
+        backend,
         checkpointing: checkpointing_name(s.checkpointing),
         band_rows: s.band_rows,
         bands: profile.bands,

@@ -1,0 +1,22 @@
+//! Fitting part parameters to a reference video (the paper's main job): simulation-driven
+//! initialisation, then part-level AdamW in the log domain on the DMS loss, differentiated
+//! through the renderer and the simulator.
+//!
+//! * [`problem`]: the scene, particles, parts, cameras and reference videos, and the
+//!   differentiable [`Objective`] (simulate -> render -> DMS -> reverse sweep).
+//! * [`config`]: the fit's settings (`FIT.toml`).
+//! * [`fit`]: the loop: initialisation, iterations, logs, checkpoints and resume.
+//!
+//! The simulation, its reverse sweep and the rendering run on the problem's backend
+//! ([`VideoProblem::compute`], any [`crate::compute::Compute`]): the one stepper
+//! `KernelAdjoint<B>` over that backend's kernels, positions and F read back once per frame;
+//! the loss runs on the host, band by band.
+
+pub mod config;
+pub mod fit;
+pub mod problem;
+
+pub use crate::space::{Granularity, ParamSpace};
+pub use config::{FitConfig, InitConfig, OptimizerKind};
+pub use fit::{run_fit, FitHooks, FitOutcome, FitState, IterRecord, StartResult};
+pub use problem::{Evaluation, Objective, StageProfile, TimeMap, VideoProblem, View};
