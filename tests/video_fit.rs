@@ -452,6 +452,65 @@ fn row_bands_give_the_whole_frame_loss_and_gradient() {
     assert!(rel(v.total, ev.total) < 1e-5);
 }
 
+/// A parts file may name a part no particle belongs to (the last one empty: `r4d segment`
+/// can write such a file): that part is a parameter slot with a zero gradient, and a fit runs
+/// (it used to index past the gradient).
+#[test]
+fn an_empty_last_part_is_a_slot_with_zero_gradient() {
+    let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
+    let mut p = small_problem(&truth, 3);
+    p.config.parts.push(jelly(5e3, 900.0));
+    let start = [
+        jelly(1.4e4, 1000.0),
+        jelly(1.1e4, 1200.0),
+        jelly(5e3, 900.0),
+    ];
+    let obj = Objective::new(&p, None, &fit_config(0).loss, false).unwrap();
+    assert_eq!(obj.slot_parts(), vec![0, 1, 2]);
+    let (_, g) = obj.value_and_grad(&start).unwrap();
+    assert_eq!(g.len(), 3);
+    assert!(g[0].youngs_modulus != 0.0 && g[1].density != 0.0);
+    assert_eq!(g[2].youngs_modulus, 0.0);
+    assert_eq!(g[2].density, 0.0);
+    p.config.parts = start.to_vec();
+    let out = run_fit(&p, &fit_config(1), None, &mut NoHooks).unwrap();
+    assert_eq!(out.parts.len(), 3);
+}
+
+/// A frame rate that maps the video onto an absurd number of simulated frames is refused
+/// when the objective is made (it used to plan ~6e8 frames), and a damaged checkpoint is a
+/// resume error, not a panic or a silent restart.
+#[test]
+fn absurd_frame_rates_and_damaged_checkpoints_are_refused() {
+    let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
+    let mut p = small_problem(&truth, 3);
+    let fps = p.fps;
+    p.fps = 1e-6;
+    let e = Objective::new(&p, None, &fit_config(0).loss, false)
+        .err()
+        .expect("refused");
+    assert!(e.to_string().contains("simulated frames"), "{e}");
+    p.fps = fps;
+    struct Keep(Option<FitState>);
+    impl FitHooks for Keep {
+        fn on_checkpoint(&mut self, s: &FitState) {
+            self.0 = Some(s.clone());
+        }
+    }
+    let mut keep = Keep(None);
+    let cfg = fit_config(1);
+    run_fit(&p, &cfg, None, &mut keep).unwrap();
+    let state = keep.0.expect("a checkpoint");
+    let mut j = serde_json::to_value(&state).unwrap();
+    j["optimizer"]["xi"] = serde_json::json!([1.0]);
+    let damaged: FitState = serde_json::from_value(j).unwrap();
+    let cfg2 = fit_config(2);
+    let e = run_fit(&p, &cfg2, Some(damaged), &mut NoHooks).expect_err("refused");
+    assert!(e.to_string().contains("cannot resume"), "{e}");
+    // The intact checkpoint resumes.
+    run_fit(&p, &cfg2, Some(state), &mut NoHooks).unwrap();
+}
+
 /// Another loss plugs into the objective through `r4d_loss::VideoLoss` / `BandedLoss`: a loss
 /// that is the DMS scaled by 3 gives 3x the DMS objective's value and gradient (the objective
 /// evaluates, differentiates and pulls back whatever loss it is given).

@@ -3,7 +3,6 @@
 
 use anyhow::{bail, Context, Result};
 use resonance4d::bench_scale::{run, table, BenchScale};
-use resonance4d::video_fit::FitConfig;
 use std::path::PathBuf;
 
 /// Arguments of `r4d bench-scale` (defaults: the paper's scale).
@@ -55,22 +54,13 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
                 a.resolution
             )
         })?;
-    if a.cells < 2 || a.cells > 48 {
-        bail!("--cells {}: between 2 and 48 (the grid is 64^3)", a.cells);
-    }
-    if a.frames < 1 || a.substeps < 1 {
-        bail!("--frames and --substeps must be positive");
-    }
     let reference_from_simulation = match a.reference.as_str() {
         "truth" => true,
         "rest" => false,
         o => bail!("--reference '{o}': truth or rest"),
     };
-    let checkpointing = FitConfig {
-        checkpointing: a.checkpointing.clone(),
-        ..Default::default()
-    }
-    .checkpointing()?;
+    let checkpointing = r4d_mpm::adjoint::checkpoint::Checkpointing::parse(&a.checkpointing)
+        .map_err(|e| anyhow::anyhow!("--checkpointing: {e}"))?;
     let scale = BenchScale {
         cells: a.cells,
         gaussians: a.gaussians,
@@ -82,6 +72,10 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
         band_rows: a.band_rows,
         reference_from_simulation,
     };
+    // Every size checked (names the flag) before the backend opens or anything is built.
+    scale
+        .validate()
+        .map_err(|e| anyhow::anyhow!("--{}", e.to_string().replace(" = ", " ")))?;
     let backend = a.backend.compute()?;
     eprintln!(
         "bench-scale: building the scene and the reference video ({}) ...",

@@ -117,21 +117,17 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         "particle" => Granularity::Particle,
         o => bail!("--granularity: unknown '{o}' (part, object, particle)"),
     };
-    let checkpointing = match a.checkpointing.as_str() {
-        "per-frame" => Checkpointing::PerFrame,
-        "store-all" => Checkpointing::StoreAll,
-        s if s.starts_with("every:") => Checkpointing::EveryN(
-            s[6..]
-                .parse()
-                .with_context(|| format!("--checkpointing: bad interval in '{s}'"))?,
-        ),
-        s if s.starts_with("nested:") => Checkpointing::Nested(
-            s[7..]
-                .parse()
-                .with_context(|| format!("--checkpointing: bad interval in '{s}'"))?,
-        ),
-        o => bail!("--checkpointing: unknown '{o}' (per-frame, store-all, every:N, nested:N)"),
+    let checkpointing = Checkpointing::parse(&a.checkpointing)
+        .map_err(|e| anyhow::anyhow!("--checkpointing: {e}"))?;
+    // The optimiser's settings, checked as `fit` checks FIT.toml's (one validation path)
+    // before anything is written.
+    let adam = AdamW {
+        lr: a.lr,
+        beta1: a.beta1,
+        beta2: a.beta2,
+        ..Default::default()
     };
+    adam.validate().map_err(|e| anyhow::anyhow!("--{e}"))?;
     let backend = a.backend.compute()?;
     let targets = read_targets(&a.target, config.time.frames)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
@@ -170,12 +166,7 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     let opts = FitOptions {
         params,
         iters: a.iters,
-        adam: AdamW {
-            lr: a.lr,
-            beta1: a.beta1,
-            beta2: a.beta2,
-            ..Default::default()
-        },
+        adam,
         loss,
         checkpointing,
         granularity,

@@ -51,6 +51,84 @@ pub struct BenchScale {
     pub reference_from_simulation: bool,
 }
 
+/// The largest benchmark a user can ask for: sizes past these are refused before anything
+/// is built (each is well above the paper's scale: 23 cells, 300 000 Gaussians, 16 x 400
+/// substeps, 1920 x 1080).
+pub const LIMITS: BenchLimits = BenchLimits {
+    max_gaussians: 20_000_000,
+    max_frames: 1_000,
+    max_substeps: 100_000,
+    max_total_substeps: 10_000_000,
+};
+
+/// See [`LIMITS`].
+#[derive(Clone, Copy, Debug)]
+pub struct BenchLimits {
+    /// Gaussians in all.
+    pub max_gaussians: usize,
+    /// Simulated frames.
+    pub max_frames: usize,
+    /// Substeps per frame.
+    pub max_substeps: usize,
+    /// Frames x substeps.
+    pub max_total_substeps: usize,
+}
+
+impl BenchScale {
+    /// Checks every size against [`LIMITS`] and the camera limit
+    /// ([`r4d_splat::camera::MAX_CAMERA_PIXELS`]); the error names the setting and its limit.
+    pub fn validate(&self) -> Result<(), FitError> {
+        let bad = |m: String| Err(FitError::Input(m));
+        let l = LIMITS;
+        if !(2..=48).contains(&self.cells) {
+            return bad(format!(
+                "cells = {}: between 2 and 48 (the grid is 64^3)",
+                self.cells
+            ));
+        }
+        if self.gaussians > l.max_gaussians {
+            return bad(format!(
+                "gaussians = {}: at most {}",
+                self.gaussians, l.max_gaussians
+            ));
+        }
+        if self.frames == 0 || self.frames > l.max_frames {
+            return bad(format!("frames = {}: 1..={}", self.frames, l.max_frames));
+        }
+        if self.substeps == 0 || self.substeps > l.max_substeps {
+            return bad(format!(
+                "substeps = {}: 1..={}",
+                self.substeps, l.max_substeps
+            ));
+        }
+        if self.frames * self.substeps > l.max_total_substeps {
+            return bad(format!(
+                "frames x substeps = {}: at most {}",
+                self.frames * self.substeps,
+                l.max_total_substeps
+            ));
+        }
+        let px = self.width as u64 * self.height as u64;
+        if self.width < 16
+            || self.height < 16
+            || px > r4d_splat::camera::MAX_CAMERA_PIXELS
+            || self.width > 1 << 15
+            || self.height > 1 << 15
+        {
+            return bad(format!(
+                "resolution {}x{}: at least 16x16, at most {} pixels",
+                self.width,
+                self.height,
+                r4d_splat::camera::MAX_CAMERA_PIXELS
+            ));
+        }
+        if self.band_rows == 0 {
+            return bad("band_rows = 0: at least 1 (rounded up to 16)".into());
+        }
+        Ok(())
+    }
+}
+
 impl Default for BenchScale {
     /// The paper's scale.
     fn default() -> Self {
@@ -288,6 +366,7 @@ fn camera(s: &BenchScale) -> Camera {
 impl BenchScene {
     /// Builds the scene and its reference video (on `compute`).
     pub fn build(s: &BenchScale, compute: Arc<dyn Compute>) -> Result<BenchScene, FitError> {
+        s.validate()?;
         let truth = vec![
             PartParams {
                 youngs_modulus_pa: 2e5,

@@ -247,11 +247,16 @@ fn read_npy<T: Real>(path: &Path) -> Result<Video<T>, VideoIoError> {
             )))
         }
     };
-    let n = t * h * w * 3;
+    // Sizes come from the file: checked, and bounded by the data actually present before
+    // anything is allocated.
+    let n = [t, h, w, 3]
+        .iter()
+        .try_fold(1usize, |a, &d| a.checked_mul(d))
+        .ok_or_else(|| bad(format!("shape {shape:?} overflows")))?;
     let body = &bytes[start + hlen..];
     let data: Vec<T> = match descr {
         "<f4" => {
-            if body.len() < 4 * n {
+            if body.len() / 4 < n {
                 return Err(bad(format!(
                     "{} data bytes for {n} float32 values",
                     body.len()
@@ -263,7 +268,7 @@ fn read_npy<T: Real>(path: &Path) -> Result<Video<T>, VideoIoError> {
                 .collect()
         }
         "<f8" => {
-            if body.len() < 8 * n {
+            if body.len() / 8 < n {
                 return Err(bad(format!(
                     "{} data bytes for {n} float64 values",
                     body.len()

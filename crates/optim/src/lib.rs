@@ -81,6 +81,9 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// A hyper-parameter out of its range (the message names it and the range).
+    #[error("{0}")]
+    Setting(String),
     /// An unknown parameter name.
     #[error("unknown parameter '{0}' (known: E, nu, yield_stress, plastic_viscosity, friction_angle, density)")]
     UnknownParam(String),
@@ -199,6 +202,33 @@ pub struct AdamW {
     pub weight_decay: f64,
 }
 
+impl AdamW {
+    /// Checks the hyper-parameters (the one check every command and every resumed state goes
+    /// through): `lr` positive and finite, `beta1` and `beta2` in `[0, 1)`, `eps` positive
+    /// and finite, `weight_decay` finite and not negative.
+    pub fn validate(&self) -> Result<(), Error> {
+        let bad = |m: String| Err(Error::Setting(m));
+        if !(self.lr.is_finite() && self.lr > 0.0) {
+            return bad(format!("lr = {} must be positive and finite", self.lr));
+        }
+        for (n, b) in [("beta1", self.beta1), ("beta2", self.beta2)] {
+            if !(0.0..1.0).contains(&b) {
+                return bad(format!("{n} = {b} must be in [0, 1)"));
+            }
+        }
+        if !(self.eps.is_finite() && self.eps > 0.0) {
+            return bad(format!("eps = {} must be positive and finite", self.eps));
+        }
+        if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
+            return bad(format!(
+                "weight_decay = {} must be >= 0 and finite",
+                self.weight_decay
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for AdamW {
     fn default() -> Self {
         AdamW {
@@ -234,7 +264,16 @@ impl LogDomainOptimizer {
         adam: AdamW,
         clip_norm: Option<f64>,
     ) -> Result<Self, Error> {
-        assert_eq!(theta.len(), bounds.len(), "one bound per parameter");
+        if theta.len() != bounds.len() {
+            return Err(Error::Invalid {
+                index: theta.len().min(bounds.len()),
+                message: format!(
+                    "{} values for {} bounds: one bound per parameter",
+                    theta.len(),
+                    bounds.len()
+                ),
+            });
+        }
         for (i, (&t, &(l, u))) in theta.iter().zip(&bounds).enumerate() {
             let bad = |m: String| {
                 Err(Error::Invalid {
@@ -249,6 +288,14 @@ impl LogDomainOptimizer {
             }
             if !(t.is_finite() && t > 0.0) {
                 return bad(format!("value {t} must be positive and finite"));
+            }
+        }
+        adam.validate()?;
+        if let Some(c) = clip_norm {
+            if !(c.is_finite() && c > 0.0) {
+                return Err(Error::Setting(format!(
+                    "clip_norm = {c} must be positive and finite (or no clipping)"
+                )));
             }
         }
         let n = theta.len();
@@ -270,6 +317,56 @@ impl LogDomainOptimizer {
     /// Current parameters `theta = exp(xi)`.
     pub fn theta(&self) -> Vec<f64> {
         self.xi.iter().map(|x| x.exp()).collect()
+    }
+
+    /// Checks a state read back (a checkpoint) before it is stepped: `n` parameters, every
+    /// vector that long, values finite, inside ordered bounds, second moments not negative,
+    /// hyper-parameters valid. A damaged or foreign checkpoint is an error here, not a panic
+    /// or silent garbage later.
+    pub fn validate(&self, n: usize) -> Result<(), Error> {
+        let lens = [
+            self.xi.len(),
+            self.log_bounds.len(),
+            self.m.len(),
+            self.v.len(),
+        ];
+        if let Some(&bad) = lens.iter().find(|&&l| l != n) {
+            return Err(Error::Invalid {
+                index: bad.min(n),
+                message: format!(
+                    "the optimiser state holds vectors of {lens:?} entries (parameters, bounds, moments), this fit has {n} parameters"
+                ),
+            });
+        }
+        for i in 0..n {
+            let (lo, hi) = self.log_bounds[i];
+            let ok = lo.is_finite()
+                && hi.is_finite()
+                && lo <= hi
+                && self.xi[i].is_finite()
+                && (lo..=hi).contains(&self.xi[i])
+                && self.m[i].is_finite()
+                && self.v[i].is_finite()
+                && self.v[i] >= 0.0;
+            if !ok {
+                return Err(Error::Invalid {
+                    index: i,
+                    message: format!(
+                        "damaged optimiser state: log value {}, log bounds [{lo}, {hi}], moments {} and {}",
+                        self.xi[i], self.m[i], self.v[i]
+                    ),
+                });
+            }
+        }
+        self.adam.validate()?;
+        if let Some(c) = self.clip_norm {
+            if !(c.is_finite() && c > 0.0) {
+                return Err(Error::Setting(format!(
+                    "clip_norm = {c} must be positive and finite (or no clipping)"
+                )));
+            }
+        }
+        Ok(())
     }
 
     /// Moves parameter `i` to `value` (clamped to its bounds) and forgets its moments: the
@@ -357,6 +454,53 @@ impl LrSchedule {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A checkpoint's optimiser is checked before it is stepped (issue 23: a vector of the
+    /// wrong length used to hit an `assert!`), and the hyper-parameters go through the one
+    /// check every command uses.
+    #[test]
+    fn damaged_states_and_bad_settings_are_errors() {
+        let o = LogDomainOptimizer::new(
+            vec![1.0, 2.0],
+            vec![(0.1, 10.0), (0.1, 10.0)],
+            AdamW::default(),
+            Some(1.0),
+        )
+        .unwrap();
+        o.validate(2).unwrap();
+        assert!(o.validate(3).is_err());
+        let mut j = serde_json::to_value(&o).unwrap();
+        j["m"] = serde_json::json!([0.0]);
+        let short: LogDomainOptimizer = serde_json::from_value(j.clone()).unwrap();
+        assert!(short.validate(2).is_err());
+        j["m"] = serde_json::json!([0.0, 0.0]);
+        j["xi"] = serde_json::json!([0.0, 50.0]);
+        let outside: LogDomainOptimizer = serde_json::from_value(j).unwrap();
+        assert!(outside.validate(2).is_err());
+        let bad = AdamW {
+            beta1: 1.5,
+            ..Default::default()
+        };
+        assert!(bad.validate().unwrap_err().to_string().contains("beta1"));
+        assert!(LogDomainOptimizer::new(vec![1.0], vec![(0.1, 10.0)], bad, None).is_err());
+        assert!(
+            LogDomainOptimizer::new(vec![1.0, 2.0], vec![(0.1, 10.0)], AdamW::default(), None)
+                .is_err(),
+            "one bound per parameter is an error, not an assert"
+        );
+        let t = TrustRegionBfgs::new(
+            vec![1.0, 2.0],
+            vec![(0.1, 10.0), (0.1, 10.0)],
+            TrustRegion {
+                initial_radius: 0.1,
+                max_radius: 0.5,
+                min_radius: 0.01,
+            },
+        )
+        .unwrap();
+        t.validate(2).unwrap();
+        assert!(t.validate(1).is_err());
+    }
 
     #[test]
     fn chain_rule_bounds_and_clipping() {

@@ -180,6 +180,7 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
     if targets.is_empty() {
         return Err(FitError::Input("no target frames".into()));
     }
+    opts.adam.validate()?;
     if opts.loss == TrajectoryLoss::Position {
         if let Some((f, t)) = targets
             .iter()
@@ -240,12 +241,17 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
     let theta = space.values(&base);
     let (opt, first, mut best) = match resume {
         Some(ck) => {
-            if ck.optimizer.theta().len() != theta.len() {
-                return Err(FitError::Resume(format!(
-                    "the checkpoint has {} free parameters, this run {}",
-                    ck.optimizer.theta().len(),
-                    theta.len()
-                )));
+            ck.optimizer
+                .validate(theta.len())
+                .map_err(|e| FitError::Resume(format!("the checkpoint's optimiser: {e}")))?;
+            if let Some((_, p)) = &ck.best {
+                if p.len() != base.len() {
+                    return Err(FitError::Resume(format!(
+                        "the checkpoint's best parameters have {} slots, this run {}",
+                        p.len(),
+                        base.len()
+                    )));
+                }
             }
             (ck.optimizer, ck.iters_done, ck.best)
         }

@@ -167,6 +167,69 @@ impl TrustRegionBfgs {
         })
     }
 
+    /// Checks a state read back (a checkpoint) before it is stepped: `n` parameters, every
+    /// vector that long (the model `n x n` or empty), values finite and inside ordered
+    /// bounds, a positive radius within valid settings.
+    pub fn validate(&self, n: usize) -> Result<(), Error> {
+        let bad = |index: usize, message: String| Err(Error::Invalid { index, message });
+        let model_ok = self.b.is_empty() || self.b.len() == n.saturating_mul(n);
+        let at_ok = self
+            .at_x
+            .as_ref()
+            .is_none_or(|(l, g)| g.len() == n && l.is_finite() && g.iter().all(|v| v.is_finite()));
+        if self.x.len() != n || self.trial.len() != n || self.log_bounds.len() != n || !model_ok {
+            return bad(
+                0,
+                format!(
+                    "the trust-region state holds {} / {} / {} values and a {}-entry model, this fit has {n} parameters",
+                    self.x.len(),
+                    self.trial.len(),
+                    self.log_bounds.len(),
+                    self.b.len()
+                ),
+            );
+        }
+        if !at_ok || self.b.iter().any(|v| !v.is_finite()) {
+            return bad(
+                0,
+                "damaged trust-region state (non-finite model or gradient)".into(),
+            );
+        }
+        for i in 0..n {
+            let (lo, hi) = self.log_bounds[i];
+            let inside = |v: f64| v.is_finite() && (lo..=hi).contains(&v);
+            if !(lo.is_finite()
+                && hi.is_finite()
+                && lo <= hi
+                && inside(self.x[i])
+                && inside(self.trial[i]))
+            {
+                return bad(
+                    i,
+                    format!(
+                        "damaged trust-region state: log values {} and {}, log bounds [{lo}, {hi}]",
+                        self.x[i], self.trial[i]
+                    ),
+                );
+            }
+        }
+        let s = self.settings;
+        let ordered = s.min_radius > 0.0
+            && s.min_radius <= s.initial_radius
+            && s.initial_radius <= s.max_radius
+            && s.max_radius.is_finite();
+        if !(ordered && self.radius.is_finite() && self.radius > 0.0) {
+            return bad(
+                0,
+                format!(
+                    "damaged trust-region state: radius {} with settings {:?}",
+                    self.radius, s
+                ),
+            );
+        }
+        Ok(())
+    }
+
     /// The parameters to evaluate next.
     pub fn theta(&self) -> Vec<f64> {
         self.trial.iter().map(|x| x.exp()).collect()

@@ -249,9 +249,21 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
             "list properties in or before the vertex element are not supported".into(),
         ));
     }
+    // Sizes declared by the header: checked, so a huge element before `vertex` is an error
+    // instead of a wrapped offset that reads the wrong bytes.
     let mut skip_bytes = 0usize;
     for e in &elements[..vi] {
-        skip_bytes += e.1 * e.2.iter().map(|p| p.1.size()).sum::<usize>();
+        let stride: usize = e.2.iter().map(|p| p.1.size()).sum();
+        skip_bytes = e
+            .1
+            .checked_mul(stride)
+            .and_then(|b| b.checked_add(skip_bytes))
+            .ok_or_else(|| {
+                err(format!(
+                    "element '{}' before 'vertex' declares {} entries of {stride} bytes: more than any file holds",
+                    e.0, e.1
+                ))
+            })?;
     }
     let (_, count, props) = &elements[vi];
     let count = *count;
@@ -268,7 +280,10 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
         Format::Ascii => {
             let text = std::str::from_utf8(&bytes[pos..])
                 .map_err(|_| err("ASCII body is not text".into()))?;
-            let skip_rows: usize = elements[..vi].iter().map(|e| e.1).sum();
+            let skip_rows = elements[..vi]
+                .iter()
+                .try_fold(0usize, |a, e| a.checked_add(e.1))
+                .ok_or_else(|| err("elements before 'vertex' declare too many rows".into()))?;
             let mut rows = text
                 .lines()
                 .filter(|l| !l.trim().is_empty())
@@ -292,7 +307,15 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
         Format::Le | Format::Be => {
             let le = format == Format::Le;
             let stride: usize = props.iter().map(|p| p.1.size()).sum();
-            let start = pos + skip_bytes;
+            let start = pos
+                .checked_add(skip_bytes)
+                .filter(|&st| st <= bytes.len())
+                .ok_or_else(|| {
+                    err(format!(
+                        "the elements before 'vertex' need {skip_bytes} bytes, the body has {}",
+                        bytes.len() - pos
+                    ))
+                })?;
             let need = count
                 .checked_mul(stride)
                 .and_then(|b| b.checked_add(start))
@@ -367,6 +390,27 @@ mod tests {
         write_ply(&f, &["x", "y"], &[&[1.0, 2.0], &[3.0, 4.0]]).unwrap();
         let q = read_ply(&f).unwrap();
         assert_eq!(q.get("y").unwrap(), &[3.0, 4.0]);
+    }
+
+    /// Issue 23: an element before `vertex` whose declared size overflows (or exceeds the
+    /// file) is an error; it used to wrap the offset and read the wrong bytes, exit 0.
+    #[test]
+    fn huge_elements_before_vertex_are_errors() {
+        let mut f = b"ply\nformat binary_little_endian 1.0\nelement junk 4611686018427387904\nproperty double a\nproperty double b\nelement vertex 1\nproperty float x\nend_header\n".to_vec();
+        f.extend_from_slice(&1.5f32.to_le_bytes());
+        let e = parse_ply(&f, "junk.ply").unwrap_err().to_string();
+        assert!(e.contains("junk.ply") && e.contains("junk"), "{e}");
+        let mut g = b"ply\nformat binary_little_endian 1.0\nelement junk 1000\nproperty float a\nelement vertex 1\nproperty float x\nend_header\n".to_vec();
+        g.extend_from_slice(&1.5f32.to_le_bytes());
+        let e = parse_ply(&g, "short.ply").unwrap_err().to_string();
+        assert!(e.contains("short.ply"), "{e}");
+        let a = b"ply\nformat ascii 1.0\nelement junk 18446744073709551615\nproperty float a\nelement junk2 18446744073709551615\nproperty float a\nelement vertex 1\nproperty float x\nend_header\n1\n";
+        let e = parse_ply(a, "rows.ply").unwrap_err().to_string();
+        assert!(e.contains("rows.ply"), "{e}");
+        // A small element before vertex is skipped correctly.
+        let mut ok = b"ply\nformat binary_little_endian 1.0\nelement junk 2\nproperty uchar a\nelement vertex 1\nproperty float x\nend_header\n\x07\x08".to_vec();
+        ok.extend_from_slice(&2.5f32.to_le_bytes());
+        assert_eq!(parse_ply(&ok, "ok.ply").unwrap().get("x").unwrap(), &[2.5]);
     }
 
     #[test]

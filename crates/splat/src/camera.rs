@@ -4,6 +4,10 @@
 
 use serde::{Deserialize, Serialize};
 
+/// The most pixels a camera may have (8192 x 8192): a larger image is refused when the camera
+/// is read, before anything is allocated for it.
+pub const MAX_CAMERA_PIXELS: u64 = 1 << 26;
+
 /// A pinhole camera without distortion.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Camera {
@@ -186,6 +190,13 @@ impl Camera {
                 self.width, self.height
             ));
         }
+        let pixels = self.width as u64 * self.height as u64;
+        if pixels > MAX_CAMERA_PIXELS {
+            return Err(format!(
+                "{what}: camera '{name}': image size {}x{} is {pixels} pixels; the limit is {MAX_CAMERA_PIXELS} (8192 x 8192: one f32 RGB frame of it is 805 MB, and a render holds several such buffers)",
+                self.width, self.height
+            ));
+        }
         for (field, v) in [
             ("fx", self.fx),
             ("fy", self.fy),
@@ -217,6 +228,14 @@ impl Camera {
                     ));
                 }
             }
+        }
+        let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
+            - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
+            + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
+        if det < 0.0 {
+            return Err(format!(
+                "{what}: camera '{name}': world_to_camera rotation has determinant {det:.3}: a mirror, not a rotation (a camera pose must be proper, det +1)"
+            ));
         }
         if !(self.near > 0.0 && self.far > self.near) {
             return Err(format!(
@@ -282,4 +301,39 @@ pub mod consts {
     pub const RADIUS_SIGMAS: f64 = 3.33;
     /// Tile edge in pixels.
     pub const TILE: u32 = 16;
+}
+
+#[cfg(test)]
+mod limit_tests {
+    use super::*;
+
+    /// Issue 23: a camera too large to render in memory and a mirrored pose are refused when
+    /// the camera is checked, with the camera's name and the limit in the message.
+    #[test]
+    fn huge_images_and_mirror_poses_are_refused() {
+        let mut c = Camera::look_at(
+            64,
+            48,
+            60.0,
+            [0.0, -3.0, 0.5],
+            [0.0, 0.0, 0.5],
+            [0.0, 0.0, 1.0],
+        );
+        c.name = "front".into();
+        c.validate("t").unwrap();
+        let mut big = c.clone();
+        big.width = 32768;
+        big.height = 32768;
+        let e = big.validate("t").unwrap_err();
+        assert!(
+            e.contains("front") && e.contains(&MAX_CAMERA_PIXELS.to_string()),
+            "{e}"
+        );
+        // A reflection: negate one row of R (and of t).
+        for j in 0..4 {
+            c.world_to_camera[0][j] = -c.world_to_camera[0][j];
+        }
+        let e = c.validate("t").unwrap_err();
+        assert!(e.contains("mirror"), "{e}");
+    }
 }

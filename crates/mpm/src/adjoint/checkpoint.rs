@@ -66,6 +66,28 @@ pub enum Checkpointing {
 }
 
 impl Checkpointing {
+    /// Parses the one spelling every command and `FIT.toml` accept: `per_frame`, `store_all`,
+    /// `every_n:K` (or `every:K`), `nested:K` with `K >= 1` (dashes for underscores too);
+    /// the error says what is accepted.
+    pub fn parse(s: &str) -> Result<Checkpointing, String> {
+        let t = s.trim().replace('-', "_");
+        let num = |p: &str| t.strip_prefix(p).map(|n| n.trim().parse::<u32>());
+        let bad = || {
+            format!(
+                "checkpointing '{s}': use per_frame, store_all, every_n:K or nested:K with K >= 1"
+            )
+        };
+        match t.as_str() {
+            "per_frame" => Ok(Checkpointing::PerFrame),
+            "store_all" => Ok(Checkpointing::StoreAll),
+            _ => match (num("every_n:").or_else(|| num("every:")), num("nested:")) {
+                (Some(Ok(n)), _) if n > 0 => Ok(Checkpointing::EveryN(n)),
+                (_, Some(Ok(n))) if n > 0 => Ok(Checkpointing::Nested(n)),
+                _ => Err(bad()),
+            },
+        }
+    }
+
     /// The checkpoint interval in substeps.
     pub fn interval(self, substeps_per_frame: u32) -> u64 {
         match self {

@@ -98,7 +98,14 @@ impl HostSim {
 
     /// Number of parameter slots (parts, or particles after [`HostSim::per_particle`]).
     pub fn slots(&self) -> usize {
-        self.slot.iter().map(|&s| s as usize + 1).max().unwrap_or(0)
+        let used = self.slot.iter().map(|&s| s as usize + 1).max().unwrap_or(0);
+        // Per part: every part of the config is a slot, also one no particle belongs to (a
+        // parts file whose last part is empty), so slot indices are part indices.
+        if self.slot == self.part {
+            used.max(self.consts.len())
+        } else {
+            used
+        }
     }
 
     /// Number of particles.

@@ -233,11 +233,9 @@ impl FitConfig {
         if !(self.lr.is_finite() && self.lr > 0.0) {
             return bad(format!("lr = {} must be positive", self.lr));
         }
-        for (n, b) in [("beta1", self.beta1), ("beta2", self.beta2)] {
-            if !(0.0..1.0).contains(&b) {
-                return bad(format!("{n} = {b} must be in [0, 1)"));
-            }
-        }
+        self.adam()
+            .validate()
+            .map_err(|e| FitError::Input(e.to_string()))?;
         if !(self.clip_norm.is_finite() && self.clip_norm >= 0.0) {
             return bad(format!("clip_norm = {} must be >= 0", self.clip_norm));
         }
@@ -305,21 +303,7 @@ impl FitConfig {
 
     /// The checkpointing strategy.
     pub fn checkpointing(&self) -> Result<Checkpointing, FitError> {
-        let s = self.checkpointing.trim();
-        match s {
-            "per_frame" | "per-frame" => Ok(Checkpointing::PerFrame),
-            "store_all" | "store-all" => Ok(Checkpointing::StoreAll),
-            _ => {
-                let num = |p: &str| s.strip_prefix(p).and_then(|n| n.parse::<u32>().ok());
-                match (num("every_n:").or_else(|| num("every:")), num("nested:")) {
-                    (Some(n), _) if n > 0 => Ok(Checkpointing::EveryN(n)),
-                    (_, Some(n)) if n > 0 => Ok(Checkpointing::Nested(n)),
-                    _ => Err(FitError::Input(format!(
-                        "checkpointing = '{s}': use per_frame, store_all, every_n:K or nested:K"
-                    ))),
-                }
-            }
-        }
+        Checkpointing::parse(&self.checkpointing).map_err(FitError::Input)
     }
 
     /// AdamW settings.

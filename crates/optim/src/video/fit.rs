@@ -487,6 +487,56 @@ pub fn initialize_shard(
     Ok((search.names, total, candidates))
 }
 
+/// Checks a checkpoint's state against this fit before anything resumes from it: optimiser
+/// vectors of the right length and finite, the initialisation's best point and the
+/// multi-start results of the right length (a damaged or foreign file is
+/// [`FitError::Resume`], never a panic or a silent restart).
+fn check_resumed(s: &FitState, space: &ParamSpace) -> Result<(), FitError> {
+    let n = space.len();
+    let resume = |what: &str, e: String| FitError::Resume(format!("{what}: {e}"));
+    if let Some(o) = &s.optimizer {
+        o.validate(n)
+            .map_err(|e| resume("the checkpoint's optimiser", e.to_string()))?;
+    }
+    if let Some(o) = &s.trust {
+        o.validate(n)
+            .map_err(|e| resume("the checkpoint's trust-region optimiser", e.to_string()))?;
+    }
+    let finite_positive = |t: &[f64]| t.iter().all(|v| v.is_finite() && *v > 0.0);
+    if let Some((l, t)) = &s.best {
+        if t.len() != n || !finite_positive(t) || l.is_nan() {
+            return Err(resume(
+                "the checkpoint's best point",
+                format!(
+                    "{} values (loss {l}), this fit has {n} positive parameters",
+                    t.len()
+                ),
+            ));
+        }
+    }
+    for r in &s.starts {
+        if r.theta.len() != n || !finite_positive(&r.theta) {
+            return Err(resume(
+                "the checkpoint's multi-start results",
+                format!("{} values, this fit has {n}", r.theta.len()),
+            ));
+        }
+    }
+    if let Some(init) = &s.init {
+        let m = init.best.len();
+        let bad = init.candidates.iter().any(|c| c.theta.len() != m)
+            || init.ranking.iter().any(|&i| i >= init.candidates.len())
+            || !finite_positive(&init.best);
+        if bad {
+            return Err(resume(
+                "the checkpoint's initialisation",
+                "inconsistent candidates, ranking or best point".into(),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Runs a whole fit of `problem` with `cfg`, continuing from `resume` when given.
 pub fn run_fit(
     problem: &VideoProblem,
@@ -520,6 +570,7 @@ pub fn run_fit(
                     names.first().cloned().unwrap_or_default()
                 )));
             }
+            check_resumed(&s, &space)?;
             s
         }
         None => FitState {
@@ -537,7 +588,18 @@ pub fn run_fit(
     if cfg.init.enabled {
         let ispace = init_space(cfg, &problem.config.parts)?;
         let outcome = match state.init.take() {
-            Some(o) => o,
+            Some(o) => {
+                if o.best.len() != ispace.len()
+                    || o.candidates.iter().any(|c| c.theta.len() != ispace.len())
+                {
+                    return Err(FitError::Resume(format!(
+                        "the checkpoint's initialisation searched {} parameters, this fit's searches {}",
+                        o.best.len(),
+                        ispace.len()
+                    )));
+                }
+                o
+            }
             None => {
                 let (_, o) = initialize(problem, cfg, hooks)?;
                 o

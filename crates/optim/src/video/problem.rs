@@ -79,7 +79,9 @@ impl TimeMap {
                     (r as usize, r as usize, 0.0)
                 } else {
                     let j = s.floor();
-                    (j as usize, j as usize + 1, (s - j) as f32)
+                    // Saturating: a frame rate so low that the frame index overflows is
+                    // refused by the objective's limit, not wrapped.
+                    (j as usize, (j as usize).saturating_add(1), (s - j) as f32)
                 }
             })
             .collect();
@@ -199,6 +201,13 @@ pub struct StageProfile {
     pub bands: usize,
 }
 
+/// The most simulated frames one evaluation may need (video frames mapped onto the
+/// simulation's frame grid); more is refused by [`Objective::new`] before any work.
+pub const MAX_SIMULATED_FRAMES: usize = 100_000;
+
+/// The most substeps one evaluation may run ([`MAX_SIMULATED_FRAMES`]'s companion).
+pub const MAX_SUBSTEPS: u64 = 10_000_000;
+
 /// Row bands of the loss by default ([`Objective::set_band_rows`]).
 pub const DEFAULT_BAND_ROWS: usize = 128;
 
@@ -219,6 +228,8 @@ pub struct Objective<'a> {
     loss: Arc<dyn VideoLoss>,
     /// Rows per band (a multiple of 16).
     band_rows: usize,
+    /// One parameter slot per particle (else per part).
+    per_particle: bool,
     /// Checkpointing of the reverse sweep.
     pub checkpointing: Checkpointing,
     /// Simulation precision where the backend has a choice (the CPU; a GPU simulates in
@@ -285,12 +296,20 @@ impl<'a> Objective<'a> {
         let t = &problem.config.time;
         let frame_dt = t.substeps() as f64 * t.substep_dt;
         let time = TimeMap::new(frames, problem.fps, frame_dt);
+        let substeps = (time.sim_frames as u64).saturating_mul(t.substeps() as u64);
+        if time.sim_frames > MAX_SIMULATED_FRAMES || substeps > MAX_SUBSTEPS {
+            return Err(FitError::Input(format!(
+                "{frames} video frames at {} fps span {} simulated frames of {frame_dt} s ({substeps} substeps); the limits are {MAX_SIMULATED_FRAMES} frames and {MAX_SUBSTEPS} substeps (check the frame rate and the simulation's time step)",
+                problem.fps, time.sim_frames
+            )));
+        }
         let mut obj = Objective {
             problem,
             sim,
             time,
             loss,
             band_rows: DEFAULT_BAND_ROWS,
+            per_particle,
             checkpointing: Checkpointing::PerFrame,
             precision: Precision::F64,
             compute: problem.compute.clone(),
@@ -335,10 +354,10 @@ impl<'a> Objective<'a> {
 
     /// The part of every parameter slot.
     pub fn slot_parts(&self) -> Vec<u32> {
-        if self.sim.slots() == self.problem.config.parts.len() && self.sim.slot == self.sim.part {
-            (0..self.problem.config.parts.len() as u32).collect()
-        } else {
+        if self.per_particle {
             self.sim.part.clone()
+        } else {
+            (0..self.problem.config.parts.len() as u32).collect()
         }
     }
 

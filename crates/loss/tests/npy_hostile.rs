@@ -1,0 +1,57 @@
+//! Hostile `.npy` headers: sizes read from the file are checked before anything is allocated
+//! or sliced (issue 23: a shape whose product overflows used to wrap and panic later).
+
+use r4d_loss::io::read_video;
+
+/// A version-1 `.npy` with `header` (padded) and `body`.
+fn npy(header: &str, body: &[u8]) -> Vec<u8> {
+    let mut h = header.to_string();
+    let total = 10 + h.len() + 1;
+    h.push_str(&" ".repeat((64 - total % 64) % 64));
+    h.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend_from_slice(&(h.len() as u16).to_le_bytes());
+    out.extend_from_slice(h.as_bytes());
+    out.extend_from_slice(body);
+    out
+}
+
+#[test]
+fn overflowing_and_oversized_shapes_are_typed_errors() {
+    let dir = std::env::temp_dir().join(format!("r4d_npy_hostile_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let body = vec![0u8; 4 * 2 * 2 * 2 * 3];
+    let cases = [
+        // t*h*w*3 wraps to 0 in 64 bits.
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (4611686018427387904, 4, 1, 3), }",
+        // Overflows outright.
+        "{'descr': '<f8', 'fortran_order': False, 'shape': (18446744073709551615, 2, 2, 3), }",
+        // Far more values than bytes.
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (100000, 1000, 1000, 3), }",
+        // Zero-sized.
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (0, 2, 2, 3), }",
+    ];
+    for (i, header) in cases.iter().enumerate() {
+        let path = dir.join(format!("case{i}.npy"));
+        std::fs::write(&path, npy(header, &body)).unwrap();
+        let r = read_video::<f32>(&path);
+        let e = r.expect_err(header);
+        assert!(
+            e.to_string().contains(&format!("case{i}.npy")),
+            "the error names the file: {e}"
+        );
+    }
+    // The well-formed file of the same body reads.
+    let path = dir.join("ok.npy");
+    std::fs::write(
+        &path,
+        npy(
+            "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2, 2, 3), }",
+            &body,
+        ),
+    )
+    .unwrap();
+    let v = read_video::<f32>(&path).unwrap();
+    assert_eq!((v.frames(), v.height(), v.width()), (2, 2, 2));
+    std::fs::remove_dir_all(&dir).ok();
+}
