@@ -135,6 +135,44 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
     }
     assert!(first["peak_host_bytes"].as_u64().unwrap() > 0);
 
+    // Resume continues the run it resumes: settings edited beyond `iters` are refused (they
+    // used to be silently used), and so is a checkpoint that cannot be read (it used to
+    // restart at iteration 0 over the run).
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    std::fs::write(&cfg, text.replace("iters = 2\n", "iters = 3\nlr = 0.5\n")).unwrap();
+    let o = r4d(&["fit", "--resume", run.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("lr") && err.contains("differ"),
+        "{err}"
+    );
+    write_cfg(3);
+    let ck = run.join("checkpoint.json");
+    let saved = std::fs::read(&ck).unwrap();
+    std::fs::write(&ck, b"\xff\xfe not a checkpoint").unwrap();
+    let o = r4d(&["fit", "--resume", run.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("checkpoint.json"),
+        "{err}"
+    );
+    std::fs::write(&ck, saved).unwrap();
+    assert_eq!(
+        json(&ck)["iters_done"],
+        2,
+        "the refused resumes left the run as it was"
+    );
+    // A --row outside the views is refused before anything is written.
+    let fresh = d.join("fresh");
+    let fresh_s = fresh.to_str().unwrap().to_string();
+    let mut bad = args.to_vec();
+    bad[14] = &fresh_s;
+    bad.extend(["--row", "100000"]);
+    let o = r4d(&bad);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--row"), "{err}");
+    assert!(!fresh.exists(), "nothing written for a refused --row");
+
     // Bad inputs: a video of the wrong size, parts for another scene.
     let small = d.join("small.npy");
     let v = r4d_loss::Video::<f32>::zeros(4, 10, 12);

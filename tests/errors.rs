@@ -72,7 +72,9 @@ fn leaving_the_domain_is_an_error_or_clamped_by_policy() {
     let e = (0..50)
         .find_map(|_| sim.step_frame(&mut st, &cfg.parts).err())
         .expect("must fail");
-    assert!(matches!(e, Error::OutOfDomain { .. }), "{e}");
+    assert!(matches!(e, Error::OutOfDomain { axis: 2, .. }), "{e}");
+    // The message names the axis that left (gravity pulls along -z here).
+    assert!(e.to_string().contains("(z = "), "{e}");
 
     cfg.solver.out_of_domain = OutOfDomain::Clamp;
     let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene, "t").unwrap();

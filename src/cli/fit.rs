@@ -426,6 +426,7 @@ pub fn run(a: FitArgs) -> Result<()> {
     if let Some(spec) = a.shard.clone() {
         return run_init_shard(&a, &spec);
     }
+    let resuming = a.resume.is_some();
     let (a, out, resume) = match &a.resume {
         Some(dir) => {
             let inv = dir.join("invocation.json");
@@ -434,12 +435,18 @@ pub fn run(a: FitArgs) -> Result<()> {
             let saved: FitArgs = serde_json::from_str(&text)
                 .with_context(|| format!("{}: not an r4d fit invocation", inv.display()))?;
             let ck = dir.join("checkpoint.json");
-            let state: Option<FitState> = match std::fs::read_to_string(&ck) {
-                Ok(t) => Some(
-                    serde_json::from_str(&t)
+            // No checkpoint yet (killed during the initialisation) starts over; an unreadable
+            // one (damaged, not UTF-8, no permission) is an error, never a silent restart
+            // that overwrites the run.
+            let state: Option<FitState> = match std::fs::read(&ck) {
+                Ok(bytes) => Some(
+                    serde_json::from_slice(&bytes)
                         .with_context(|| format!("{}: not a fit checkpoint", ck.display()))?,
                 ),
-                Err(_) => None,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+                Err(e) => {
+                    return Err(e).with_context(|| format!("--resume: reading {}", ck.display()))
+                }
             };
             (saved, dir.clone(), state)
         }
@@ -451,12 +458,61 @@ pub fn run(a: FitArgs) -> Result<()> {
     let backend = a.backend.compute()?;
     // Loaded (and checked) before the fit, used by its final report.
     let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
-    let cfg = match &a.config {
+    let mut cfg = match &a.config {
         Some(p) => FitConfig::load(p)?,
         None => FitConfig::default(),
     };
+    if resuming {
+        // A resumed run continues with the settings it started with (saved in the run
+        // folder); an edited FIT.toml is refused, not silently used.
+        let saved = out.join("fit_config.json");
+        if let Ok(text) = std::fs::read_to_string(&saved) {
+            let was: FitConfig = serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a fit configuration", saved.display()))?;
+            let (now_v, was_v) = (serde_json::to_value(&cfg)?, serde_json::to_value(&was)?);
+            let differ: Vec<String> = match (now_v.as_object(), was_v.as_object()) {
+                (Some(n), Some(w)) => n
+                    .iter()
+                    .filter(|(k, v)| w.get(*k) != Some(*v))
+                    .map(|(k, _)| k.clone())
+                    .collect(),
+                _ => vec!["(the whole file)".into()],
+            };
+            // Raising `iters` extends a run (the documented way to continue one); any other
+            // change would silently make a different fit.
+            if differ.iter().any(|k| k != "iters") {
+                bail!(
+                    "--resume: the fit settings{} differ from those the run started with ({}: {}); only iters may change on resume: restore the others, or start a new run with --out",
+                    a.config
+                        .as_ref()
+                        .map(|p| format!(" in {}", p.display()))
+                        .unwrap_or_default(),
+                    saved.display(),
+                    differ.join(", ")
+                );
+            }
+            if cfg.iters != was.iters {
+                eprintln!("note: --resume: iters {} -> {}", was.iters, cfg.iters);
+            }
+            cfg = FitConfig {
+                iters: cfg.iters,
+                ..was
+            };
+        }
+    }
     let (mut problem, physflow_units) = load_problem(&a)?;
     problem.compute = backend;
+    if let Some(row) = a.row {
+        let h = problem
+            .views
+            .iter()
+            .map(|v| v.camera.height as usize)
+            .min()
+            .unwrap_or(0);
+        if row >= h {
+            bail!("--row {row}: the views are {h} rows high (rows 0..{h})");
+        }
+    }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     write_json(&out.join("invocation.json"), &a)?;
     write_json(&out.join("fit_config.json"), &cfg)?;

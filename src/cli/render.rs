@@ -98,6 +98,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
             _ => RasterizeMode::Classic,
         },
     };
+    settings
+        .validate("--background")
+        .map_err(|e| anyhow::anyhow!(e))?;
     let mut renderer: Box<dyn Renderer> = match a.backend {
         BackendKind::Cpu => Box::new(SplatRenderer::new(CpuSplat)),
         BackendKind::Reference => Box::new(SplatRenderer::new(ReferenceSplat)),

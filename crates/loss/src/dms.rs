@@ -101,9 +101,17 @@ impl DmsConfig {
             ("mag", w.mag),
             ("phase", w.phase),
         ] {
-            if !v.is_finite() {
-                return Err(LossError::Config(format!("weight {name} is {v}")));
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(LossError::Config(format!(
+                    "weight {name} is {v}: weights are finite and not negative"
+                )));
             }
+        }
+        if [w.l1, w.spatial, w.mag, w.phase].iter().all(|&v| v == 0.0) {
+            return Err(LossError::Config(
+                "every loss weight (l1, spatial, mag, phase) is 0: the loss would be 0 for any parameters"
+                    .into(),
+            ));
         }
         self.spatial.validate()?;
         self.spectral.validate()

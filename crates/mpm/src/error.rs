@@ -98,7 +98,7 @@ pub enum Error {
         limit: f64,
     },
     /// A particle left the simulation grid (policy `out_of_domain = "error"`).
-    #[error("particle {particle} left the simulation domain (coordinate {coord} m; the grid interior is [{lo}, {hi}) m) in frame {frame}, substep {substep}; add a bounding_box boundary condition or set out_of_domain = \"clamp\"")]
+    #[error("particle {particle} left the simulation domain ({} = {coord} m; the grid interior is [{lo}, {hi}) m on every axis) in frame {frame}, substep {substep}; add a bounding_box boundary condition or set out_of_domain = \"clamp\"", ["x", "y", "z"][(*axis).min(2)])]
     OutOfDomain {
         /// Frame being computed.
         frame: usize,
@@ -106,6 +106,8 @@ pub enum Error {
         substep: usize,
         /// Particle index.
         particle: usize,
+        /// The axis that left (0 = x, 1 = y, 2 = z).
+        axis: usize,
         /// The offending coordinate.
         coord: f64,
         /// Lower bound of the interior.

@@ -330,7 +330,15 @@ impl<B: MpmKernels> MpmSim<B> {
         Ok(())
     }
 
-    fn health_error(&self, h: Health, frame: usize, frame_start: u64) -> Error {
+    /// The error of health record `h`; `x`: the particles' positions now (they tell which
+    /// axis a particle left along, as the record keeps one coordinate).
+    fn health_error(
+        &self,
+        h: Health,
+        frame: usize,
+        frame_start: u64,
+        x: &[[B::Scalar; 3]],
+    ) -> Error {
         let global = h.substep as u64;
         let substep = global.saturating_sub(frame_start) as usize;
         let particle = h.particle as usize;
@@ -344,14 +352,35 @@ impl<B: MpmKernels> MpmSim<B> {
                 limit: self.setup.config.solver.max_cfl * self.setup.dx
                     / self.setup.config.time.substep_dt,
             },
-            HEALTH_OUT_OF_DOMAIN => Error::OutOfDomain {
-                frame,
-                substep,
-                particle,
-                coord: value,
-                lo: 0.5 * self.setup.dx,
-                hi: (self.setup.n as f64 - 1.5) * self.setup.dx,
-            },
+            HEALTH_OUT_OF_DOMAIN => {
+                let (lo, hi) = (
+                    0.5 * self.setup.dx,
+                    (self.setup.n as f64 - 1.5) * self.setup.dx,
+                );
+                // The axis: one outside the interior now, else the coordinate nearest the
+                // recorded value.
+                let p = x.get(particle).map(|p| p.map(|c| c.f64()));
+                let axis = p.map_or(0, |p| {
+                    (0..3)
+                        .find(|&a| !(lo..hi).contains(&p[a]))
+                        .unwrap_or_else(|| {
+                            (0..3)
+                                .min_by(|&a, &b| {
+                                    (p[a] - value).abs().total_cmp(&(p[b] - value).abs())
+                                })
+                                .unwrap_or(0)
+                        })
+                });
+                Error::OutOfDomain {
+                    frame,
+                    substep,
+                    particle,
+                    axis,
+                    coord: value,
+                    lo,
+                    hi,
+                }
+            }
             _ => Error::NonFinite {
                 frame,
                 substep,
@@ -421,7 +450,11 @@ impl<B: MpmKernels> Simulator for MpmSim<B> {
             self.backend
                 .write(&mut self.grid.health, &[Health::default()])
                 .map_err(be)?;
-            return Err(self.health_error(h, frame, start));
+            let x = self
+                .backend
+                .download(&state.particles.x)
+                .unwrap_or_default();
+            return Err(self.health_error(h, frame, start, &x));
         }
         state.frame = frame;
         Ok(())

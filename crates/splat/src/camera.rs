@@ -278,6 +278,25 @@ pub struct RenderSettings {
     pub mode: RasterizeMode,
 }
 
+impl RenderSettings {
+    /// Checks the settings: the background colour is three values in `[0, 1]` (an image's
+    /// range; anything else would flow into the raw output and the loss). `what` names the
+    /// source (a file, a flag) in the message.
+    pub fn validate(&self, what: &str) -> Result<(), String> {
+        if let Some(v) = self
+            .background
+            .iter()
+            .find(|v| !(v.is_finite() && (0.0..=1.0).contains(*v)))
+        {
+            return Err(format!(
+                "{what}: background {:?} has {v}: each of r, g, b must be in [0, 1]",
+                self.background
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for RenderSettings {
     fn default() -> Self {
         RenderSettings {
@@ -335,5 +354,24 @@ mod limit_tests {
         }
         let e = c.validate("t").unwrap_err();
         assert!(e.contains("mirror"), "{e}");
+    }
+
+    /// A background outside [0, 1] is refused where it is read (it used to flow into the raw
+    /// output).
+    #[test]
+    fn backgrounds_outside_the_unit_range_are_refused() {
+        let s = RenderSettings {
+            background: [0.2, 1.5, 0.0],
+            ..Default::default()
+        };
+        assert!(s.validate("--background").unwrap_err().contains("1.5"));
+        RenderSettings::default().validate("t").unwrap();
+        let e = crate::camera_io::parse_camera_json(
+            r#"{"cameras": [], "background": [2, 0, 0]}"#,
+            "c.json",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("c.json") && e.contains("background"), "{e}");
     }
 }

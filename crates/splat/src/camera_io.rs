@@ -14,7 +14,7 @@
 //!   `images.txt`). Models `SIMPLE_PINHOLE`, `PINHOLE`, and the radial/OpenCV models with all
 //!   distortion coefficients 0. Images are ordered by name.
 
-use crate::camera::{Camera, RasterizeMode};
+use crate::camera::{Camera, RasterizeMode, RenderSettings};
 use crate::error::{Error, Result};
 use serde_json::Value;
 use std::collections::HashMap;
@@ -125,7 +125,14 @@ fn parse_r4d(v: &Value, file: &str) -> Result<CameraSet> {
                 .filter(|a| a.len() == 3)
                 .and_then(|a| a.iter().map(Value::as_f64).collect::<Option<Vec<_>>>())
                 .ok_or_else(|| cerr(file, "'background' must be [r, g, b]"))?;
-            Some([a[0] as f32, a[1] as f32, a[2] as f32])
+            let b = [a[0] as f32, a[1] as f32, a[2] as f32];
+            RenderSettings {
+                background: b,
+                ..Default::default()
+            }
+            .validate("'background'")
+            .map_err(|m| cerr(file, m))?;
+            Some(b)
         }
     };
     let mode = match v.get("rasterize_mode").and_then(Value::as_str) {
@@ -276,6 +283,13 @@ fn parse_nerfstudio(v: &Value, file: &str) -> Result<CameraSet> {
     })
 }
 
+/// A POINTS2D line of COLMAP's `images.txt`: empty, or numbers in triples (an image line ends
+/// with its name and has 10 or more fields, not a multiple of 3 numbers).
+fn is_points_line(line: &str) -> bool {
+    let t: Vec<&str> = line.split_whitespace().collect();
+    t.len() % 3 == 0 && t.iter().all(|s| s.parse::<f64>().is_ok())
+}
+
 /// Parses COLMAP's `cameras.txt` and `images.txt`; `what` names the source in errors.
 pub fn parse_colmap(cameras_txt: &str, images_txt: &str, what: &str) -> Result<CameraSet> {
     let file_c = format!("{what}/cameras.txt");
@@ -343,7 +357,8 @@ pub fn parse_colmap(cameras_txt: &str, images_txt: &str, what: &str) -> Result<C
     let mut lines = images_txt
         .lines()
         .enumerate()
-        .filter(|(_, l)| !l.trim().starts_with('#'));
+        .filter(|(_, l)| !l.trim().starts_with('#'))
+        .peekable();
     while let Some((ln, line)) = lines.next() {
         let t: Vec<&str> = line.split_whitespace().collect();
         if t.is_empty() {
@@ -403,12 +418,44 @@ pub fn parse_colmap(cameras_txt: &str, images_txt: &str, what: &str) -> Result<C
             near: 0.01,
             far: 1e10,
         });
-        // The next line lists the image's 2D points.
-        lines.next();
+        // The next line lists the image's 2D points (X Y POINT3D_ID triples, possibly none:
+        // an empty line). A file written without them has the next image line there: it is
+        // kept, not skipped (skipping it used to lose every other image silently).
+        if lines.peek().is_some_and(|(_, l)| is_points_line(l)) {
+            lines.next();
+        }
     }
     cams.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(CameraSet {
         cameras: cams,
         ..Default::default()
     })
+}
+
+#[cfg(test)]
+mod colmap_tests {
+    use super::*;
+
+    /// An `images.txt` written without its POINTS2D lines keeps every image (it used to lose
+    /// every other one silently); with them (empty or not) it reads the same.
+    #[test]
+    fn images_without_points_lines_keep_every_image() {
+        let cams = "1 PINHOLE 64 48 50 50 32 24\n";
+        let img = |i: u32| format!("{i} 1 0 0 0 0 0 {i} 1 view_{i}.png\n");
+        let without: String = (1..=4).map(img).collect();
+        let with: String = (1..=4)
+            .map(|i| {
+                let pts = if i % 2 == 0 {
+                    "\n".to_string()
+                } else {
+                    "1.0 2.0 -1 3.5 4.5 7\n".into()
+                };
+                img(i) + &pts
+            })
+            .collect();
+        let a = parse_colmap(cams, &without, "colmap").unwrap();
+        let b = parse_colmap(cams, &with, "colmap").unwrap();
+        assert_eq!(a.cameras.len(), 4);
+        assert_eq!(a.cameras, b.cameras);
+    }
 }

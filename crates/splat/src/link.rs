@@ -148,7 +148,9 @@ impl SimLink {
             )));
         }
         let need = self.simulated.len();
-        if x.len() < need || x.len() != need + self.filled && self.filled > 0 {
+        // Exactly the link's particles: a frame from another simulation (more or fewer
+        // particles) would silently move the wrong Gaussians.
+        if x.len() != need + self.filled {
             return Err(Error::Mismatch(format!(
                 "{what}: {} particles, the link expects {} simulated Gaussians{}",
                 x.len(),
@@ -367,6 +369,11 @@ mod tests {
                 }
             }
         }
+        // A frame from another simulation (one particle more) is refused, not mangled.
+        let mut more = x.clone();
+        more.push([1.0; 3]);
+        assert!(l.deformation(&scene, &more, None, "t").is_err());
+        assert!(l.deformation(&scene, &x[..3], None, "t").is_err());
         // The filling particle (index 3 of 4: simulated has 3 entries) gets nothing.
         assert_eq!(dx[3], [0.0; 3]);
         // Mismatched sizes are an error, not an out-of-bounds write.

@@ -35,6 +35,16 @@ use crate::gaussians::Gaussians;
 use crate::link::SimLink;
 use serde::Deserialize;
 
+/// The finest filling grid (`particle_filling.n_grid`, cells per axis): 400^3 cells of 16
+/// bytes, about 1 GB. PhysGaussian's configs use 200 or less.
+pub const MAX_FILL_GRID: usize = 400;
+
+/// The most filling particles one may ask for (`max_particles_num`).
+pub const MAX_FILL_PARTICLES: usize = 50_000_000;
+
+/// The most particles per filled cell (`max_particles_per_cell`).
+pub const MAX_PARTICLES_PER_CELL: usize = 64;
+
 /// PhysGaussian's `particle_filling` block.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(default)]
@@ -303,8 +313,23 @@ fn fill_interior(
 ) -> Result<Vec<[f32; 3]>> {
     let bad = |m: String| Error::Mismatch(format!("{what}: particle_filling: {m}"));
     let n = fill.n_grid;
-    if !(2..=1024).contains(&n) {
-        return Err(bad(format!("n_grid = {n} (2..=1024)")));
+    if !(2..=MAX_FILL_GRID).contains(&n) {
+        return Err(bad(format!(
+            "n_grid = {n} (2..={MAX_FILL_GRID}: the filling grid takes 16 bytes a cell, {} MB at the limit)",
+            (MAX_FILL_GRID as u64).pow(3) * 16 / 1_000_000
+        )));
+    }
+    if fill.max_particles_num > MAX_FILL_PARTICLES {
+        return Err(bad(format!(
+            "max_particles_num = {} (at most {MAX_FILL_PARTICLES})",
+            fill.max_particles_num
+        )));
+    }
+    if fill.max_particles_per_cell > MAX_PARTICLES_PER_CELL {
+        return Err(bad(format!(
+            "max_particles_per_cell = {} (at most {MAX_PARTICLES_PER_CELL})",
+            fill.max_particles_per_cell
+        )));
     }
     if fill.search_exclude_direction > 5 {
         return Err(bad("search_exclude_direction must be 0..5".into()));

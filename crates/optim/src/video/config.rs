@@ -277,6 +277,16 @@ impl FitConfig {
         if self.init.frames < 2 {
             return bad("init.frames must be at least 2".into());
         }
+        if let Some(f) = self.frames.filter(|&f| f < 2) {
+            return bad(format!(
+                "frames = {f}: at least 2 (the loss compares motion between frames)"
+            ));
+        }
+        let mut ids: Vec<usize> = self.parts.iter().map(|p| p.id).collect();
+        ids.sort_unstable();
+        if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
+            return bad(format!("[[parts]] id {} appears twice", w[0]));
+        }
         self.checkpointing()?;
         if let Some(f) = &self.free {
             kinds(f, "free")?;
@@ -319,6 +329,14 @@ impl FitConfig {
 
     /// Free kinds of every part.
     pub fn free_kinds(&self, parts: &[PartParams]) -> Result<Vec<Vec<ParamKind>>, FitError> {
+        if let Some(o) = self.parts.iter().find(|o| o.id >= parts.len()) {
+            return Err(FitError::Input(format!(
+                "[[parts]] id {}: the simulation has {} part(s) (ids 0..={})",
+                o.id,
+                parts.len(),
+                parts.len().saturating_sub(1)
+            )));
+        }
         parts
             .iter()
             .enumerate()
@@ -347,5 +365,59 @@ impl FitConfig {
             })
             .map(|(_, b)| (b[0], b[1]))
             .unwrap_or_else(|| kind.default_bounds())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 23: settings that used to be silently changed or ignored are errors.
+    #[test]
+    fn silent_settings_are_refused() {
+        let ok = FitConfig::default();
+        ok.validate().unwrap();
+        let frames0 = FitConfig {
+            frames: Some(0),
+            ..Default::default()
+        };
+        assert!(frames0
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("frames = 0"));
+        let mut zero = FitConfig::default();
+        zero.loss.weights = r4d_loss::DmsWeights {
+            l1: 0.0,
+            spatial: 0.0,
+            mag: 0.0,
+            phase: 0.0,
+        };
+        assert!(zero.validate().is_err(), "all-zero loss weights");
+        let part = |id| PartFit {
+            id,
+            free: None,
+            bounds: Default::default(),
+        };
+        let twice = FitConfig {
+            parts: vec![part(0), part(0)],
+            ..Default::default()
+        };
+        assert!(twice.validate().unwrap_err().to_string().contains("twice"));
+        let unknown = FitConfig {
+            parts: vec![part(5)],
+            ..Default::default()
+        };
+        unknown.validate().unwrap();
+        let e = unknown
+            .free_kinds(&[PartParams::default(), PartParams::default()])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("id 5") && e.contains("2 part"), "{e}");
+        let bad_ck = FitConfig {
+            checkpointing: "every:0".into(),
+            ..Default::default()
+        };
+        assert!(bad_ck.validate().is_err());
     }
 }

@@ -103,6 +103,9 @@ impl VideoProblem {
         if self.views.is_empty() {
             return bad("no view to fit: give a camera and its video".into());
         }
+        self.settings
+            .validate("render settings")
+            .map_err(FitError::Input)?;
         if !(self.fps.is_finite() && self.fps > 0.0) {
             return bad(format!("fps is {}, must be positive", self.fps));
         }
