@@ -401,12 +401,11 @@ impl LogDomainOptimizer {
                 g.iter_mut().for_each(|x| *x *= c / norm);
             }
         }
-        self.t += 1;
+        // Saturating: a step count read from a damaged checkpoint must not overflow.
+        self.t = self.t.saturating_add(1);
+        let t = self.t.min(i32::MAX as u64) as i32;
         let a = self.adam;
-        let (b1t, b2t) = (
-            1.0 - a.beta1.powi(self.t as i32),
-            1.0 - a.beta2.powi(self.t as i32),
-        );
+        let (b1t, b2t) = (1.0 - a.beta1.powi(t), 1.0 - a.beta2.powi(t));
         for i in 0..self.xi.len() {
             self.m[i] = a.beta1 * self.m[i] + (1.0 - a.beta1) * g[i];
             self.v[i] = a.beta2 * self.v[i] + (1.0 - a.beta2) * g[i] * g[i];

@@ -289,7 +289,7 @@ impl TrustRegionBfgs {
             .map(|(g, x)| g * x.exp())
             .collect();
         let gnorm = norm(&g);
-        self.evaluations += 1;
+        self.evaluations = self.evaluations.saturating_add(1);
         let finite = loss.is_finite() && g.iter().all(|v| v.is_finite());
         match self.at_x.take() {
             None => {
@@ -302,7 +302,7 @@ impl TrustRegionBfgs {
                             .collect();
                     }
                     self.at_x = Some((loss, g));
-                    self.accepted += 1;
+                    self.accepted = self.accepted.saturating_add(1);
                 } else {
                     self.radius = (0.25 * self.radius).max(self.settings.min_radius);
                 }
@@ -347,7 +347,7 @@ impl TrustRegionBfgs {
                     }
                     self.x = self.trial.clone();
                     self.at_x = Some((loss, g));
-                    self.accepted += 1;
+                    self.accepted = self.accepted.saturating_add(1);
                 } else if self.radius <= self.settings.min_radius {
                     // Rejected at the smallest radius: the model no longer describes the
                     // loss near x (noise, a kink). Restart it: a scaled identity and the
@@ -357,7 +357,7 @@ impl TrustRegionBfgs {
                         .map(|k| if k % (n + 1) == 0 { c } else { 0.0 })
                         .collect();
                     self.radius = self.settings.initial_radius;
-                    self.restarts += 1;
+                    self.restarts = self.restarts.saturating_add(1);
                     self.at_x = Some((f, gx));
                 } else {
                     self.radius = (0.5 * step.min(self.radius)).max(self.settings.min_radius);

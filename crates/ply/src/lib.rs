@@ -267,6 +267,13 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
     }
     let (_, count, props) = &elements[vi];
     let count = *count;
+    // A vertex without properties takes no bytes: a huge declared count would loop for
+    // ever over nothing (found by tests/fuzz_parsers.rs).
+    if props.is_empty() && count > 0 {
+        return Err(err(format!(
+            "the vertex element declares {count} vertices but no property"
+        )));
+    }
     // Reserve no more than the body can hold: every vertex takes at least one byte (binary)
     // or two (ASCII: a digit and a separator), so an absurd declared count cannot allocate.
     let body = bytes.len().saturating_sub(pos);
