@@ -5,7 +5,7 @@
 //! error — never a panic, never a single allocation above 256 MiB, never a hang.
 //!
 //! `R4D_FUZZ_EXECS` sets the executions per parser (default 20 000: seconds in CI);
-//! `R4D_FUZZ_SEED` the seed. A failing input is written to `target/fuzz-failures/` and the
+//! `R4D_FUZZ_SEED` the seed; `R4D_FUZZ_ONLY=ply,colmap` runs only the named parsers. A failing input is written to `target/fuzz-failures/` and the
 //! test fails naming it; keep it under `tests/fixtures/fuzz/<parser>/` and it is replayed by
 //! every run as a regression case.
 
@@ -390,7 +390,14 @@ fn every_parser_survives_mutated_inputs() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(0x5eed);
-    let all = targets();
+    // R4D_FUZZ_ONLY=ply,colmap runs only those parsers (long runs, one parser at a time).
+    let only: Option<Vec<String>> = std::env::var("R4D_FUZZ_ONLY")
+        .ok()
+        .map(|s| s.split(',').map(|t| t.trim().to_string()).collect());
+    let all: Vec<Target> = targets()
+        .into_iter()
+        .filter(|t| only.as_ref().is_none_or(|o| o.iter().any(|n| n == t.name)))
+        .collect();
     // The parsers' own panics are what is looked for; keep their messages out of the log.
     std::panic::set_hook(Box::new(|_| {}));
     let failures_dir = repo("target/fuzz-failures");
