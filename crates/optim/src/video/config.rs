@@ -230,9 +230,7 @@ impl FitConfig {
     /// Checks the values.
     pub fn validate(&self) -> Result<(), FitError> {
         let bad = |m: String| Err(FitError::Input(m));
-        if !(self.lr.is_finite() && self.lr > 0.0) {
-            return bad(format!("lr = {} must be positive", self.lr));
-        }
+        // lr, beta1, beta2, eps, weight_decay: the one check every command uses.
         self.adam()
             .validate()
             .map_err(|e| FitError::Input(e.to_string()))?;
@@ -241,9 +239,6 @@ impl FitConfig {
         }
         if self.band_rows == 0 {
             return bad("band_rows = 0: at least 1 (rounded up to 16)".into());
-        }
-        if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
-            return bad(format!("weight_decay = {} must be >= 0", self.weight_decay));
         }
         if self.checkpoint_every == 0 {
             return bad("checkpoint_every must be at least 1".into());
