@@ -4,7 +4,7 @@
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
 use r4d_optim::compute::fit_trajectory_on;
 pub use r4d_optim::trajectory::{
-    FitCheckpoint, FitOptions, Fitted, Granularity, IterLog, PartRecord,
+    FitOptions, FitState, Fitted, Granularity, IterRecord, PartRecord,
 };
 pub use r4d_optim::{Compute, FitError};
 
@@ -15,7 +15,7 @@ pub fn fit_trajectory(
     scene: &ParticleSet,
     targets: &[Vec<[f32; 3]>],
     opts: &FitOptions,
-    on_iter: impl FnMut(&IterLog),
+    on_iter: impl FnMut(&IterRecord),
 ) -> Result<Vec<PartParams>, FitError> {
     fit_trajectory_resumable(compute, config, scene, targets, opts, None, on_iter, |_| {})
         .map(|f| f.parts)
@@ -29,9 +29,9 @@ pub fn fit_trajectory_resumable(
     scene: &ParticleSet,
     targets: &[Vec<[f32; 3]>],
     opts: &FitOptions,
-    resume: Option<FitCheckpoint>,
-    mut on_iter: impl FnMut(&IterLog),
-    mut on_checkpoint: impl FnMut(&FitCheckpoint),
+    resume: Option<FitState>,
+    mut on_iter: impl FnMut(&IterRecord),
+    mut on_checkpoint: impl FnMut(&FitState),
 ) -> Result<Fitted, FitError> {
     fit_trajectory_on(
         compute,

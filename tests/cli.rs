@@ -190,7 +190,7 @@ fn fit_trajectory_writes_params_json_and_a_log() {
     let log = std::fs::read_to_string(out.join("log.jsonl")).unwrap();
     assert_eq!(log.lines().count(), 2);
     let first: serde_json::Value = serde_json::from_str(log.lines().next().unwrap()).unwrap();
-    assert!(first["loss"].as_f64().unwrap() > 0.0 && first["grad_norm"].is_number());
+    assert!(first["loss"]["total"].as_f64().unwrap() > 0.0 && first["grad_norm"].is_number());
     // A run continued with --resume picks up after the last completed iteration.
     let o = r4d(&[
         "fit-trajectory",

@@ -13,6 +13,13 @@ fn r4d(args: &[&str]) -> std::process::Output {
         .expect("run r4d")
 }
 
+fn r4d_strings(args: &[String]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_r4d"))
+        .args(args)
+        .output()
+        .expect("run r4d")
+}
+
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("r4d_cli_fit_{name}_{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
@@ -172,6 +179,73 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("--row"), "{err}");
     assert!(!fresh.exists(), "nothing written for a refused --row");
+
+    // Resume refuses other inputs: the run's checkpoint carries a fingerprint of the scene,
+    // particles, parts, cameras, videos and settings (the reference changed here).
+    let video_path = inp.join("reference.npy");
+    let original = std::fs::read(&video_path).unwrap();
+    let mut changed = original.clone();
+    let last = changed.len() - 1;
+    changed[last] ^= 0x01;
+    std::fs::write(&video_path, &changed).unwrap();
+    let o = r4d(&["fit", "--resume", run.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("fingerprint") && err.contains("checkpoint.json"),
+        "{err}"
+    );
+    std::fs::write(&video_path, &original).unwrap();
+
+    // Killed with SIGKILL at random instants and resumed, a fit ends as an uninterrupted one:
+    // the same params.json byte for byte and the same log (but wall times and heap peaks).
+    write_cfg(2);
+    let with_out = |dir: &Path| {
+        let mut a: Vec<String> = args.iter().map(|s| s.to_string()).collect();
+        a[14] = dir.to_str().unwrap().to_string();
+        a
+    };
+    let reference = d.join("uninterrupted");
+    let start = std::time::Instant::now();
+    ok(&r4d_strings(&with_out(&reference)));
+    let wall = start.elapsed();
+    let records = |dir: &Path| -> Vec<serde_json::Value> {
+        std::fs::read_to_string(dir.join("log.jsonl"))
+            .unwrap()
+            .lines()
+            .map(|l| {
+                let mut v: serde_json::Value = serde_json::from_str(l).unwrap();
+                let o = v.as_object_mut().unwrap();
+                o.remove("time_s");
+                o.remove("peak_host_bytes");
+                v
+            })
+            .collect()
+    };
+    for (k, share) in [0.3, 0.7].into_iter().enumerate() {
+        let dir = d.join(format!("killed{k}"));
+        let mut child = Command::new(env!("CARGO_BIN_EXE_r4d"))
+            .args(with_out(&dir))
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(wall.mul_f64(share));
+        let _ = child.kill();
+        let _ = child.wait();
+        // Killed before invocation.json was written: nothing to resume, start again.
+        let o = if dir.join("invocation.json").exists() {
+            r4d(&["fit", "--resume", dir.to_str().unwrap()])
+        } else {
+            r4d_strings(&with_out(&dir))
+        };
+        ok(&o);
+        assert_eq!(
+            std::fs::read(dir.join("params.json")).unwrap(),
+            std::fs::read(reference.join("params.json")).unwrap(),
+            "killed at {share} of the run: params.json differs"
+        );
+        assert_eq!(records(&dir), records(&reference), "killed at {share}");
+    }
 
     // Bad inputs: a video of the wrong size, parts for another scene.
     let small = d.join("small.npy");

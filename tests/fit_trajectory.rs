@@ -38,7 +38,7 @@ fn recovers_a_jelly_beams_youngs_modulus_from_10x_off() {
         |it| {
             eprintln!(
                 "iter {:2}: loss {:.3e} E {:.0}",
-                it.iter, it.loss, it.parts[0].e
+                it.iter, it.loss.total, it.parts[0].e
             )
         },
     )
@@ -71,7 +71,7 @@ fn recovers_both_parts_stiffness_to_density_ratios() {
         eprintln!(
             "iter {:2}: loss {:.3e} E/rho {:.1} {:.1}",
             it.iter,
-            it.loss,
+            it.loss.total,
             it.parts[0].e / it.parts[0].density,
             it.parts[1].e / it.parts[1].density
         )
@@ -92,7 +92,7 @@ fn recovers_both_parts_stiffness_to_density_ratios() {
 
 #[test]
 fn a_resumed_fit_continues_exactly_where_it_stopped() {
-    use resonance4d::fit_trajectory::{fit_trajectory_resumable, FitCheckpoint};
+    use resonance4d::fit_trajectory::{fit_trajectory_resumable, FitState};
     let mut truth = SimConfig::load(&fixture("fit/beam.toml")).unwrap();
     truth.time.frames = 2;
     let scene = ParticleSet::from_shapes(&truth.shapes, truth.domain.dx());
@@ -103,7 +103,7 @@ fn a_resumed_fit_continues_exactly_where_it_stopped() {
         iters: 4,
         ..Default::default()
     };
-    let mut at2: Option<FitCheckpoint> = None;
+    let mut at2: Option<FitState> = None;
     let full = fit_trajectory_resumable(
         &*compute::cpu(),
         &start,
@@ -115,12 +115,39 @@ fn a_resumed_fit_continues_exactly_where_it_stopped() {
         |ck| {
             if ck.iters_done == 2 {
                 // What a run killed after its second iteration leaves on disk.
-                let json = serde_json::to_string(ck).unwrap();
-                at2 = Some(serde_json::from_str(&json).unwrap());
+                let json = ck.to_json();
+                at2 = Some(FitState::from_json(&json).unwrap());
             }
         },
     )
     .unwrap();
+    // The state refuses another run: other targets, other options.
+    let mut moved = target.clone();
+    moved[0][0][1] += 1e-3;
+    for (t, o) in [
+        (&moved, opts.clone()),
+        (
+            &target,
+            FitOptions {
+                clip_norm: Some(0.5),
+                ..opts.clone()
+            },
+        ),
+    ] {
+        let e = fit_trajectory_resumable(
+            &*compute::cpu(),
+            &start,
+            &scene,
+            t,
+            &o,
+            at2.clone(),
+            |_| {},
+            |_| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("fingerprint"), "{e}");
+    }
     let mut iters_run = Vec::new();
     let resumed = fit_trajectory_resumable(
         &*compute::cpu(),
@@ -155,7 +182,7 @@ fn the_fit_runs_on_the_reference_kernels_too() {
     let first = |b: &dyn Compute| {
         let mut log = Vec::new();
         fit_trajectory(b, &start, &scene, &target, &opts, |it| {
-            log.push((it.loss, it.grad_norm))
+            log.push((it.loss.total, it.grad_norm))
         })
         .unwrap();
         log[0]

@@ -10,7 +10,7 @@ use r4d_backend_cpu::CpuBackend;
 use r4d_backend_wgpu::testing::gpu_or_skip;
 use r4d_mpm::{MpmSim, ParticleSet, SimConfig, Simulator};
 use resonance4d::compute::{self, Compute};
-use resonance4d::fit_trajectory::{fit_trajectory, FitOptions, IterLog};
+use resonance4d::fit_trajectory::{fit_trajectory, FitOptions, IterRecord};
 
 /// Simulates `cfg` on the CPU backend (as `r4d simulate` does) and returns frames 1 ...
 fn targets(cfg: &SimConfig, scene: &ParticleSet) -> Vec<Vec<[f32; 3]>> {
@@ -46,12 +46,12 @@ fn wgpu_fit_matches_the_cpu_fit() {
             iters: 4,
             ..Default::default()
         };
-        let mut log: Vec<IterLog> = Vec::new();
+        let mut log: Vec<IterRecord> = Vec::new();
         let t = std::time::Instant::now();
         let fitted = fit_trajectory(backend, &start, &scene, &target, &opts, |it| {
             eprintln!(
                 "{backend:?} iter {}: loss {:.6e} |grad| {:.6e} E {:.1}",
-                it.iter, it.loss, it.grad_norm, it.parts[0].e
+                it.iter, it.loss.total, it.grad_norm, it.parts[0].e
             );
             log.push(it.clone());
         })
@@ -61,11 +61,16 @@ fn wgpu_fit_matches_the_cpu_fit() {
     };
     let (cpu, cpu_log) = run(&*compute::cpu());
     let (gpu, gpu_log) = run(&*gpu);
-    let (l0, g0) = (rel(cpu_log[0].loss, gpu_log[0].loss), {
+    let (l0, g0) = (rel(cpu_log[0].loss.total, gpu_log[0].loss.total), {
         rel(cpu_log[0].grad_norm, gpu_log[0].grad_norm)
     });
     eprintln!("first iteration: loss rel {l0:.2e}, gradient rel {g0:.2e}");
-    assert!(l0 < 1e-3, "loss {} vs {}", cpu_log[0].loss, gpu_log[0].loss);
+    assert!(
+        l0 < 1e-3,
+        "loss {} vs {}",
+        cpu_log[0].loss.total,
+        gpu_log[0].loss.total
+    );
     assert!(
         g0 < 1e-3,
         "gradient {} vs {}",
@@ -105,16 +110,16 @@ fn wgpu_yield_stress_gradient_matches_the_cpu() {
             iters: 1,
             ..Default::default()
         };
-        let mut log: Vec<IterLog> = Vec::new();
+        let mut log: Vec<IterRecord> = Vec::new();
         fit_trajectory(backend, &start, &scene, &target, &opts, |it| {
             log.push(it.clone())
         })
         .unwrap();
         eprintln!(
             "{backend:?}: loss {:.6e} |grad| {:.6e}",
-            log[0].loss, log[0].grad_norm
+            log[0].loss.total, log[0].grad_norm
         );
-        (log[0].loss, log[0].grad_norm)
+        (log[0].loss.total, log[0].grad_norm)
     };
     let (lc, gc) = first(&*compute::cpu());
     let (lg, gg) = first(&*gpu);

@@ -172,6 +172,17 @@ fn via_file(name: &'static str, f: impl Fn(&Path) + 'static) -> Run {
     })
 }
 
+/// Writes the input to `dir/name` (a fresh folder) and runs `f` on the folder.
+fn via_dir_file(dir: &'static str, name: &'static str, f: impl Fn(&Path) + 'static) -> Run {
+    let d = tmp_dir().join(dir);
+    std::fs::create_dir_all(&d).unwrap();
+    let path = d.join(name);
+    Box::new(move |b: &[u8]| {
+        std::fs::write(&path, b).unwrap();
+        f(&d);
+    })
+}
+
 fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
@@ -267,7 +278,214 @@ fn targets() -> Vec<Target> {
         .unwrap(),
     )
     .unwrap();
+    // A fit checkpoint with every section filled (initialisation, optimiser, best point,
+    // multi-start), as both fits write it.
+    let checkpoint = {
+        let names = vec!["E[0]".to_string(), "density[0]".to_string()];
+        let mut s = r4d_optim::record::FitState::new(names, "0".repeat(32));
+        s.iters_done = 2;
+        s.optimizer = r4d_optim::LogDomainOptimizer::new(
+            vec![1e5, 1e3],
+            vec![(1e3, 1e8), (10.0, 1e4)],
+            Default::default(),
+            Some(1.0),
+        )
+        .ok();
+        s.best = Some((0.5, vec![1e5, 1e3]));
+        s.init = r4d_optim::InitOutcome::from_candidates(
+            vec![r4d_optim::Candidate {
+                index: 0,
+                theta: vec![1e5, 1e3],
+                score: Some(0.9),
+                error: None,
+            }],
+            1,
+        )
+        .ok();
+        s.starts = vec![r4d_optim::record::StartResult {
+            candidate: 0,
+            score: Some(0.9),
+            loss: 0.5,
+            theta: vec![1e5, 1e3],
+        }];
+        let unchecked = serde_json::to_vec(&s).unwrap();
+        vec![s.to_json().into_bytes(), unchecked]
+    };
+    let snapshot = {
+        let p = tmp_dir().join("seed-state.r4d");
+        r4d_mpm::Snapshot {
+            frame: 1,
+            substep: 10,
+            time_s: 0.01,
+            x: vec![[0.5; 3]; 4],
+            v: vec![[0.0; 3]; 4],
+            c: vec![[0.0; 9]; 4],
+            f: vec![[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]; 4],
+            plastic: vec![[0.0, 1.0]; 4],
+            fingerprint: "f".repeat(32),
+        }
+        .write(&p)
+        .unwrap();
+        vec![std::fs::read(&p).unwrap()]
+    };
+    let png = |img: image::DynamicImage| {
+        let mut b = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut b), image::ImageFormat::Png)
+            .unwrap();
+        b
+    };
+    let frames = vec![
+        std::fs::read(repo(
+            "tests/fixtures/physgaussian/fit_jelly_arch/cam0/frame_0000.png",
+        ))
+        .unwrap(),
+        png(image::DynamicImage::ImageRgb8(image::RgbImage::from_fn(
+            6,
+            4,
+            |x, y| image::Rgb([x as u8 * 40, y as u8 * 60, 7]),
+        ))),
+        png(image::DynamicImage::ImageRgba16(
+            image::ImageBuffer::from_fn(3, 3, |x, _| image::Rgba([x as u16 * 9000, 1, 2, 65535])),
+        )),
+    ];
+    let label_pngs = vec![
+        png(image::DynamicImage::ImageLuma8(image::GrayImage::from_fn(
+            5,
+            4,
+            |x, y| image::Luma([((x + y) % 3) as u8]),
+        ))),
+        png(image::DynamicImage::ImageLuma16(
+            image::ImageBuffer::from_fn(4, 4, |x, _| image::Luma([x as u16 * 300])),
+        )),
+    ];
+    let classes = vec![
+        br#"{"class_names": ["stem", "head"], "ignore": 255}"#.to_vec(),
+        br#"{"class_names": ["a"]}"#.to_vec(),
+    ];
+    let physflow = vec![std::fs::read(repo(
+        "tests/fixtures/datasets/physflow/config/phys_dreamer/toyphone_config.json",
+    ))
+    .unwrap()];
+    let all_data = vec![std::fs::read(repo(
+        "tests/fixtures/datasets/pacnerf/toyball/all_data.json",
+    ))
+    .unwrap()];
+    let transforms = vec![std::fs::read(repo(
+        "tests/fixtures/datasets/physdreamer/toyplant/transforms_train.json",
+    ))
+    .unwrap()];
+    let mp4 = {
+        let p = tmp_dir().join("seed.mp4");
+        let mut v = r4d_loss::Video::<f32>::zeros(2, 16, 16);
+        for (i, x) in v.data_mut().iter_mut().enumerate() {
+            *x = (i % 7) as f32 / 7.0;
+        }
+        r4d_video::write_mp4(&p, &v, 30.0).unwrap();
+        vec![std::fs::read(&p).unwrap()]
+    };
+    // A mask folder with one label map: classes.json is mutated.
+    let mask_dir = tmp_dir().join("masks");
+    std::fs::create_dir_all(&mask_dir).unwrap();
+    image::GrayImage::from_fn(4, 4, |x, _| image::Luma([(x % 3) as u8]))
+        .save(mask_dir.join("view.png"))
+        .unwrap();
+    let mask_camera = r4d_splat::Camera {
+        name: "view".into(),
+        width: 4,
+        height: 4,
+        ..r4d_splat::Camera::look_at(4, 4, 60.0, [0.0, 0.0, 3.0], [0.0; 3], [0.0, 1.0, 0.0])
+    };
     vec![
+        Target {
+            name: "fit_checkpoint",
+            seeds: checkpoint,
+            run: Box::new(|b| {
+                let free = vec![
+                    vec![
+                        r4d_optim::ParamKind::YoungsModulus,
+                        r4d_optim::ParamKind::Density
+                    ];
+                    1
+                ];
+                let space = r4d_optim::space::ParamSpace::new(
+                    r4d_optim::space::Granularity::Part,
+                    &free,
+                    &[0],
+                    |_, k| k.default_bounds(),
+                );
+                if let Ok(s) = r4d_optim::record::FitState::from_json(&text(b)) {
+                    let _ = s.check(&space, &"0".repeat(32));
+                }
+                // The checks behind the checksum, on any state that parses.
+                if let Ok(s) = serde_json::from_slice::<r4d_optim::record::FitState>(b) {
+                    let _ = s.check(&space, &s.fingerprint.clone());
+                }
+            }),
+        },
+        Target {
+            name: "state_snapshot",
+            seeds: snapshot,
+            run: via_file("state.r4d", |p| {
+                let _ = r4d_mpm::Snapshot::read(p, 4, &"f".repeat(32));
+            }),
+        },
+        Target {
+            name: "png_frame",
+            seeds: frames,
+            run: via_file("frame_0000.png", |p| {
+                let _ = r4d_loss::io::read_frames::<f32>(&[p.to_path_buf()], p);
+                let _ = r4d_datasets::video::image_size(p);
+            }),
+        },
+        Target {
+            name: "mask_png",
+            seeds: label_pngs,
+            run: via_file("mask.png", |p| {
+                let _ = r4d_segment::mask::read_label_png(p);
+                let _ = r4d_segment::mask::read_probability_map(p);
+            }),
+        },
+        Target {
+            name: "classes_json",
+            seeds: classes,
+            run: {
+                let path = mask_dir.join("classes.json");
+                let dir = mask_dir.clone();
+                Box::new(move |b: &[u8]| {
+                    std::fs::write(&path, b).unwrap();
+                    let _ =
+                        r4d_segment::mask::MaskDir::open(&dir, std::slice::from_ref(&mask_camera));
+                })
+            },
+        },
+        Target {
+            name: "physflow_config",
+            seeds: physflow,
+            run: Box::new(|b| {
+                let _ = r4d_datasets::physflow_config::decode(&text(b), Path::new("c.json"));
+            }),
+        },
+        Target {
+            name: "pacnerf_all_data",
+            seeds: all_data,
+            run: via_dir_file("pacnerf", "all_data.json", |d| {
+                let _ = r4d_datasets::pacnerf::read_all_data(d);
+            }),
+        },
+        Target {
+            name: "physdreamer_transforms",
+            seeds: transforms,
+            run: via_dir_file("physdreamer", "transforms_train.json", |d| {
+                let _ = r4d_datasets::physdreamer::read_transforms(d);
+            }),
+        },
+        Target {
+            name: "mp4",
+            seeds: mp4,
+            run: via_file("v.mp4", |p| {
+                let _ = r4d_video::read_mp4::<f32>(p, None);
+            }),
+        },
         Target {
             name: "ply",
             seeds: small_ply.clone(),

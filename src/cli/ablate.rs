@@ -235,7 +235,7 @@ fn run_variant(
             } else {
                 let toml_path = dir.join("fit.toml");
                 let text = toml::to_string(&v.cfg).context("writing the variant's FIT.toml")?;
-                std::fs::write(&toml_path, text)
+                r4d_fsio::write_atomic(&toml_path, text.as_bytes())
                     .with_context(|| format!("writing {}", toml_path.display()))?;
                 let mut args: Vec<String> = vec![
                     "fit".into(),
@@ -554,7 +554,7 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
     let total = held;
     let mut slots: Vec<Option<Candidate>> = (0..total).map(|_| None).collect();
     for (s, path, rec) in recs {
-        for key in ["names", "total", "top_k", "fit_config"] {
+        for key in ["names", "total", "top_k", "fit_config", "fingerprint"] {
             if rec[key] != first[key] {
                 bail!(
                     "{}: '{key}' differs from {}'s: the shards are of different fits",
@@ -607,16 +607,11 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
         &out.join("init.json"),
         &json!({ "names": names, "outcome": outcome }),
     )?;
-    let state = resonance4d::video_fit::FitState {
-        names: names.clone(),
-        init: Some(outcome.clone()),
-        iters_done: 0,
-        optimizer: None,
-        best: None,
-        trust: None,
-        starts: Vec::new(),
-    };
-    write_json(&out.join("checkpoint.json"), &state)?;
+    let fingerprint: String = serde_json::from_value(first["fingerprint"].clone())
+        .context("shard.json: no 'fingerprint' (a shard written by an older r4d: run it again)")?;
+    let mut state = resonance4d::video_fit::FitState::new(names.clone(), fingerprint);
+    state.init = Some(outcome.clone());
+    super::checkpoint::write(&out.join("checkpoint.json"), &state)?;
     let best = &outcome.candidates[outcome.ranking[0]];
     let vals: Vec<String> = names
         .iter()

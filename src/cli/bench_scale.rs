@@ -87,7 +87,8 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
     println!("{}", table(&report));
     if let Some(path) = &a.json {
         let text = serde_json::to_string_pretty(&report)?;
-        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+        r4d_fsio::write_atomic(path, text.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
 }

@@ -216,7 +216,9 @@ fn write_inputs(inputs: &Path, run: &DemoRun) -> Result<()> {
     // TOML: the clamp's end time is +infinity, which JSON cannot hold.
     let mut sim = p.config.clone();
     sim.particles = Some("particles.ply".into());
-    std::fs::write(inputs.join("sim.toml"), toml::to_string(&sim)?)?;
+    let sim_path = inputs.join("sim.toml");
+    r4d_fsio::write_atomic(&sim_path, toml::to_string(&sim)?.as_bytes())
+        .with_context(|| format!("writing {}", sim_path.display()))?;
     let cams: Vec<_> = p.views.iter().map(|v| v.camera.clone()).collect();
     write_json(
         &inputs.join("cameras.json"),

@@ -394,6 +394,7 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
     )?;
     let rec = serde_json::json!({
         "kind": "init",
+        "fingerprint": resonance4d::video_fit::fingerprint(&problem, &cfg),
         "shard": shard.i,
         "of": shard.n,
         "names": names,
@@ -438,16 +439,7 @@ pub fn run(a: FitArgs) -> Result<()> {
             // No checkpoint yet (killed during the initialisation) starts over; an unreadable
             // one (damaged, not UTF-8, no permission) is an error, never a silent restart
             // that overwrites the run.
-            let state: Option<FitState> = match std::fs::read(&ck) {
-                Ok(bytes) => Some(
-                    serde_json::from_slice(&bytes)
-                        .with_context(|| format!("{}: not a fit checkpoint", ck.display()))?,
-                ),
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-                Err(e) => {
-                    return Err(e).with_context(|| format!("--resume: reading {}", ck.display()))
-                }
-            };
+            let state: Option<FitState> = super::checkpoint::read(&ck)?;
             (saved, dir.clone(), state)
         }
         None => {
@@ -524,7 +516,13 @@ pub fn run(a: FitArgs) -> Result<()> {
         );
     }
     let mut hooks = RunHooks::new(&out, &cfg, resume.as_ref())?;
-    let outcome = run_fit(&problem, &cfg, resume, &mut hooks)?;
+    let outcome = run_fit(&problem, &cfg, resume, &mut hooks).map_err(|e| match e {
+        e @ resonance4d::video_fit::FitError::Resume(_) => anyhow::Error::new(e).context(format!(
+            "--resume: {}",
+            out.join("checkpoint.json").display()
+        )),
+        e => e.into(),
+    })?;
     hooks.finish()?;
     let files = write_results(&out, &problem, &cfg, &outcome, &hooks.log, a.row, &lpips)?;
     if physflow_units {

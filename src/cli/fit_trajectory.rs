@@ -7,10 +7,10 @@ use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
 use r4d_mpm::ply::read_ply;
 use r4d_optim::{AdamW, ParamKind};
 use resonance4d::fit_trajectory::{
-    fit_trajectory_resumable, FitCheckpoint, FitError, FitOptions, Granularity, PartRecord,
+    fit_trajectory_resumable, FitError, FitOptions, FitState, Granularity, PartRecord,
 };
 use serde_json::json;
-use std::io::{IsTerminal, Write};
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `r4d fit-trajectory`.
@@ -133,27 +133,20 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let log_path = a.out.join("log.jsonl");
     let ck_path = a.out.join("checkpoint.json");
-    let resume: Option<FitCheckpoint> = if a.resume && ck_path.exists() {
-        let text = std::fs::read_to_string(&ck_path)
-            .with_context(|| format!("reading {}", ck_path.display()))?;
-        let ck: FitCheckpoint = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a fit checkpoint", ck_path.display()))?;
+    let resume: Option<FitState> = if a.resume {
+        super::checkpoint::read(&ck_path)?
+    } else {
+        None
+    };
+    if let Some(ck) = &resume {
         eprintln!(
             "resuming after iteration {} from {}",
             ck.iters_done,
             ck_path.display()
         );
-        Some(ck)
-    } else {
-        None
-    };
-    let mut log = std::fs::OpenOptions::new()
-        .create(true)
-        .write(true)
-        .append(resume.is_some())
-        .truncate(resume.is_none())
-        .open(&log_path)
-        .with_context(|| format!("opening {}", log_path.display()))?;
+    }
+    let mut log =
+        super::run_hooks::open_log(&log_path, resume.as_ref().map_or(0, |s| s.iters_done))?;
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::new(a.iters as u64)
     } else {
@@ -177,12 +170,7 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     if let Some(ck) = &resume {
         bar.set_position(ck.iters_done as u64);
     }
-    let save = |ck: &FitCheckpoint| -> Result<()> {
-        let tmp = a.out.join("checkpoint.json.tmp");
-        std::fs::write(&tmp, serde_json::to_string(ck)?)?;
-        std::fs::rename(&tmp, &ck_path)?;
-        Ok(())
-    };
+    let save = |ck: &FitState| super::checkpoint::write(&ck_path, ck);
     let fitted = fit_trajectory_resumable(
         &*backend,
         &config,
@@ -192,11 +180,8 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         resume,
         |it| {
             bar.inc(1);
-            bar.set_message(format!("loss {:.3e}", it.loss));
-            if let Err(e) = serde_json::to_writer(&mut log, it)
-                .map(|_| ())
-                .and_then(|_| writeln!(log).map_err(serde_json::Error::io))
-            {
+            bar.set_message(format!("loss {:.3e}", it.loss.total));
+            if let Err(e) = super::run_hooks::append_record(&mut log, it) {
                 io_error.get_or_insert(e);
             }
         },
@@ -209,6 +194,9 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     .map_err(|e| match e {
         e @ FitError::Backend { .. } => {
             anyhow::Error::new(e).context(format!("--backend {}", a.backend.name()))
+        }
+        e @ FitError::Resume(_) => {
+            anyhow::Error::new(e).context(format!("--resume: {}", ck_path.display()))
         }
         e => e.into(),
     })?;
@@ -259,9 +247,9 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
         .map(|(i, p)| PartRecord::of(i, p))
         .collect();
     let path = a.out.join("params.json");
-    std::fs::write(
+    r4d_fsio::write_atomic(
         &path,
-        serde_json::to_string_pretty(&json!({ "parts": records }))? + "\n",
+        (serde_json::to_string_pretty(&json!({ "parts": records }))? + "\n").as_bytes(),
     )
     .with_context(|| format!("writing {}", path.display()))?;
     println!(

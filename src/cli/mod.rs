@@ -2,6 +2,7 @@
 
 mod ablate;
 mod bench_scale;
+mod checkpoint;
 mod dataset;
 mod demo;
 mod eval;

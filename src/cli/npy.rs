@@ -31,5 +31,5 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    std::fs::write(path, out).with_context(|| format!("writing {}", path.display()))
+    r4d_fsio::write_atomic(path, &out).with_context(|| format!("writing {}", path.display()))
 }

@@ -216,9 +216,9 @@ fn render_sequence(
             .expect("template"),
     );
     let gif_path = a.out.join("animation.gif");
-    let gif_file = std::fs::File::create(&gif_path)
+    let mut gif_file = r4d_fsio::AtomicFile::create(&gif_path)
         .with_context(|| format!("creating {}", gif_path.display()))?;
-    let mut gif = image::codecs::gif::GifEncoder::new_with_speed(gif_file, 10);
+    let mut gif = image::codecs::gif::GifEncoder::new_with_speed(&mut gif_file, 10);
     gif.set_repeat(image::codecs::gif::Repeat::Infinite)?;
     let delay = image::Delay::from_numer_denom_ms(1000, a.fps.max(1));
     let mp4_path = a.out.join("animation.mp4");
@@ -247,6 +247,11 @@ fn render_sequence(
         bar.inc(1);
     }
     bar.finish_and_clear();
+    // Dropping the encoder writes the GIF trailer; then the file replaces the old one.
+    drop(gif);
+    gif_file
+        .commit()
+        .with_context(|| format!("writing {}", gif_path.display()))?;
     if let Some(m) = mp4 {
         m.finish()?;
     }
@@ -277,6 +282,15 @@ fn write_png(path: &Path, img: &Image) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let buf: Vec<u8> = img.rgb.iter().map(|&v| to_u8(v)).collect();
-    image::save_buffer(path, &buf, img.width, img.height, image::ColorType::Rgb8)
-        .with_context(|| format!("writing {}", path.display()))
+    let mut bytes = Vec::new();
+    image::write_buffer_with_format(
+        &mut std::io::Cursor::new(&mut bytes),
+        &buf,
+        img.width,
+        img.height,
+        image::ColorType::Rgb8,
+        image::ImageFormat::Png,
+    )
+    .with_context(|| format!("encoding {}", path.display()))?;
+    r4d_fsio::write_atomic(path, &bytes).with_context(|| format!("writing {}", path.display()))
 }

@@ -1,7 +1,7 @@
 //! Progress bars, `log.jsonl`, `init.json` and `checkpoint.json` for `r4d fit` and
 //! `r4d demo`.
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use r4d_mpm::PartParams;
 use r4d_optim::ParamKind;
@@ -37,24 +37,7 @@ impl RunHooks {
     pub fn new(dir: &Path, cfg: &FitConfig, resume: Option<&FitState>) -> Result<Self> {
         let path = dir.join("log.jsonl");
         let keep = resume.map_or(0, |s| s.iters_done);
-        let mut log = Vec::new();
-        if keep > 0 {
-            let f = std::fs::File::open(&path)
-                .with_context(|| format!("resuming: reading {}", path.display()))?;
-            for line in std::io::BufReader::new(f).lines().take(keep) {
-                log.push(
-                    serde_json::from_str(&line?)
-                        .with_context(|| format!("{}: bad record", path.display()))?,
-                );
-            }
-        }
-        // Rewrite the kept records: a run killed after logging but before checkpointing
-        // leaves extra lines that the resumed run writes again.
-        let mut log_file =
-            std::fs::File::create(&path).with_context(|| format!("writing {}", path.display()))?;
-        for r in &log {
-            writeln!(log_file, "{}", serde_json::to_string(r)?)?;
-        }
+        let (log_file, log) = open_log_records(&path, keep)?;
         let b = bar(
             cfg.iters as u64,
             "{bar:40} iter {pos}/{len} [{elapsed} < {eta}] {msg}",
@@ -147,12 +130,7 @@ impl FitHooks for RunHooks {
                 r.iter, r.loss.total, r.grad_norm, r.time_s
             );
         }
-        let line = serde_json::to_string(r).map_err(anyhow::Error::from);
-        let res = line.and_then(|l| {
-            writeln!(self.log_file, "{l}")?;
-            self.log_file.flush()?;
-            Ok(())
-        });
+        let res = append_record(&mut self.log_file, r);
         self.keep(res);
         self.log.push(r.clone());
     }
@@ -167,9 +145,65 @@ impl FitHooks for RunHooks {
     }
 
     fn on_checkpoint(&mut self, s: &FitState) {
-        let r = write_json(&self.dir.join("checkpoint.json"), s).map_err(anyhow::Error::from);
+        let r = super::checkpoint::write(&self.dir.join("checkpoint.json"), s);
         self.keep(r);
     }
+}
+
+/// Opens a run's `log.jsonl` for writing: when resuming after `keep` iterations, keeps its
+/// first `keep` records (a run killed after logging but before checkpointing left extra lines
+/// that the resumed run writes again) and returns them; a log with fewer records than the
+/// checkpoint's iterations, or a damaged one, is an error naming it.
+pub fn open_log_records(path: &Path, keep: usize) -> Result<(std::fs::File, Vec<IterRecord>)> {
+    let mut log = Vec::new();
+    if keep > 0 {
+        let f = std::fs::File::open(path)
+            .with_context(|| format!("resuming: reading {}", path.display()))?;
+        for (i, line) in std::io::BufReader::new(f).lines().take(keep).enumerate() {
+            let line = line.with_context(|| format!("resuming: reading {}", path.display()))?;
+            log.push(serde_json::from_str(&line).with_context(|| {
+                format!(
+                    "{}: line {} is not an iteration record",
+                    path.display(),
+                    i + 1
+                )
+            })?);
+        }
+        if log.len() < keep {
+            bail!(
+                "{}: {} records, the checkpoint has {keep} iterations (the log was truncated or replaced)",
+                path.display(),
+                log.len()
+            );
+        }
+    }
+    // The kept records are rewritten atomically, then appended to.
+    let mut text = String::new();
+    for r in &log {
+        text += &serde_json::to_string(r)?;
+        text.push('\n');
+    }
+    r4d_fsio::write_atomic(path, text.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    let file = std::fs::OpenOptions::new()
+        .append(true)
+        .open(path)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok((file, log))
+}
+
+/// [`open_log_records`] without the records.
+pub fn open_log(path: &Path, keep: usize) -> Result<std::fs::File> {
+    open_log_records(path, keep).map(|(f, _)| f)
+}
+
+/// Appends one record to a log (a whole line per write, flushed).
+pub fn append_record(log: &mut std::fs::File, r: &IterRecord) -> Result<()> {
+    let mut line = serde_json::to_string(r)?;
+    line.push('\n');
+    log.write_all(line.as_bytes())?;
+    log.flush()?;
+    Ok(())
 }
 
 /// A table of the fit's free parameters: start and fit per part and kind (per-particle fits:

@@ -259,8 +259,13 @@ fn write_views(
         }
         shares.push(differ as f64 / (w as f64 * h as f64));
         let path = dir.join(format!("view_{v:04}.png"));
-        out.save(&path)
-            .with_context(|| format!("writing {}", path.display()))?;
+        let mut bytes = Vec::new();
+        out.write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .and_then(|_| r4d_fsio::write_atomic(&path, &bytes).map_err(image::ImageError::IoError))
+        .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(shares)
 }

@@ -82,6 +82,22 @@ fn write_frame(dir: &Path, k: usize, x: &[[f32; 3]], f: Option<&[[f32; 9]]>) -> 
     Ok(())
 }
 
+/// The fingerprint a run's `state.r4d` carries: the config (its frame count excepted: a
+/// resumed run may simulate more frames), the particles, the backend and `--write-f`.
+fn fingerprint(config: &SimConfig, scene: &ParticleSet, backend: &str, write_f: bool) -> String {
+    let mut f = r4d_fsio::Fingerprint::new();
+    f.text("simulate");
+    let mut c = config.clone();
+    c.time.frames = 0;
+    f.text(&serde_json::to_string(&c).unwrap_or_default());
+    f.points(&scene.x);
+    f.f32s(&scene.volume);
+    f.u32s(&scene.part);
+    f.text(backend);
+    f.word(u64::from(write_f));
+    f.finish()
+}
+
 fn simulate<B: MpmKernels>(
     backend: B,
     a: &SimulateArgs,
@@ -97,8 +113,9 @@ fn simulate<B: MpmKernels>(
     let params = config.parts.clone();
     let snap_path = a.out.join("state.r4d");
     let resumed = a.resume && snap_path.exists();
+    let print = fingerprint(&config, sim.scene(), backend_name, a.write_f);
     let mut state = if resumed {
-        let snap = r4d_mpm::Snapshot::read(&snap_path, n)?;
+        let snap = r4d_mpm::Snapshot::read(&snap_path, n, &print)?;
         eprintln!(
             "resuming after frame {} from {}",
             snap.frame,
@@ -141,7 +158,9 @@ fn simulate<B: MpmKernels>(
             break;
         }
         write(&sim, &state, k)?;
-        sim.snapshot(&state)?.write(&snap_path)?;
+        let mut snap = sim.snapshot(&state)?;
+        snap.fingerprint.clone_from(&print);
+        snap.write(&snap_path)?;
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -170,8 +189,11 @@ fn simulate<B: MpmKernels>(
         "error": error.as_ref().map(|e| e.to_string()),
     });
     let sp = a.out.join("summary.json");
-    std::fs::write(&sp, serde_json::to_string_pretty(&summary)? + "\n")
-        .with_context(|| format!("writing {}", sp.display()))?;
+    r4d_fsio::write_atomic(
+        &sp,
+        (serde_json::to_string_pretty(&summary)? + "\n").as_bytes(),
+    )
+    .with_context(|| format!("writing {}", sp.display()))?;
     if let Some(e) = error {
         return Err(
             anyhow::Error::new(e).context(format!("frames 0..={done} are in {}", a.out.display()))

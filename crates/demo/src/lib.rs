@@ -27,8 +27,9 @@ pub mod stage;
 
 use profiles::{Profile, Profile2d, Verdict};
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
+use r4d_optim::record::Terms;
 use r4d_optim::space::{get, set};
-use r4d_optim::video::fit::{run_fit, FitHooks, FitOutcome, Terms};
+use r4d_optim::video::fit::{run_fit, FitHooks, FitOutcome};
 use r4d_optim::video::{FitConfig, Objective, VideoProblem, View};
 use r4d_optim::ParamKind;
 use r4d_optim::{Compute, FitError};

@@ -155,11 +155,19 @@ fn create_parent(path: &Path) -> Result<()> {
 /// Saves an RGB image as PNG, creating the parent folder.
 fn save_png(path: &Path, img: &RgbImage) -> Result<()> {
     create_parent(path)?;
-    img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|source| DiagError::Image {
-            path: path.to_path_buf(),
-            source,
-        })
+    let mut bytes = Vec::new();
+    img.write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )
+    .map_err(|source| DiagError::Image {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    r4d_fsio::write_atomic(path, &bytes).map_err(|source| DiagError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// Writes every frame of `video` as an 8-bit PNG `dir/{prefix}_{t:04}.png` (values
@@ -195,7 +203,7 @@ pub fn write_gif(path: &Path, video: &Video<f32>, fps: f64) -> Result<()> {
         }
     } // Dropping the encoder writes the GIF trailer.
     create_parent(path)?;
-    std::fs::write(path, bytes).map_err(|source| DiagError::Io {
+    r4d_fsio::write_atomic(path, &bytes).map_err(|source| DiagError::Io {
         path: path.to_path_buf(),
         source,
     })

@@ -5,8 +5,9 @@ use crate::diagnostics::{loss_curve_png, write_fit_diagnostics, DiagnosticFiles}
 use r4d_loss::lpips::{Lpips, LpipsError, LpipsNet, LpipsValue};
 use r4d_loss::Video;
 use r4d_mpm::PartParams;
+use r4d_optim::record::Terms;
 use r4d_optim::trajectory::PartRecord;
-use r4d_optim::video::fit::{FitOutcome, IterRecord, Terms};
+use r4d_optim::video::fit::{terms_of, FitOutcome, IterRecord};
 use r4d_optim::video::{FitConfig, Objective, VideoProblem};
 use r4d_optim::FitError;
 use serde_json::json;
@@ -140,9 +141,7 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), FitE
     let io = |e: std::io::Error| FitError::Input(format!("{}: {e}", path.display()));
     let text = serde_json::to_string_pretty(value)
         .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
-    let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, text + "\n").map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
+    r4d_fsio::write_atomic(path, (text + "\n").as_bytes()).map_err(io)
 }
 
 /// Writes the results of `outcome` into `dir`: `params.json` (and `params_particles.json`
@@ -229,7 +228,7 @@ pub fn write_results(
         params,
         views,
         loss_curve,
-        final_terms: Terms::of(&ev),
+        final_terms: terms_of(&ev),
         metrics,
     })
 }

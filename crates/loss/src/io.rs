@@ -85,6 +85,11 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> VideoIoError + '_ {
     }
 }
 
+/// The largest frame side read from an image file (pixels; cameras are bounded the same way).
+pub const MAX_IMAGE_SIDE: u32 = 8192;
+/// The most memory one decoded frame may take (bytes).
+pub const MAX_IMAGE_BYTES: u64 = 256 << 20;
+
 /// Every `*.png` of `dir`, sorted by file name.
 pub fn png_frames(dir: &Path) -> Result<Vec<PathBuf>, VideoIoError> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -114,15 +119,19 @@ pub fn read_frames<T: Real>(files: &[PathBuf], what: &Path) -> Result<Video<T>, 
     let mut data = Vec::new();
     let mut size = None;
     for f in files {
-        let img = image::ImageReader::open(f)
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_IMAGE_SIDE);
+        limits.max_image_height = Some(MAX_IMAGE_SIDE);
+        limits.max_alloc = Some(MAX_IMAGE_BYTES);
+        let mut reader = image::ImageReader::open(f)
             .map_err(io_err(f))?
             .with_guessed_format()
-            .map_err(io_err(f))?
-            .decode()
-            .map_err(|e| VideoIoError::Png {
-                path: f.clone(),
-                message: e.to_string(),
-            })?;
+            .map_err(io_err(f))?;
+        reader.limits(limits);
+        let img = reader.decode().map_err(|e| VideoIoError::Png {
+            path: f.clone(),
+            message: e.to_string(),
+        })?;
         let wh = (img.width(), img.height());
         match size {
             None => size = Some(wh),
@@ -307,7 +316,7 @@ pub fn write_npy<T: Real>(path: &Path, video: &Video<T>) -> Result<(), VideoIoEr
     for v in video.data() {
         out.extend_from_slice(&(v.f64() as f32).to_le_bytes());
     }
-    std::fs::write(path, out).map_err(io_err(path))
+    r4d_fsio::write_atomic(path, &out).map_err(io_err(path))
 }
 
 /// Writes a video as 8-bit PNG frames `dir/frame_NNNN.png` (values clamped to [0, 1],
@@ -321,13 +330,19 @@ pub fn write_png_dir<T: Real>(dir: &Path, video: &Video<T>) -> Result<(), VideoI
             .map(|v| (v.f64().clamp(0.0, 1.0) * 255.0).round() as u8)
             .collect();
         let path = dir.join(format!("frame_{t:04}.png"));
-        image::RgbImage::from_raw(video.width() as u32, video.height() as u32, px)
-            .expect("buffer matches size")
-            .save(&path)
-            .map_err(|e| VideoIoError::Png {
-                path: path.clone(),
-                message: e.to_string(),
-            })?;
+        let png_error = |message: String| VideoIoError::Png {
+            path: path.clone(),
+            message,
+        };
+        let img = image::RgbImage::from_raw(video.width() as u32, video.height() as u32, px)
+            .ok_or_else(|| png_error("frame buffer of the wrong size".into()))?;
+        let mut bytes = Vec::new();
+        img.write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| png_error(e.to_string()))?;
+        r4d_fsio::write_atomic(&path, &bytes).map_err(io_err(&path))?;
     }
     Ok(())
 }

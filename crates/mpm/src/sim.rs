@@ -263,7 +263,8 @@ impl<B: MpmKernels> MpmSim<B> {
         Ok(())
     }
 
-    /// A host copy of the state (for [`crate::Snapshot::write`]).
+    /// A host copy of the state (for [`crate::Snapshot::write`]; the caller sets its
+    /// fingerprint).
     pub fn snapshot(&self, state: &SimState<B>) -> Result<crate::Snapshot> {
         let b = &self.backend;
         let p = &state.particles;
@@ -276,6 +277,7 @@ impl<B: MpmKernels> MpmSim<B> {
             c: to_f32(b.download(&p.c).map_err(be)?),
             f: to_f32(b.download(&p.f).map_err(be)?),
             plastic: to_f32(b.download(&p.plastic).map_err(be)?),
+            fingerprint: String::new(),
         })
     }
 

@@ -36,7 +36,8 @@
 //! ```
 //! ([`ReferenceCompute`] is that implementation.)
 
-use crate::trajectory::{self, FitCheckpoint, FitOptions, Fitted, IterLog};
+use crate::record::{FitState, IterRecord};
+use crate::trajectory::{self, FitOptions, Fitted};
 use crate::video::problem::{Mode, Objective, RunOut};
 use crate::FitError;
 use r4d_mpm::adjoint::checkpoint::Differentiable;
@@ -171,9 +172,9 @@ pub(crate) struct TrajectoryJob<'a> {
     pub scene: &'a ParticleSet,
     pub targets: &'a [Vec<[f32; 3]>],
     pub opts: &'a FitOptions,
-    pub resume: Option<FitCheckpoint>,
-    pub on_iter: &'a mut dyn FnMut(&IterLog),
-    pub on_checkpoint: &'a mut dyn FnMut(&FitCheckpoint),
+    pub resume: Option<FitState>,
+    pub on_iter: &'a mut dyn FnMut(&IterRecord),
+    pub on_checkpoint: &'a mut dyn FnMut(&FitState),
 }
 
 impl<'a> MpmJob<'a> {
@@ -273,9 +274,9 @@ pub fn fit_trajectory_on(
     scene: &ParticleSet,
     targets: &[Vec<[f32; 3]>],
     opts: &FitOptions,
-    resume: Option<FitCheckpoint>,
-    on_iter: &mut dyn FnMut(&IterLog),
-    on_checkpoint: &mut dyn FnMut(&FitCheckpoint),
+    resume: Option<FitState>,
+    on_iter: &mut dyn FnMut(&IterRecord),
+    on_checkpoint: &mut dyn FnMut(&FitState),
 ) -> Result<Fitted, FitError> {
     let job = TrajectoryJob {
         config,

@@ -55,6 +55,7 @@ mod error;
 mod heap;
 mod init;
 mod lhs;
+pub mod record;
 pub mod space;
 pub mod trajectory;
 mod trust_bfgs;

@@ -21,10 +21,11 @@ use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
 use r4d_mpm::math::Real;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
-use serde::Serialize;
 use std::cell::RefCell;
 use std::time::Instant;
 
+use crate::record::{mix_json, Fingerprint, Terms};
+pub use crate::record::{FitState, IterRecord, PartRecord};
 pub use crate::space::Granularity;
 pub use crate::FitError;
 
@@ -78,59 +79,6 @@ impl Default for FitOptions {
     }
 }
 
-/// One iteration's record (a line of `log.jsonl`).
-#[derive(Clone, Debug, Serialize)]
-pub struct IterLog {
-    /// Iteration (0-based); parameters are those evaluated at this iteration.
-    pub iter: usize,
-    /// Loss (mean over frames).
-    pub loss: f64,
-    /// Norm of the gradient with respect to the log parameters, before clipping.
-    pub grad_norm: f64,
-    /// The parameters evaluated.
-    pub parts: Vec<PartRecord>,
-    /// Wall time of the iteration (s).
-    pub time_s: f64,
-}
-
-/// A part's parameters in the `params.json` schema.
-#[derive(Clone, Debug, Serialize, serde::Deserialize, PartialEq)]
-pub struct PartRecord {
-    /// Part index.
-    pub id: usize,
-    /// Material name.
-    pub material: String,
-    /// Young's modulus (Pa).
-    #[serde(rename = "E")]
-    pub e: f64,
-    /// Poisson's ratio.
-    pub nu: f64,
-    /// Density (kg/m^3).
-    pub density: f64,
-    /// Yield stress (Pa).
-    pub yield_stress: f64,
-    /// Plastic viscosity (Pa s).
-    pub plastic_viscosity: f64,
-    /// Friction angle (degrees).
-    pub friction_angle: f64,
-}
-
-impl PartRecord {
-    /// The record of a part.
-    pub fn of(id: usize, p: &PartParams) -> Self {
-        PartRecord {
-            id,
-            material: format!("{:?}", p.material).to_lowercase(),
-            e: p.youngs_modulus_pa,
-            nu: p.poisson_ratio,
-            density: p.density_kg_m3,
-            yield_stress: p.yield_stress_pa,
-            plastic_viscosity: p.plastic_viscosity_pa_s,
-            friction_angle: p.friction_angle_deg,
-        }
-    }
-}
-
 /// Fits the free parameters of `config`'s parts so that the simulation of `scene` follows
 /// `targets` (positions at frames 1, 2, ...). The starting point is the config's parameters.
 /// `on_iter` sees every iteration's record. Returns the parameters with the lowest loss
@@ -141,7 +89,7 @@ pub fn fit_trajectory<B: MpmAdjointKernels>(
     scene: &ParticleSet,
     targets: &[Vec<[f32; 3]>],
     opts: &FitOptions,
-    on_iter: impl FnMut(&IterLog),
+    on_iter: impl FnMut(&IterRecord),
 ) -> Result<Vec<PartParams>, FitError> {
     fit_trajectory_resumable(backend, config, scene, targets, opts, None, on_iter, |_| {})
         .map(|f| f.parts)
@@ -152,20 +100,33 @@ fn part_means(config: &SimConfig, part: &[u32], values: &[PartParams]) -> Vec<Pa
     part_summary(&config.parts, part, values)
 }
 
-/// Everything a killed fit needs to continue exactly where it stopped: the optimiser with its
-/// moments, the iterations done and the best parameters so far.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct FitCheckpoint {
-    /// Iterations completed.
-    pub iters_done: usize,
-    /// The optimiser (log parameters, Adam moments, step count).
-    pub optimizer: LogDomainOptimizer,
-    /// Lowest loss so far and its parameters.
-    pub best: Option<(f64, Vec<PartParams>)>,
+/// The fingerprint of a trajectory fit ([`FitState::fingerprint`]): the simulation settings
+/// and starting parameters, the particles, the targets and every option but `iters`.
+pub fn fingerprint(
+    config: &SimConfig,
+    scene: &ParticleSet,
+    targets: &[Vec<[f32; 3]>],
+    opts: &FitOptions,
+) -> String {
+    let mut f = Fingerprint::new();
+    f.text("trajectory fit");
+    mix_json(&mut f, config);
+    f.points(&scene.x);
+    f.f32s(&scene.volume);
+    f.u32s(&scene.part);
+    f.word(targets.len() as u64);
+    for t in targets {
+        f.points(t);
+    }
+    let mut o = opts.clone();
+    o.iters = 0;
+    f.text(&format!("{o:?}"));
+    f.finish()
 }
 
-/// [`fit_trajectory`] that starts from `resume` when given and hands a [`FitCheckpoint`] to
-/// `on_checkpoint` after every iteration (to be written to disk).
+/// [`fit_trajectory`] that starts from `resume` when given (a state this fit wrote:
+/// [`FitState::check`] refuses one of other inputs or options) and hands a [`FitState`] to
+/// `on_checkpoint` after every iteration (to be written to disk, [`FitState::to_json`]).
 #[allow(clippy::too_many_arguments)]
 pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
     backend: B,
@@ -173,9 +134,9 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
     scene: &ParticleSet,
     targets: &[Vec<[f32; 3]>],
     opts: &FitOptions,
-    resume: Option<FitCheckpoint>,
-    mut on_iter: impl FnMut(&IterLog),
-    mut on_checkpoint: impl FnMut(&FitCheckpoint),
+    resume: Option<FitState>,
+    mut on_iter: impl FnMut(&IterRecord),
+    mut on_checkpoint: impl FnMut(&FitState),
 ) -> Result<Fitted, FitError> {
     if targets.is_empty() {
         return Err(FitError::Input("no target frames".into()));
@@ -239,27 +200,17 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
         )
     });
     let theta = space.values(&base);
-    let (opt, first, mut best) = match resume {
-        Some(ck) => {
-            ck.optimizer
-                .validate(theta.len())
-                .map_err(|e| FitError::Resume(format!("the checkpoint's optimiser: {e}")))?;
-            if let Some((_, p)) = &ck.best {
-                if p.len() != base.len() {
-                    return Err(FitError::Resume(format!(
-                        "the checkpoint's best parameters have {} slots, this run {}",
-                        p.len(),
-                        base.len()
-                    )));
-                }
-            }
-            (ck.optimizer, ck.iters_done, ck.best)
+    let names = space.names();
+    let mut state = match resume {
+        Some(s) => {
+            s.check(&space, &fingerprint(config, scene, targets, opts))?;
+            s
         }
-        None => (
-            LogDomainOptimizer::new(theta, space.bounds(), opts.adam, opts.clip_norm)?,
-            0,
-            None,
-        ),
+        None => FitState::new(names.clone(), fingerprint(config, scene, targets, opts)),
+    };
+    let opt = match state.optimizer.take() {
+        Some(o) => o,
+        None => LogDomainOptimizer::new(theta, space.bounds(), opts.adam, opts.clip_norm)?,
     };
     let mut opt = Stepper::Adam(opt);
     let spf = sim.setup.substeps_per_frame;
@@ -270,7 +221,7 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
         base: opts.adam.lr,
         iters: opts.iters,
     };
-    for iter in first..opts.iters {
+    for iter in state.iters_done..opts.iters {
         let start = Instant::now();
         let it = descent::iterate(&space, &base, &mut opt, rate, iter, |slots| {
             let sweep = Sweep {
@@ -286,37 +237,38 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
             let (loss, grad) = sweep.run(&stepper).map_err(backend_error)?;
             Ok(((), loss, grad))
         })?;
-        keep_best(&mut best, it.loss, &it.slots);
-        on_iter(&IterLog {
+        keep_best(&mut state.best, it.loss, &it.theta);
+        on_iter(&IterRecord::new(
             iter,
-            loss: it.loss,
-            grad_norm: it.grad_norm,
-            parts: summarize(&it.slots)
-                .iter()
-                .enumerate()
-                .map(|(i, p)| PartRecord::of(i, p))
-                .collect(),
-            time_s: start.elapsed().as_secs_f64(),
-        });
+            Terms {
+                total: it.loss,
+                ..Terms::default()
+            },
+            &names,
+            &it.theta,
+            &it.gtheta,
+            (it.grad_norm, it.lr),
+            &summarize(&it.slots),
+            (start.elapsed().as_secs_f64(), 0),
+        ));
+        state.iters_done = iter + 1;
         if let Stepper::Adam(optimizer) = &opt {
-            on_checkpoint(&FitCheckpoint {
-                iters_done: iter + 1,
-                optimizer: optimizer.clone(),
-                best: best.clone(),
-            });
+            state.optimizer = Some(optimizer.clone());
+            on_checkpoint(&state);
+            state.optimizer = None;
         }
     }
-    let values = best.map(|(_, p)| p).unwrap_or_else(|| {
-        let mut v = base.clone();
-        space.apply(&mut v, &opt.theta());
-        v
-    });
+    let theta = match &state.best {
+        Some((_, t)) => t.clone(),
+        None => opt.theta(),
+    };
+    let mut values = base.clone();
+    space.apply(&mut values, &theta);
     Ok(Fitted {
         parts: summarize(&values),
         per_particle: per_particle.then_some(values),
     })
 }
-
 /// One evaluation of the loss and of its parameter gradient (per slot, with the yield stress
 /// gradient of the initial state).
 struct Sweep<'a> {

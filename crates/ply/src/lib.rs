@@ -14,7 +14,7 @@
 //! assert_eq!(p.type_of("x"), Some(r4d_ply::PlyType::F32));
 //! ```
 
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// Errors of PLY reading and writing.
@@ -350,7 +350,8 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
     })
 }
 
-/// Writes float columns as a binary little-endian PLY vertex element.
+/// Writes float columns as a binary little-endian PLY vertex element, atomically (a kill
+/// leaves the old file or the new one, [`r4d_fsio`]).
 pub fn write_ply(path: &Path, names: &[&str], columns: &[&[f32]]) -> Result<()> {
     assert_eq!(names.len(), columns.len(), "one name per column");
     let count = columns.first().map_or(0, |c| c.len());
@@ -362,8 +363,7 @@ pub fn write_ply(path: &Path, names: &[&str], columns: &[&[f32]]) -> Result<()> 
         path: path.to_path_buf(),
         source,
     };
-    let file = std::fs::File::create(path).map_err(io)?;
-    let mut w = BufWriter::new(file);
+    let mut w = r4d_fsio::AtomicFile::create(path).map_err(io)?;
     let mut header = format!("ply\nformat binary_little_endian 1.0\nelement vertex {count}\n");
     for n in names {
         header.push_str(&format!("property float {n}\n"));
@@ -378,7 +378,7 @@ pub fn write_ply(path: &Path, names: &[&str], columns: &[&[f32]]) -> Result<()> 
         }
         w.write_all(&row).map_err(io)?;
     }
-    w.flush().map_err(io)
+    w.commit().map_err(io)
 }
 
 #[cfg(test)]

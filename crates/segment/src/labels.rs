@@ -113,7 +113,7 @@ impl PartLabels {
     /// Writes the JSON file (pretty-printed, the keys of the struct).
     pub fn write_json(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string_pretty(self).expect("labels serialise");
-        std::fs::write(path, text + "\n").map_err(Error::io(path))
+        r4d_fsio::write_atomic(path, (text + "\n").as_bytes()).map_err(Error::io(path))
     }
 
     /// Copies the scene PLY `scene` to `out` with a float `part` property (the label, -1 for

@@ -446,11 +446,22 @@ impl MaskSource for MaskDir {
     }
 }
 
+/// The largest mask image side read (pixels; cameras are bounded the same way).
+pub const MAX_IMAGE_SIDE: u32 = 8192;
+/// The most memory one decoded mask image may take (bytes).
+pub const MAX_IMAGE_BYTES: u64 = 256 << 20;
+
 fn decode_png(path: &Path) -> Result<image::DynamicImage> {
-    image::ImageReader::open(path)
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE);
+    limits.max_alloc = Some(MAX_IMAGE_BYTES);
+    let mut reader = image::ImageReader::open(path)
         .map_err(Error::io(path))?
         .with_guessed_format()
-        .map_err(Error::io(path))?
+        .map_err(Error::io(path))?;
+    reader.limits(limits);
+    reader
         .decode()
         .map_err(|e| Error::mask(path.display(), format!("cannot decode: {e}")))
 }
@@ -646,7 +657,7 @@ pub fn write_npy(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
     for v in data {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    std::fs::write(path, out).map_err(Error::io(path))
+    r4d_fsio::write_atomic(path, &out).map_err(Error::io(path))
 }
 
 /// Writes a label map as a grayscale PNG (8-bit when every value fits, else 16-bit).
@@ -656,15 +667,19 @@ pub fn write_label_png(path: &Path, width: u32, height: u32, labels: &[u16]) -> 
         (width * height) as usize,
         "one label per pixel"
     );
+    let mut bytes = Vec::new();
+    let mut cursor = std::io::Cursor::new(&mut bytes);
+    let png = image::ImageFormat::Png;
     let r = if labels.iter().all(|&l| l <= 255) {
         let b: Vec<u8> = labels.iter().map(|&l| l as u8).collect();
         image::GrayImage::from_raw(width, height, b)
             .expect("sized")
-            .save(path)
+            .write_to(&mut cursor, png)
     } else {
         image::ImageBuffer::<image::Luma<u16>, _>::from_raw(width, height, labels.to_vec())
             .expect("sized")
-            .save(path)
+            .write_to(&mut cursor, png)
     };
-    r.map_err(|e| Error::mask(path.display(), format!("cannot write: {e}")))
+    r.map_err(|e| Error::mask(path.display(), format!("cannot write: {e}")))?;
+    r4d_fsio::write_atomic(path, &bytes).map_err(Error::io(path))
 }

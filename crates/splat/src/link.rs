@@ -62,7 +62,7 @@ impl SimLink {
     /// Writes `link.json`.
     pub fn save(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string_pretty(self).expect("serialisable");
-        std::fs::write(path, text).map_err(|source| Error::Io {
+        r4d_fsio::write_atomic(path, text.as_bytes()).map_err(|source| Error::Io {
             path: path.to_path_buf(),
             source,
         })

@@ -226,12 +226,7 @@ impl Mp4Writer {
             sync: &self.sync,
         };
         let bytes = mux::file(&stream);
-        let mut part = self.path.clone().into_os_string();
-        part.push(".part");
-        let part = PathBuf::from(part);
-        std::fs::write(&part, bytes).map_err(VideoError::io(&part))?;
-        std::fs::rename(&part, &self.path).map_err(VideoError::io(&self.path))?;
-        Ok(())
+        r4d_fsio::write_atomic(&self.path, &bytes).map_err(VideoError::io(&self.path))
     }
 }
 

@@ -4,54 +4,19 @@
 use super::config::{FitConfig, OptimizerKind};
 use super::problem::{Evaluation, Objective, VideoProblem};
 use crate::descent::{self, keep_best, Rate, Stepper};
+use crate::record::{mix_json, Fingerprint, FlatProbe, Terms};
+pub use crate::record::{FitState, IterRecord, StartResult};
 use crate::space::{part_summary, Granularity, ParamSpace};
-use crate::trajectory::PartRecord;
 use crate::FitError;
 use crate::{
     evaluate_candidate, Candidate, InitOutcome, Initializer, LatinHypercubeInit,
     LogDomainOptimizer, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs,
 };
+use r4d_loss::bands::ReferenceVideo;
 use r4d_loss::{ssim::ms_ssim, MsSsimConfig, Video};
 use r4d_mpm::PartParams;
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
 use std::time::Instant;
-
-/// Everything a killed fit needs to continue exactly where it stopped (`checkpoint.json`).
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct FitState {
-    /// Names of the free parameters (checked on resume).
-    pub names: Vec<String>,
-    /// The initialisation's result, once done.
-    pub init: Option<InitOutcome>,
-    /// Iterations completed.
-    pub iters_done: usize,
-    /// The optimiser (log parameters, moments, step count); `None` before the first
-    /// iteration.
-    pub optimizer: Option<LogDomainOptimizer>,
-    /// Lowest loss evaluated and its `theta`.
-    pub best: Option<(f64, Vec<f64>)>,
-    /// The trust-region optimiser (`optimizer = "trust_bfgs"`), like `optimizer`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub trust: Option<TrustRegionBfgs>,
-    /// The short fits of a multi-start (`multi_start > 1`), in candidate-rank order.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub starts: Vec<StartResult>,
-}
-
-/// One start of a multi-start: a short fit from an initialisation candidate.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct StartResult {
-    /// The candidate's index in the initialisation.
-    pub candidate: usize,
-    /// Its MS-SSIM score.
-    pub score: Option<f64>,
-    /// Lowest loss of the short fit.
-    pub loss: f64,
-    /// The parameters of that loss (the fit's free parameters).
-    pub theta: Vec<f64>,
-}
 
 /// One evaluation and step of the fit loop.
 struct Step {
@@ -139,79 +104,19 @@ fn save(opt: &Stepper, state: &mut FitState) {
     }
 }
 
-/// Loss terms summed over the views (absent terms were not evaluated).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Terms {
-    /// Weighted total.
-    pub total: f64,
-    /// Mean absolute error.
-    pub l1: Option<f64>,
-    /// `1 - SSIM`.
-    pub spatial: Option<f64>,
-    /// Spectral log-magnitude term.
-    pub mag: Option<f64>,
-    /// Spectral phase term.
-    pub phase: Option<f64>,
-}
-
-impl Terms {
-    /// The terms of an evaluation, summed over its views.
-    pub fn of(ev: &Evaluation) -> Terms {
-        let mean = |f: &dyn Fn(&r4d_loss::DmsTerms) -> Option<f64>| {
-            let v: Vec<f64> = ev.views.iter().filter_map(f).collect();
-            (!v.is_empty()).then(|| v.iter().sum::<f64>())
-        };
-        Terms {
-            total: ev.total,
-            l1: mean(&|t| t.l1),
-            spatial: mean(&|t| t.spatial),
-            mag: mean(&|t| t.mag),
-            phase: mean(&|t| t.phase),
-        }
+/// The loss terms of an evaluation, summed over its views.
+pub fn terms_of(ev: &Evaluation) -> Terms {
+    let mean = |f: &dyn Fn(&r4d_loss::DmsTerms) -> Option<f64>| {
+        let v: Vec<f64> = ev.views.iter().filter_map(f).collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>())
+    };
+    Terms {
+        total: ev.total,
+        l1: mean(&|t| t.l1),
+        spatial: mean(&|t| t.spatial),
+        mag: mean(&|t| t.mag),
+        phase: mean(&|t| t.phase),
     }
-}
-
-/// One iteration (a line of `log.jsonl`).
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct IterRecord {
-    /// Iteration (0-based); the parameters are those evaluated at it.
-    pub iter: usize,
-    /// Loss terms (summed over views).
-    pub loss: Terms,
-    /// Free parameters evaluated, by name.
-    pub theta: BTreeMap<String, f64>,
-    /// `dL/dxi` (log-domain gradient) by name, before clipping.
-    pub grad_log: BTreeMap<String, f64>,
-    /// Norm of `dL/dxi` before clipping.
-    pub grad_norm: f64,
-    /// Learning rate of the step taken after this evaluation.
-    pub lr: f64,
-    /// The parameters per part (per-particle fits: geometric means).
-    pub parts: Vec<PartRecord>,
-    /// Wall time of the iteration (s).
-    pub time_s: f64,
-    /// Peak heap bytes of the process since the fit started, as measured by
-    /// [`FitHooks::heap`] (0 without one; the `r4d` binary's counting allocator).
-    pub peak_host_bytes: usize,
-    /// Flat-direction probes run after this evaluation (see [`FitConfig::flat_probe`]).
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub probes: Vec<FlatProbe>,
-}
-
-/// One flat-direction probe: a parameter whose gradient was exactly zero, evaluated across
-/// its bounds with the others fixed.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct FlatProbe {
-    /// The parameter.
-    pub name: String,
-    /// Its value when the gradient was zero.
-    pub from: f64,
-    /// The value it continues from (= `from` when no probed value was better).
-    pub to: f64,
-    /// Loss at `from` (the iteration's loss).
-    pub loss_from: f64,
-    /// Lowest probed loss.
-    pub loss_best: f64,
 }
 
 /// The kinds that act only through a branch of the return mapping: their gradient is exactly
@@ -487,57 +392,50 @@ pub fn initialize_shard(
     Ok((search.names, total, candidates))
 }
 
-/// Checks a checkpoint's state against this fit before anything resumes from it: optimiser
-/// vectors of the right length and finite, the initialisation's best point and the
-/// multi-start results of the right length (a damaged or foreign file is
-/// [`FitError::Resume`], never a panic or a silent restart).
-fn check_resumed(s: &FitState, space: &ParamSpace) -> Result<(), FitError> {
-    let n = space.len();
-    let resume = |what: &str, e: String| FitError::Resume(format!("{what}: {e}"));
-    if let Some(o) = &s.optimizer {
-        o.validate(n)
-            .map_err(|e| resume("the checkpoint's optimiser", e.to_string()))?;
+/// The fingerprint of a video fit ([`FitState::fingerprint`]): the simulation settings and
+/// starting parameters, the particles and their parts, the scene, the link, the render
+/// settings, every view's camera and reference video, the frame rate, and every fit setting
+/// but `iters` (raising it extends a finished run). The backend is not part of it.
+pub fn fingerprint(problem: &VideoProblem, cfg: &FitConfig) -> String {
+    let mut f = Fingerprint::new();
+    f.text("video fit");
+    mix_json(&mut f, &problem.config);
+    let p = &problem.particles;
+    f.points(&p.x);
+    f.f32s(&p.volume);
+    f.u32s(&p.part);
+    let g = &problem.scene;
+    f.word(u64::from(g.sh_degree));
+    f.points(&g.means);
+    f.points(&g.log_scales);
+    f.word(g.quats.len() as u64);
+    for q in &g.quats {
+        f.f32s(q);
     }
-    if let Some(o) = &s.trust {
-        o.validate(n)
-            .map_err(|e| resume("the checkpoint's trust-region optimiser", e.to_string()))?;
-    }
-    let finite_positive = |t: &[f64]| t.iter().all(|v| v.is_finite() && *v > 0.0);
-    if let Some((l, t)) = &s.best {
-        if t.len() != n || !finite_positive(t) || l.is_nan() {
-            return Err(resume(
-                "the checkpoint's best point",
-                format!(
-                    "{} values (loss {l}), this fit has {n} positive parameters",
-                    t.len()
-                ),
-            ));
+    f.f32s(&g.opacity_logits);
+    f.f32s(&g.sh);
+    mix_json(&mut f, &problem.link);
+    f.text(&format!("{:?}", problem.settings));
+    f.word(problem.views.len() as u64);
+    for v in &problem.views {
+        mix_json(&mut f, &v.camera);
+        f.word(v.video.frames() as u64);
+        f.word(v.video.height() as u64);
+        f.word(v.video.width() as u64);
+        match &v.video {
+            ReferenceVideo::F32(x) => f.f32s(x.data()),
+            ReferenceVideo::U8(x) => f.bytes(x.data()),
         }
     }
-    for r in &s.starts {
-        if r.theta.len() != n || !finite_positive(&r.theta) {
-            return Err(resume(
-                "the checkpoint's multi-start results",
-                format!("{} values, this fit has {n}", r.theta.len()),
-            ));
-        }
-    }
-    if let Some(init) = &s.init {
-        let m = init.best.len();
-        let bad = init.candidates.iter().any(|c| c.theta.len() != m)
-            || init.ranking.iter().any(|&i| i >= init.candidates.len())
-            || !finite_positive(&init.best);
-        if bad {
-            return Err(resume(
-                "the checkpoint's initialisation",
-                "inconsistent candidates, ranking or best point".into(),
-            ));
-        }
-    }
-    Ok(())
+    f.word(problem.fps.to_bits());
+    let mut settings = cfg.clone();
+    settings.iters = 0;
+    mix_json(&mut f, &settings);
+    f.finish()
 }
 
-/// Runs a whole fit of `problem` with `cfg`, continuing from `resume` when given.
+/// Runs a whole fit of `problem` with `cfg`, continuing from `resume` when given (a state
+/// written by this fit: [`FitState::check`] refuses one of other inputs or settings).
 pub fn run_fit(
     problem: &VideoProblem,
     cfg: &FitConfig,
@@ -559,29 +457,13 @@ pub fn run_fit(
         return Err(FitError::Input("no free parameter to fit".into()));
     }
     let names = space.names();
+    let print = fingerprint(problem, cfg);
     let mut state = match resume {
         Some(s) => {
-            if s.names != names {
-                return Err(FitError::Resume(format!(
-                    "the checkpoint fits {} parameters ({}...), this run {} ({}...)",
-                    s.names.len(),
-                    s.names.first().cloned().unwrap_or_default(),
-                    names.len(),
-                    names.first().cloned().unwrap_or_default()
-                )));
-            }
-            check_resumed(&s, &space)?;
+            s.check(&space, &print)?;
             s
         }
-        None => FitState {
-            names: names.clone(),
-            init: None,
-            iters_done: 0,
-            optimizer: None,
-            best: None,
-            trust: None,
-            starts: Vec::new(),
-        },
+        None => FitState::new(names.clone(), print),
     };
     // Starting point: the config's parts, replaced by the initialisation's best candidate.
     let mut base_parts = problem.config.parts.clone();
@@ -681,26 +563,17 @@ pub fn run_fit(
         let st = iterate(&obj, &space, &base_slots, &mut opt, cfg, (iter, cfg.iters))?;
         let (ev, theta, gtheta) = (&st.ev, &st.theta, &st.gtheta);
         keep_best(&mut state.best, ev.total, theta);
-        let rec = IterRecord {
+        let mut rec = IterRecord::new(
             iter,
-            loss: Terms::of(ev),
-            theta: names.iter().cloned().zip(theta.iter().copied()).collect(),
-            grad_log: names
-                .iter()
-                .cloned()
-                .zip(gtheta.iter().zip(theta).map(|(g, t)| g * t))
-                .collect(),
-            grad_norm: st.grad_norm,
-            lr: st.lr,
-            parts: part_summary(&base_parts, &slot_parts, &st.slots)
-                .iter()
-                .enumerate()
-                .map(|(i, p)| PartRecord::of(i, p))
-                .collect(),
-            time_s: start.elapsed().as_secs_f64(),
-            peak_host_bytes: peak(),
-            probes: st.probes,
-        };
+            terms_of(ev),
+            &names,
+            theta,
+            gtheta,
+            (st.grad_norm, st.lr),
+            &part_summary(&base_parts, &slot_parts, &st.slots),
+            (start.elapsed().as_secs_f64(), peak()),
+        );
+        rec.probes = st.probes;
         hooks.on_iter(&rec);
         state.iters_done = iter + 1;
         if state.iters_done % cfg.checkpoint_every == 0 || state.iters_done == cfg.iters {

@@ -18,5 +18,5 @@ pub mod problem;
 
 pub use crate::space::{Granularity, ParamSpace};
 pub use config::{FitConfig, InitConfig, OptimizerKind};
-pub use fit::{run_fit, FitHooks, FitOutcome, FitState, IterRecord, StartResult};
+pub use fit::{fingerprint, run_fit, FitHooks, FitOutcome, FitState, IterRecord, StartResult};
 pub use problem::{Evaluation, Objective, StageProfile, TimeMap, VideoProblem, View};
