@@ -172,17 +172,6 @@ fn via_file(name: &'static str, f: impl Fn(&Path) + 'static) -> Run {
     })
 }
 
-/// Writes the input to `dir/name` (a fresh folder) and runs `f` on the folder.
-fn via_dir_file(dir: &'static str, name: &'static str, f: impl Fn(&Path) + 'static) -> Run {
-    let d = tmp_dir().join(dir);
-    std::fs::create_dir_all(&d).unwrap();
-    let path = d.join(name);
-    Box::new(move |b: &[u8]| {
-        std::fs::write(&path, b).unwrap();
-        f(&d);
-    })
-}
-
 fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
@@ -383,18 +372,6 @@ fn targets() -> Vec<Target> {
         r4d_video::write_mp4(&p, &v, 30.0).unwrap();
         vec![std::fs::read(&p).unwrap()]
     };
-    // A mask folder with one label map: classes.json is mutated.
-    let mask_dir = tmp_dir().join("masks");
-    std::fs::create_dir_all(&mask_dir).unwrap();
-    image::GrayImage::from_fn(4, 4, |x, _| image::Luma([(x % 3) as u8]))
-        .save(mask_dir.join("view.png"))
-        .unwrap();
-    let mask_camera = r4d_splat::Camera {
-        name: "view".into(),
-        width: 4,
-        height: 4,
-        ..r4d_splat::Camera::look_at(4, 4, 60.0, [0.0, 0.0, 3.0], [0.0; 3], [0.0, 1.0, 0.0])
-    };
     vec![
         Target {
             name: "fit_checkpoint",
@@ -425,38 +402,32 @@ fn targets() -> Vec<Target> {
         Target {
             name: "state_snapshot",
             seeds: snapshot,
-            run: via_file("state.r4d", |p| {
-                let _ = r4d_mpm::Snapshot::read(p, 4, &"f".repeat(32));
+            run: Box::new(|b| {
+                let _ = r4d_mpm::Snapshot::decode(b, Path::new("state.r4d"), 4, &"f".repeat(32));
             }),
         },
         Target {
             name: "png_frame",
             seeds: frames,
-            run: via_file("frame_0000.png", |p| {
-                let _ = r4d_loss::io::read_frames::<f32>(&[p.to_path_buf()], p);
-                let _ = r4d_datasets::video::image_size(p);
+            run: Box::new(|b| {
+                let _ = r4d_loss::io::decode_frame::<f32>(b, Path::new("frame_0000.png"));
             }),
         },
         Target {
             name: "mask_png",
             seeds: label_pngs,
-            run: via_file("mask.png", |p| {
-                let _ = r4d_segment::mask::read_label_png(p);
-                let _ = r4d_segment::mask::read_probability_map(p);
+            run: Box::new(|b| {
+                let p = Path::new("mask.png");
+                let _ = r4d_segment::mask::decode_label_png(b, p);
+                let _ = r4d_segment::mask::decode_probability_map(b, p, false);
             }),
         },
         Target {
             name: "classes_json",
             seeds: classes,
-            run: {
-                let path = mask_dir.join("classes.json");
-                let dir = mask_dir.clone();
-                Box::new(move |b: &[u8]| {
-                    std::fs::write(&path, b).unwrap();
-                    let _ =
-                        r4d_segment::mask::MaskDir::open(&dir, std::slice::from_ref(&mask_camera));
-                })
-            },
+            run: Box::new(|b| {
+                let _ = r4d_segment::mask::parse_classes(&text(b), Path::new("classes.json"));
+            }),
         },
         Target {
             name: "physflow_config",
@@ -468,16 +439,24 @@ fn targets() -> Vec<Target> {
         Target {
             name: "pacnerf_all_data",
             seeds: all_data,
-            run: via_dir_file("pacnerf", "all_data.json", |d| {
-                let _ = r4d_datasets::pacnerf::read_all_data(d);
-            }),
+            run: {
+                let d = tmp_dir().join("pacnerf");
+                std::fs::create_dir_all(&d).unwrap();
+                Box::new(move |b| {
+                    let _ = r4d_datasets::pacnerf::parse_all_data(&text(b), &d);
+                })
+            },
         },
         Target {
             name: "physdreamer_transforms",
             seeds: transforms,
-            run: via_dir_file("physdreamer", "transforms_train.json", |d| {
-                let _ = r4d_datasets::physdreamer::read_transforms(d);
-            }),
+            run: {
+                let d = tmp_dir().join("physdreamer");
+                std::fs::create_dir_all(&d).unwrap();
+                Box::new(move |b| {
+                    let _ = r4d_datasets::physdreamer::parse_transforms(&text(b), &d);
+                })
+            },
         },
         Target {
             name: "mp4",
@@ -546,22 +525,23 @@ fn targets() -> Vec<Target> {
         Target {
             name: "npy_video",
             seeds: videos,
-            run: via_file("v.npy", |p| {
-                let _ = r4d_loss::io::read_video::<f32>(p);
+            run: Box::new(|b| {
+                let _ = r4d_loss::io::decode_npy_video::<f32>(b, Path::new("v.npy"));
             }),
         },
         Target {
             name: "npy_mask",
             seeds: masks,
-            run: via_file("m.npy", |p| {
-                let _ = r4d_segment::mask::read_npy(p);
+            run: Box::new(|b| {
+                let _ = r4d_segment::mask::parse_npy(b);
+                let _ = r4d_segment::mask::decode_probability_map(b, Path::new("m.npy"), true);
             }),
         },
         Target {
             name: "parts_json",
             seeds: parts,
-            run: via_file("parts.json", |p| {
-                let _ = r4d_segment::PartLabels::load(p);
+            run: Box::new(|b| {
+                let _ = r4d_segment::PartLabels::parse(&text(b), Path::new("parts.json"));
             }),
         },
         Target {

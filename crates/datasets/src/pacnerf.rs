@@ -86,7 +86,13 @@ fn resolve(dir: &Path, file_path: &str) -> Option<PathBuf> {
 /// Parses `all_data.json` into cameras (by camera index).
 pub fn read_all_data(dir: &Path) -> Result<BTreeMap<usize, PacCamera>> {
     let path = dir.join("all_data.json");
-    let v: Value = serde_json::from_str(&crate::error::read_text(&path)?)
+    parse_all_data(&crate::error::read_text(&path)?, dir)
+}
+
+/// [`read_all_data`] on the text of `dir/all_data.json` (images are looked up in `dir`).
+pub fn parse_all_data(text: &str, dir: &Path) -> Result<BTreeMap<usize, PacCamera>> {
+    let path = dir.join("all_data.json");
+    let v: Value = serde_json::from_str(text)
         .map_err(|e| DatasetError::invalid(&path, format!("not JSON: {e}")))?;
     let list = v.as_array().ok_or_else(|| {
         DatasetError::invalid(&path, "expected a list of {file_path, c2w, intrinsic}")

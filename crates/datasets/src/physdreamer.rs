@@ -49,7 +49,14 @@ const DEFAULT_CONFIG: &str = r#"{"material": "jelly", "E": 0.01, "nu": 0.3, "den
 /// Cameras from `transforms_train.json`.
 pub fn read_transforms(dir: &Path) -> Result<Vec<Camera>> {
     let path = dir.join("transforms_train.json");
-    let v: Value = serde_json::from_str(&crate::error::read_text(&path)?)
+    parse_transforms(&crate::error::read_text(&path)?, dir)
+}
+
+/// [`read_transforms`] on the text of `dir/transforms_train.json` (images are looked up in
+/// `dir`).
+pub fn parse_transforms(text: &str, dir: &Path) -> Result<Vec<Camera>> {
+    let path = dir.join("transforms_train.json");
+    let v: Value = serde_json::from_str(text)
         .map_err(|e| DatasetError::invalid(&path, format!("not JSON: {e}")))?;
     let angle = v.get("camera_angle_x").and_then(Value::as_f64);
     let frames = v

@@ -19,6 +19,8 @@
 //! [`Fingerprint`] is the 128-bit hash that checkpoints and snapshots carry: of the inputs
 //! they resume (refusing a resume on other inputs) and of their own content (a checksum).
 
+pub mod npy;
+
 use std::ffi::OsString;
 use std::fs::File;
 use std::io::{self, BufWriter, Write};

@@ -119,19 +119,7 @@ pub fn read_frames<T: Real>(files: &[PathBuf], what: &Path) -> Result<Video<T>, 
     let mut data = Vec::new();
     let mut size = None;
     for f in files {
-        let mut limits = image::Limits::default();
-        limits.max_image_width = Some(MAX_IMAGE_SIDE);
-        limits.max_image_height = Some(MAX_IMAGE_SIDE);
-        limits.max_alloc = Some(MAX_IMAGE_BYTES);
-        let mut reader = image::ImageReader::open(f)
-            .map_err(io_err(f))?
-            .with_guessed_format()
-            .map_err(io_err(f))?;
-        reader.limits(limits);
-        let img = reader.decode().map_err(|e| VideoIoError::Png {
-            path: f.clone(),
-            message: e.to_string(),
-        })?;
+        let img = decode_image(&read_bounded(f)?, f)?;
         let wh = (img.width(), img.height());
         match size {
             None => size = Some(wh),
@@ -153,6 +141,46 @@ pub fn read_frames<T: Real>(files: &[PathBuf], what: &Path) -> Result<Video<T>, 
             message: e.to_string(),
         }
     })
+}
+
+/// A file's bytes, refusing one larger than [`MAX_IMAGE_BYTES`] before reading it.
+fn read_bounded(path: &Path) -> Result<Vec<u8>, VideoIoError> {
+    let len = std::fs::metadata(path).map_err(io_err(path))?.len();
+    if len > MAX_IMAGE_BYTES {
+        return Err(VideoIoError::Png {
+            path: path.to_path_buf(),
+            message: format!("{len} bytes: image files are read up to {MAX_IMAGE_BYTES} bytes"),
+        });
+    }
+    std::fs::read(path).map_err(io_err(path))
+}
+
+/// Decodes an image file's bytes (PNG, JPEG; the format from the content), within
+/// [`MAX_IMAGE_SIDE`] and [`MAX_IMAGE_BYTES`]; `path` names it in errors.
+pub fn decode_image(bytes: &[u8], path: &Path) -> Result<image::DynamicImage, VideoIoError> {
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE);
+    limits.max_alloc = Some(MAX_IMAGE_BYTES);
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(io_err(path))?;
+    reader.limits(limits);
+    reader.decode().map_err(|e| VideoIoError::Png {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+/// One frame from an image file's bytes: `(width, height, RGB values k / max)`.
+pub fn decode_frame<T: Real>(
+    bytes: &[u8],
+    path: &Path,
+) -> Result<(u32, u32, Vec<T>), VideoIoError> {
+    let img = decode_image(bytes, path)?;
+    let mut data = Vec::new();
+    push_rgb(&img, path, &mut data)?;
+    Ok((img.width(), img.height(), data))
 }
 
 /// Appends an image's pixels as RGB values `k / max`.
@@ -209,113 +237,40 @@ fn push_rgb<T: Real>(
 
 fn read_npy<T: Real>(path: &Path) -> Result<Video<T>, VideoIoError> {
     let bytes = std::fs::read(path).map_err(io_err(path))?;
+    decode_npy_video(&bytes, path)
+}
+
+/// A video from the bytes of a `.npy` file (`path` names it in errors): float32 or float64,
+/// shape `(T, H, W, 3)` or `(H, W, 3)`, sizes checked ([`r4d_fsio::npy::parse`]).
+pub fn decode_npy_video<T: Real>(bytes: &[u8], path: &Path) -> Result<Video<T>, VideoIoError> {
     let bad = |message: String| VideoIoError::Npy {
         path: path.to_path_buf(),
         message,
     };
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
-        return Err(bad("not a .npy file (bad magic)".into()));
+    let a = r4d_fsio::npy::parse(bytes).map_err(bad)?;
+    if a.dtype == r4d_fsio::npy::Dtype::Bool {
+        return Err(bad(
+            "dtype |b1 is not supported for a video (float32 '<f4' or float64 '<f8')".into(),
+        ));
     }
-    let (hlen, start) = match bytes[6] {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        2 | 3 if bytes.len() >= 12 => (
-            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-            12,
-        ),
-        v => return Err(bad(format!("unsupported .npy version {v}"))),
-    };
-    let header = bytes
-        .get(start..start + hlen)
-        .and_then(|h| std::str::from_utf8(h).ok())
-        .ok_or_else(|| bad("truncated or non-UTF-8 header".into()))?;
-    let field = |key: &str| -> Option<&str> {
-        let i = header.find(&format!("'{key}'"))? + key.len() + 2;
-        Some(header[i..].trim_start_matches([' ', ':']))
-    };
-    let descr = field("descr")
-        .and_then(|s| s.strip_prefix('\'')?.split('\'').next())
-        .ok_or_else(|| bad("no 'descr' in header".into()))?;
-    if field("fortran_order").is_some_and(|s| s.starts_with("True")) {
-        return Err(bad("Fortran-order arrays are not supported".into()));
-    }
-    let shape: Vec<usize> = field("shape")
-        .and_then(|s| s.strip_prefix('(')?.split(')').next())
-        .ok_or_else(|| bad("no 'shape' in header".into()))?
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<usize>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| bad(format!("bad shape: {e}")))?;
-    let (t, h, w) = match shape[..] {
+    let (t, h, w) = match a.shape[..] {
         [t, h, w, 3] => (t, h, w),
         [h, w, 3] => (1, h, w),
         _ => {
             return Err(bad(format!(
-                "shape {shape:?}, expected (T, H, W, 3) or (H, W, 3)"
+                "shape {:?}, expected (T, H, W, 3) or (H, W, 3)",
+                a.shape
             )))
         }
     };
-    // Sizes come from the file: checked, and bounded by the data actually present before
-    // anything is allocated.
-    let n = [t, h, w, 3]
-        .iter()
-        .try_fold(1usize, |a, &d| a.checked_mul(d))
-        .ok_or_else(|| bad(format!("shape {shape:?} overflows")))?;
-    let body = &bytes[start + hlen..];
-    let data: Vec<T> = match descr {
-        "<f4" => {
-            if body.len() / 4 < n {
-                return Err(bad(format!(
-                    "{} data bytes for {n} float32 values",
-                    body.len()
-                )));
-            }
-            body.chunks_exact(4)
-                .take(n)
-                .map(|c| T::c(f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64))
-                .collect()
-        }
-        "<f8" => {
-            if body.len() / 8 < n {
-                return Err(bad(format!(
-                    "{} data bytes for {n} float64 values",
-                    body.len()
-                )));
-            }
-            body.chunks_exact(8)
-                .take(n)
-                .map(|c| T::c(f64::from_le_bytes(c.try_into().expect("8 bytes"))))
-                .collect()
-        }
-        d => {
-            return Err(bad(format!(
-                "dtype {d} is not supported (float32 '<f4' or float64 '<f8')"
-            )))
-        }
-    };
+    let data: Vec<T> = a.values_f64().map(T::c).collect();
     Video::new(t, h, w, data).map_err(|e| bad(e.to_string()))
 }
 
 /// Writes a video as a float32 `.npy` of shape `(T, H, W, 3)`.
 pub fn write_npy<T: Real>(path: &Path, video: &Video<T>) -> Result<(), VideoIoError> {
-    let shape = format!(
-        "({}, {}, {}, 3)",
-        video.frames(),
-        video.height(),
-        video.width()
-    );
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
-    let total = 10 + header.len() + 1;
-    header.push_str(&" ".repeat((64 - total % 64) % 64));
-    header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len() + 4 * video.data().len());
-    out.extend_from_slice(b"\x93NUMPY\x01\x00");
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    for v in video.data() {
-        out.extend_from_slice(&(v.f64() as f32).to_le_bytes());
-    }
+    let data: Vec<f32> = video.data().iter().map(|v| v.f64() as f32).collect();
+    let out = r4d_fsio::npy::encode_f32(&[video.frames(), video.height(), video.width(), 3], &data);
     r4d_fsio::write_atomic(path, &out).map_err(io_err(path))
 }
 

@@ -100,10 +100,33 @@ impl Snapshot {
     /// Reads a snapshot of `particles` particles written for the inputs `fingerprint` (see
     /// the module docs for what is refused).
     pub fn read(path: &Path, particles: usize, fingerprint: &str) -> Result<Snapshot> {
+        let len = std::fs::metadata(path)
+            .map_err(|source| Error::Io {
+                path: path.to_path_buf(),
+                source,
+            })?
+            .len();
+        // The size is known from the particle count: a larger file is not read.
+        let expected = (particles as u64)
+            .saturating_mul((PER_PARTICLE * 4) as u64)
+            .saturating_add((HEADER + TRAILER) as u64);
+        if len > expected {
+            return Err(Error::Scene {
+                what: path.display().to_string(),
+                message: format!(
+                    "{len} bytes, expected {expected} for {particles} particles (not this scene's state)"
+                ),
+            });
+        }
         let b = std::fs::read(path).map_err(|source| Error::Io {
             path: path.to_path_buf(),
             source,
         })?;
+        Snapshot::decode(&b, path, particles, fingerprint)
+    }
+
+    /// [`Snapshot::read`] on the file's bytes (`path` names it in errors).
+    pub fn decode(b: &[u8], path: &Path, particles: usize, fingerprint: &str) -> Result<Snapshot> {
         let bad = |m: String| Error::Scene {
             what: path.display().to_string(),
             message: m,

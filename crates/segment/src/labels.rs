@@ -80,8 +80,20 @@ impl PartLabels {
             }
         } else {
             let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-            serde_json::from_str(&text).map_err(|e| bad(format!("not a parts file: {e}")))?
+            return PartLabels::parse(&text, path);
         };
+        labels.validate().map_err(bad)?;
+        Ok(labels)
+    }
+
+    /// A parts JSON file's text, checked (`path` names it in errors).
+    pub fn parse(text: &str, path: &Path) -> Result<PartLabels> {
+        let bad = |message: String| Error::Parts {
+            file: path.display().to_string(),
+            message,
+        };
+        let labels: PartLabels =
+            serde_json::from_str(text).map_err(|e| bad(format!("not a parts file: {e}")))?;
         labels.validate().map_err(bad)?;
         Ok(labels)
     }

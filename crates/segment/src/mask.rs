@@ -201,6 +201,34 @@ fn per_class_files(dir: &Path) -> Result<Vec<(String, PathBuf)>> {
     Ok(out)
 }
 
+/// A `classes.json`'s text, checked: `(class names, ignore value)` (`path` names the file in
+/// errors).
+pub fn parse_classes(text: &str, path: &Path) -> Result<(Vec<String>, Option<u16>)> {
+    let file = path.display().to_string();
+    let c: ClassesFile = serde_json::from_str(text).map_err(|e| Error::Classes {
+        file: file.clone(),
+        message: format!("{e} (expected {{\"class_names\": [\"...\"], \"ignore\": 255}})"),
+    })?;
+    if c.class_names.is_empty() || c.class_names.len() >= IGNORE as usize {
+        return Err(Error::Classes {
+            file,
+            message: format!("{} class names (1 ..= 65534)", c.class_names.len()),
+        });
+    }
+    if let Some(i) = c.ignore {
+        if (i as usize) <= c.class_names.len() {
+            return Err(Error::Classes {
+                file,
+                message: format!(
+                    "ignore = {i} is a class label (0 ..= {})",
+                    c.class_names.len()
+                ),
+            });
+        }
+    }
+    Ok((c.class_names, c.ignore))
+}
+
 impl MaskDir {
     /// Finds the mask of every camera in `dir` (a camera without one is an error naming it
     /// and the names tried) and settles the classes (see the module docs).
@@ -217,28 +245,11 @@ impl MaskDir {
         let classes_path = dir.join("classes.json");
         let classes = if classes_path.is_file() {
             let text = std::fs::read_to_string(&classes_path).map_err(Error::io(&classes_path))?;
-            let c: ClassesFile = serde_json::from_str(&text).map_err(|e| Error::Classes {
-                file: classes_path.display().to_string(),
-                message: format!("{e} (expected {{\"class_names\": [\"...\"], \"ignore\": 255}})"),
-            })?;
-            if c.class_names.is_empty() || c.class_names.len() >= IGNORE as usize {
-                return Err(Error::Classes {
-                    file: classes_path.display().to_string(),
-                    message: format!("{} class names (1 ..= 65534)", c.class_names.len()),
-                });
-            }
-            if let Some(i) = c.ignore {
-                if (i as usize) <= c.class_names.len() {
-                    return Err(Error::Classes {
-                        file: classes_path.display().to_string(),
-                        message: format!(
-                            "ignore = {i} is a class label (0 ..= {})",
-                            c.class_names.len()
-                        ),
-                    });
-                }
-            }
-            Some(c)
+            let (class_names, ignore) = parse_classes(&text, &classes_path)?;
+            Some(ClassesFile {
+                class_names,
+                ignore,
+            })
         } else {
             None
         };
@@ -451,13 +462,12 @@ pub const MAX_IMAGE_SIDE: u32 = 8192;
 /// The most memory one decoded mask image may take (bytes).
 pub const MAX_IMAGE_BYTES: u64 = 256 << 20;
 
-fn decode_png(path: &Path) -> Result<image::DynamicImage> {
+fn decode_png(bytes: &[u8], path: &Path) -> Result<image::DynamicImage> {
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(MAX_IMAGE_SIDE);
     limits.max_image_height = Some(MAX_IMAGE_SIDE);
     limits.max_alloc = Some(MAX_IMAGE_BYTES);
-    let mut reader = image::ImageReader::open(path)
-        .map_err(Error::io(path))?
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(Error::io(path))?;
     reader.limits(limits);
@@ -466,13 +476,30 @@ fn decode_png(path: &Path) -> Result<image::DynamicImage> {
         .map_err(|e| Error::mask(path.display(), format!("cannot decode: {e}")))
 }
 
+/// A mask file's bytes, refusing one larger than [`MAX_IMAGE_BYTES`] before reading it.
+fn read_bounded(path: &Path) -> Result<Vec<u8>> {
+    let len = std::fs::metadata(path).map_err(Error::io(path))?.len();
+    if len > MAX_IMAGE_BYTES {
+        return Err(Error::mask(
+            path.display(),
+            format!("{len} bytes: mask files are read up to {MAX_IMAGE_BYTES} bytes"),
+        ));
+    }
+    std::fs::read(path).map_err(Error::io(path))
+}
+
 const GRAY_ONLY: &str = "an indexed (palette) PNG: save the label indices as grayscale, \
      e.g. PIL's Image.fromarray(np.array(Image.open(f)).astype(np.uint8))";
 
 /// Reads an 8- or 16-bit grayscale label PNG: `(width, height, labels)`.
 pub fn read_label_png(path: &Path) -> Result<(u32, u32, Vec<u16>)> {
+    decode_label_png(&read_bounded(path)?, path)
+}
+
+/// [`read_label_png`] on the file's bytes (`path` names it in errors).
+pub fn decode_label_png(bytes: &[u8], path: &Path) -> Result<(u32, u32, Vec<u16>)> {
     use image::DynamicImage as D;
-    let img = decode_png(path)?;
+    let img = decode_png(bytes, path)?;
     let (w, h) = (img.width(), img.height());
     let l = match img {
         D::ImageLuma8(b) => b.into_raw().into_iter().map(u16::from).collect(),
@@ -492,12 +519,26 @@ pub fn read_label_png(path: &Path) -> Result<(u32, u32, Vec<u16>)> {
 
 /// Reads one class's probability map: an 8/16-bit grayscale PNG (`v / max`) or a 2-D `.npy`.
 pub fn read_probability_map(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
-    use image::DynamicImage as D;
     let is_npy = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
-    if is_npy {
-        let a = read_npy(path)?;
+    let bytes = if is_npy {
+        std::fs::read(path).map_err(Error::io(path))?
+    } else {
+        read_bounded(path)?
+    };
+    decode_probability_map(&bytes, path, is_npy)
+}
+
+/// [`read_probability_map`] on the file's bytes: a `.npy` array when `npy`, else a PNG.
+pub fn decode_probability_map(
+    bytes: &[u8],
+    path: &Path,
+    npy: bool,
+) -> Result<(u32, u32, Vec<f32>)> {
+    use image::DynamicImage as D;
+    if npy {
+        let a = parse_npy(bytes).map_err(|m| Error::mask(path.display(), m))?;
         let [h, w] = a.shape[..] else {
             return Err(Error::mask(
                 path.display(),
@@ -507,7 +548,7 @@ pub fn read_probability_map(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
         check_probabilities(&a.data, path)?;
         return Ok((w as u32, h as u32, a.data));
     }
-    let img = decode_png(path)?;
+    let img = decode_png(bytes, path)?;
     let (w, h) = (img.width(), img.height());
     let v = match img {
         D::ImageLuma8(b) => b.into_raw().into_iter().map(|v| v as f32 / 255.0).collect(),
@@ -560,103 +601,24 @@ pub fn read_npy(path: &Path) -> Result<NpyArray> {
     parse_npy(&bytes).map_err(|m| Error::mask(path.display(), m))
 }
 
-fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
-        return Err("not a .npy file (bad magic)".into());
-    }
-    let (hlen, start) = match bytes[6] {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        2 | 3 if bytes.len() >= 12 => (
-            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-            12,
-        ),
-        v => return Err(format!("unsupported .npy version {v}")),
-    };
-    let header = bytes
-        .get(start..start + hlen)
-        .and_then(|h| std::str::from_utf8(h).ok())
-        .ok_or("truncated or non-UTF-8 header")?;
-    let field = |key: &str| -> Option<&str> {
-        let i = header.find(&format!("'{key}'"))? + key.len() + 2;
-        Some(header[i..].trim_start_matches([' ', ':']))
-    };
-    let descr = field("descr")
-        .and_then(|s| s.strip_prefix('\'')?.split('\'').next())
-        .ok_or("no 'descr' in header")?;
-    if field("fortran_order").is_some_and(|s| s.starts_with("True")) {
-        return Err("Fortran-order arrays are not supported".into());
-    }
-    let shape: Vec<usize> = field("shape")
-        .and_then(|s| s.strip_prefix('(')?.split(')').next())
-        .ok_or("no 'shape' in header")?
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<usize>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("bad shape: {e}"))?;
-    let n = shape
-        .iter()
-        .try_fold(1usize, |a, &d| a.checked_mul(d))
-        .ok_or("shape overflows")?;
-    let body = &bytes[start + hlen..];
-    let size = match descr {
-        "<f4" => 4,
-        "<f8" => 8,
-        "|b1" => 1,
-        d => {
-            return Err(format!(
-                "dtype {d} is not supported (float32 '<f4', float64 '<f8' or bool '|b1'; \
-                 save probabilities as float, not uint8)"
-            ))
+/// A mask array from the bytes of a `.npy` file ([`r4d_fsio::npy::parse`]: sizes checked).
+pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
+    let a = r4d_fsio::npy::parse(bytes).map_err(|e| {
+        if e.starts_with("dtype") {
+            format!("{e}; save probabilities as float, not uint8")
+        } else {
+            e
         }
-    };
-    if body.len() / size < n {
-        return Err(format!(
-            "{} data bytes for {n} values of {descr}",
-            body.len()
-        ));
-    }
-    let data = match size {
-        4 => body
-            .chunks_exact(4)
-            .take(n)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect(),
-        8 => body
-            .chunks_exact(8)
-            .take(n)
-            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")) as f32)
-            .collect(),
-        _ => body[..n].iter().map(|&b| (b != 0) as u8 as f32).collect(),
-    };
-    Ok(NpyArray { shape, data })
+    })?;
+    Ok(NpyArray {
+        data: a.values_f32().collect(),
+        shape: a.shape,
+    })
 }
 
 /// Writes a float32 `.npy` (C order; for tests and tools that produce masks).
 pub fn write_npy(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
-    assert_eq!(
-        shape.iter().product::<usize>(),
-        data.len(),
-        "shape matches data"
-    );
-    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let shape_s = if dims.len() == 1 {
-        format!("({},)", dims[0])
-    } else {
-        format!("({})", dims.join(", "))
-    };
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_s}, }}");
-    let total = 10 + header.len() + 1;
-    header.push_str(&" ".repeat((64 - total % 64) % 64));
-    header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len() + 4 * data.len());
-    out.extend_from_slice(b"\x93NUMPY\x01\x00");
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    for v in data {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
+    let out = r4d_fsio::npy::encode_f32(shape, data);
     r4d_fsio::write_atomic(path, &out).map_err(Error::io(path))
 }
 
