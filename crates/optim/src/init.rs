@@ -108,13 +108,20 @@ pub struct InitOutcome {
 }
 
 impl InitOutcome {
-    /// Ranks evaluated candidates (`candidates[i].index == i`, which this asserts): a
+    /// Ranks evaluated candidates (`candidates[i].index == i`, else [`Error::Setting`]): a
     /// candidate counts as scored when its score is `Some` and not NaN. Fails with
     /// [`Error::AllCandidatesFailed`] when none is scored (reporting the failure with the
     /// lowest index) and [`Error::NoCandidates`] when `candidates` is empty.
     pub fn from_candidates(candidates: Vec<Candidate>, top_k: usize) -> Result<Self, Error> {
-        for (i, c) in candidates.iter().enumerate() {
-            assert_eq!(c.index, i, "candidates must be in index order");
+        if let Some((i, c)) = candidates
+            .iter()
+            .enumerate()
+            .find(|(i, c)| c.index != *i)
+        {
+            return Err(Error::Setting(format!(
+                "candidate at position {i} has index {}: candidates must be in index order",
+                c.index
+            )));
         }
         let score = |c: &Candidate| c.score.filter(|s| !s.is_nan());
         let mut ranking: Vec<usize> = candidates
