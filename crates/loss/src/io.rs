@@ -90,6 +90,10 @@ pub const MAX_IMAGE_SIDE: u32 = 8192;
 /// The most memory one decoded frame may take (bytes).
 pub const MAX_IMAGE_BYTES: u64 = 256 << 20;
 
+/// The most memory a video read from `.npy` or image frames may take (bytes; the MP4 reader's
+/// `MAX_DECODED_BYTES` is the same 8 GiB).
+pub const MAX_VIDEO_BYTES: u64 = 8 << 30;
+
 /// Every `*.png` of `dir`, sorted by file name.
 pub fn png_frames(dir: &Path) -> Result<Vec<PathBuf>, VideoIoError> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -122,7 +126,26 @@ pub fn read_frames<T: Real>(files: &[PathBuf], what: &Path) -> Result<Video<T>, 
         let img = decode_image(&read_bounded(f)?, f)?;
         let wh = (img.width(), img.height());
         match size {
-            None => size = Some(wh),
+            None => {
+                // The whole video's size is known from the first frame: checked before the
+                // other frames are decoded.
+                let bytes = u64::from(wh.0)
+                    .saturating_mul(u64::from(wh.1))
+                    .saturating_mul(3 * std::mem::size_of::<T>() as u64)
+                    .saturating_mul(files.len() as u64);
+                if bytes > MAX_VIDEO_BYTES {
+                    return Err(VideoIoError::Png {
+                        path: dir.to_path_buf(),
+                        message: format!(
+                            "{} frames of {}x{} need {bytes} bytes: videos are read up to {MAX_VIDEO_BYTES} bytes (r4d_loss::io::MAX_VIDEO_BYTES; select fewer frames or a smaller size)",
+                            files.len(),
+                            wh.0,
+                            wh.1
+                        ),
+                    });
+                }
+                size = Some(wh)
+            }
             Some(s) if s != wh => {
                 return Err(VideoIoError::FrameSize {
                     path: f.clone(),
@@ -236,6 +259,15 @@ fn push_rgb<T: Real>(
 }
 
 fn read_npy<T: Real>(path: &Path) -> Result<Video<T>, VideoIoError> {
+    let len = std::fs::metadata(path).map_err(io_err(path))?.len();
+    if len > MAX_VIDEO_BYTES {
+        return Err(VideoIoError::Npy {
+            path: path.to_path_buf(),
+            message: format!(
+                "{len} bytes: videos are read up to {MAX_VIDEO_BYTES} bytes (r4d_loss::io::MAX_VIDEO_BYTES; select fewer frames or a smaller size)"
+            ),
+        });
+    }
     let bytes = std::fs::read(path).map_err(io_err(path))?;
     decode_npy_video(&bytes, path)
 }

@@ -55,3 +55,23 @@ fn overflowing_and_oversized_shapes_are_typed_errors() {
     assert_eq!((v.frames(), v.height(), v.width()), (2, 2, 2));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_frame_folder_too_large_for_memory_is_refused_after_its_first_frame() {
+    let dir = std::env::temp_dir().join(format!("r4d_frames_hostile_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // 1000 x 1000 px: 12 MB a frame as f32, 1000 frames are 12 GB > 8 GiB.
+    let f = dir.join("frame.png");
+    image::RgbImage::new(1000, 1000).save(&f).unwrap();
+    let files = vec![f; 1000];
+    let e = r4d_loss::io::read_frames::<f32>(&files, &dir)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("MAX_VIDEO_BYTES") && e.contains("1000 frames"), "{e}");
+    // Small frames read as before.
+    let small = dir.join("small.png");
+    image::RgbImage::new(4, 4).save(&small).unwrap();
+    let v = r4d_loss::io::read_frames::<f32>(&vec![small; 3], &dir).unwrap();
+    assert_eq!(v.frames(), 3);
+    let _ = std::fs::remove_dir_all(&dir);
+}
