@@ -372,7 +372,21 @@ fn targets() -> Vec<Target> {
         r4d_video::write_mp4(&p, &v, 30.0).unwrap();
         vec![std::fs::read(&p).unwrap()]
     };
+    let colmap_dir = repo("tests/fixtures/datasets/physdreamer/toyplant_colmap/sparse/0");
+    let cameras_bin = std::fs::read(colmap_dir.join("cameras.bin")).unwrap();
+    let images_bin = std::fs::read(colmap_dir.join("images.bin")).unwrap();
+    let colmap_bins = vec![cameras_bin.clone(), images_bin.clone()];
     vec![
+        Target {
+            name: "colmap_bin",
+            seeds: colmap_bins,
+            // Each input as cameras.bin (with the fixture's images.bin) and as images.bin.
+            run: Box::new(move |b| {
+                let (c, i) = (Path::new("cameras.bin"), Path::new("images.bin"));
+                let _ = r4d_datasets::cameras::colmap_bin_bytes_to_text(b, c, &images_bin, i);
+                let _ = r4d_datasets::cameras::colmap_bin_bytes_to_text(&cameras_bin, c, b, i);
+            }),
+        },
         Target {
             name: "fit_checkpoint",
             seeds: checkpoint,

@@ -176,9 +176,18 @@ pub fn colmap_bin_to_text(cameras: &Path, images: &Path) -> Result<(String, Stri
             source,
         })
     };
-    let cb = read(cameras)?;
+    colmap_bin_bytes_to_text(&read(cameras)?, cameras, &read(images)?, images)
+}
+
+/// [`colmap_bin_to_text`] on the files' bytes (`cameras` and `images` name them in errors).
+pub fn colmap_bin_bytes_to_text(
+    cb: &[u8],
+    cameras: &Path,
+    ib: &[u8],
+    images: &Path,
+) -> Result<(String, String)> {
     let mut r = Bin {
-        b: &cb,
+        b: cb,
         at: 0,
         path: cameras,
     };
@@ -202,9 +211,8 @@ pub fn colmap_bin_to_text(cameras: &Path, images: &Path) -> Result<(String, Stri
         ctext.push_str(&line);
         ctext.push('\n');
     }
-    let ib = read(images)?;
     let mut r = Bin {
-        b: &ib,
+        b: ib,
         at: 0,
         path: images,
     };

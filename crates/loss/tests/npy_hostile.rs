@@ -67,7 +67,10 @@ fn a_frame_folder_too_large_for_memory_is_refused_after_its_first_frame() {
     let e = r4d_loss::io::read_frames::<f32>(&files, &dir)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("MAX_VIDEO_BYTES") && e.contains("1000 frames"), "{e}");
+    assert!(
+        e.contains("MAX_VIDEO_BYTES") && e.contains("1000 frames"),
+        "{e}"
+    );
     // Small frames read as before.
     let small = dir.join("small.png");
     image::RgbImage::new(4, 4).save(&small).unwrap();

@@ -113,11 +113,7 @@ impl InitOutcome {
     /// [`Error::AllCandidatesFailed`] when none is scored (reporting the failure with the
     /// lowest index) and [`Error::NoCandidates`] when `candidates` is empty.
     pub fn from_candidates(candidates: Vec<Candidate>, top_k: usize) -> Result<Self, Error> {
-        if let Some((i, c)) = candidates
-            .iter()
-            .enumerate()
-            .find(|(i, c)| c.index != *i)
-        {
+        if let Some((i, c)) = candidates.iter().enumerate().find(|(i, c)| c.index != *i) {
             return Err(Error::Setting(format!(
                 "candidate at position {i} has index {}: candidates must be in index order",
                 c.index
