@@ -196,7 +196,7 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
     );
     std::fs::write(&video_path, &original).unwrap();
 
-    // Killed with SIGKILL at random instants and resumed, a fit ends as an uninterrupted one:
+    // Killed with SIGKILL at seeded random instants and resumed, a fit ends as an uninterrupted one:
     // the same params.json byte for byte and the same log (but wall times and heap peaks).
     write_cfg(2);
     let with_out = |dir: &Path| {
@@ -221,7 +221,20 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
             })
             .collect()
     };
-    for (k, share) in [0.3, 0.7].into_iter().enumerate() {
+    // Kill instants from a seeded generator (R4D_FAULT_SEED, as tests/fault_injection.rs).
+    let mut seed: u64 = std::env::var("R4D_FAULT_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0x00c0_ffee)
+        | 1;
+    let mut unit = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let shares: Vec<f64> = (0..2).map(|_| 0.1 + 0.85 * unit()).collect();
+    for (k, share) in shares.into_iter().enumerate() {
         let dir = d.join(format!("killed{k}"));
         let mut child = Command::new(env!("CARGO_BIN_EXE_r4d"))
             .args(with_out(&dir))
