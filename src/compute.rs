@@ -1,5 +1,5 @@
 //! The backends as [`Compute`]s, the one place where the fits meet a concrete backend: the
-//! CPU (all cores, f32 or f64) and a GPU through wgpu. Every fit, evaluation and benchmark
+//! CPU (all cores, f32 or f64) and a GPU through wgpu or through Vulkan (ash). Every fit, evaluation and benchmark
 //! takes an `Arc<dyn Compute>`; the CLI picks it once from `--backend`.
 //!
 //! ```
@@ -10,6 +10,7 @@
 
 use r4d_backend_cpu::splat::CpuSplat;
 use r4d_backend_cpu::{CpuBackend, Par};
+use r4d_backend_vulkan::{VulkanEngine, VulkanMpm, VulkanSplat};
 use r4d_backend_wgpu::{WgpuContext, WgpuSplat};
 pub use r4d_optim::compute::{Compute, Precision, ReferenceCompute};
 use r4d_optim::compute::{JobOut, MpmJob};
@@ -107,6 +108,63 @@ impl Compute for WgpuCompute {
     }
 }
 
+/// A GPU through Vulkan directly (ash, `r4d-backend-vulkan`): `VulkanMpm` (f32) and the
+/// Vulkan renderer (built once, reused by every render); the same recordings as wgpu.
+pub struct VulkanCompute {
+    engine: VulkanEngine,
+    renderer: Mutex<Option<SplatRenderer<VulkanSplat>>>,
+}
+
+impl std::fmt::Debug for VulkanCompute {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("VulkanCompute")
+            .field("device", &self.engine.device_name())
+            .finish_non_exhaustive()
+    }
+}
+
+impl VulkanCompute {
+    /// On `engine`'s device.
+    pub fn new(engine: VulkanEngine) -> Self {
+        VulkanCompute {
+            engine,
+            renderer: Mutex::new(None),
+        }
+    }
+}
+
+impl Compute for VulkanCompute {
+    fn name(&self) -> &str {
+        "vulkan"
+    }
+
+    fn run_mpm(&self, _precision: Precision, job: MpmJob<'_>) -> Result<JobOut, FitError> {
+        job.run_on(VulkanMpm::new(self.engine.clone()))
+    }
+
+    fn with_renderer(
+        &self,
+        f: &mut dyn FnMut(&mut dyn Renderer) -> Result<(), FitError>,
+    ) -> Result<(), FitError> {
+        let mut guard = self
+            .renderer
+            .lock()
+            .map_err(|_| FitError::backend_msg("vulkan", "the renderer panicked earlier"))?;
+        let r =
+            guard.get_or_insert_with(|| SplatRenderer::new(VulkanSplat::new(self.engine.clone())));
+        f(r)
+    }
+
+    fn reset_device_peak(&self) {
+        self.engine.reset_peak();
+    }
+
+    fn device_peak_bytes(&self) -> Option<u64> {
+        use r4d_gpu::GpuEngine;
+        Some(self.engine.memory_usage().peak_bytes)
+    }
+}
+
 /// The CPU backend ([`CpuCompute`]).
 pub fn cpu() -> Arc<dyn Compute> {
     Arc::new(CpuCompute)
@@ -115,6 +173,11 @@ pub fn cpu() -> Arc<dyn Compute> {
 /// The GPU of `ctx` ([`WgpuCompute`]).
 pub fn wgpu(ctx: Arc<WgpuContext>) -> Arc<dyn Compute> {
     Arc::new(WgpuCompute::new(ctx))
+}
+
+/// The Vulkan device of `engine` ([`VulkanCompute`]).
+pub fn vulkan(engine: VulkanEngine) -> Arc<dyn Compute> {
+    Arc::new(VulkanCompute::new(engine))
 }
 
 /// The single-threaded reference kernels ([`ReferenceCompute`], the gradient oracle).

@@ -348,3 +348,61 @@ fn wgpu_path_dependent_materials_match_cpu() {
     }
     drop(b);
 }
+
+/// The Vulkan engine (ash), or `None` (skip).
+fn vulkan(test: &str) -> Option<r4d_backend_vulkan::VulkanEngine> {
+    r4d_backend_vulkan::testing::vulkan_or_skip(test)
+}
+
+#[test]
+fn vulkan_elastic_scenes_match_cpu() {
+    let Some(e) = vulkan("vulkan_elastic") else {
+        return;
+    };
+    compare_elastic(
+        "vulkan jelly beam",
+        JELLY_BEAM,
+        r4d_backend_vulkan::VulkanMpm::new(e.clone()),
+        20,
+    );
+    compare_elastic(
+        "vulkan two-part object",
+        TWO_PART,
+        r4d_backend_vulkan::VulkanMpm::new(e),
+        20,
+    );
+}
+
+#[test]
+fn vulkan_path_dependent_materials_match_cpu() {
+    let Some(e) = vulkan("vulkan_plastic") else {
+        return;
+    };
+    let scenes = [
+        ("metal beam (clamped, pressed at mid-span)", METAL_BEAM.to_string()),
+        (
+            "sand column",
+            plastic_scene(
+                "sand",
+                "youngs_modulus_pa = 2e5\npoisson_ratio = 0.3\nfriction_angle_deg = 30.0\ndensity_kg_m3 = 1600.0",
+                false,
+            ),
+        ),
+        (
+            "plasticine (pressed)",
+            plastic_scene(
+                "plasticine",
+                "youngs_modulus_pa = 3e5\npoisson_ratio = 0.3\nyield_stress_pa = 2e3\nsoftening = 0.1\ndensity_kg_m3 = 1200.0",
+                true,
+            ),
+        ),
+    ];
+    for (label, text) in scenes {
+        compare_plastic(
+            &format!("vulkan {label}"),
+            &text,
+            r4d_backend_vulkan::VulkanMpm::new(e.clone()),
+            10,
+        );
+    }
+}

@@ -1,4 +1,4 @@
-//! `fit_trajectory` on the wgpu backend (f32, `KernelAdjoint<WgpuMpm>`) against the CPU backend (f64,
+//! `fit_trajectory` on the wgpu backend (and on the Vulkan engine) (f32, `KernelAdjoint<WgpuMpm>`) against the CPU backend (f64,
 //! `KernelAdjoint<CpuBackend<f64>>`): the first iteration's loss and gradient agree to 1e-3 relative and the
 //! fitted parameters to 1% (issue 9's CPU-vs-wgpu bound). Skipped without an adapter unless
 //! `R4D_REQUIRE_GPU=1`.
@@ -33,7 +33,20 @@ fn wgpu_fit_matches_the_cpu_fit() {
     let Some(ctx) = gpu_or_skip("wgpu_fit_matches_the_cpu_fit") else {
         return;
     };
-    let gpu = compute::wgpu(std::sync::Arc::new(ctx));
+    gpu_fit_matches_the_cpu_fit(compute::wgpu(std::sync::Arc::new(ctx)));
+}
+
+/// The same on the Vulkan engine (ash): the recordings of wgpu, executed through Vulkan.
+#[test]
+fn vulkan_fit_matches_the_cpu_fit() {
+    let Some(e) = r4d_backend_vulkan::testing::vulkan_or_skip("vulkan_fit_matches_the_cpu_fit")
+    else {
+        return;
+    };
+    gpu_fit_matches_the_cpu_fit(compute::vulkan(e));
+}
+
+fn gpu_fit_matches_the_cpu_fit(gpu: std::sync::Arc<dyn Compute>) {
     // The sagging beam of tests/fit_trajectory.rs, over two frames, from E 10x off (as there).
     let mut truth = SimConfig::load(&fixture("fit/beam.toml")).unwrap();
     truth.time.frames = 2;

@@ -73,6 +73,8 @@ pub enum BackendKind {
     Reference,
     /// wgpu (WGSL compute on Vulkan, Metal or DX12; `R4D_WGPU_ADAPTER` picks an adapter).
     Wgpu,
+    /// Vulkan directly (ash; the same kernels as SPIR-V; `R4D_VULKAN_DEVICE` picks a device).
+    Vulkan,
 }
 
 impl BackendKind {
@@ -87,6 +89,10 @@ impl BackendKind {
                     .map_err(|e| anyhow::anyhow!("--backend wgpu: {e}"))?;
                 compute::wgpu(std::sync::Arc::new(ctx))
             }
+            BackendKind::Vulkan => compute::vulkan(
+                r4d_backend_vulkan::VulkanEngine::new()
+                    .map_err(|e| anyhow::anyhow!("--backend vulkan: {e}"))?,
+            ),
         })
     }
 
@@ -96,6 +102,7 @@ impl BackendKind {
             BackendKind::Cpu => "cpu",
             BackendKind::Reference => "reference",
             BackendKind::Wgpu => "wgpu",
+            BackendKind::Vulkan => "vulkan",
         }
     }
 }

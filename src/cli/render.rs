@@ -111,6 +111,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 std::sync::Arc::new(ctx),
             )))
         }
+        BackendKind::Vulkan => {
+            let e = r4d_backend_vulkan::VulkanEngine::new()
+                .map_err(|e| anyhow::anyhow!("--backend vulkan: {e}"))?;
+            eprintln!("vulkan device: {}", e.device_name());
+            Box::new(SplatRenderer::new(r4d_backend_vulkan::VulkanSplat::new(e)))
+        }
     };
     let link_default = |dir: Option<&Path>| -> Result<Option<SimLink>> {
         let path = match (&a.link, dir) {

@@ -61,6 +61,13 @@ pub fn run(a: SimulateArgs) -> Result<()> {
             let backend = r4d_backend_wgpu::WgpuMpm::new(std::sync::Arc::new(ctx));
             simulate(backend, &a, config, scene, &source, &warnings)
         }
+        BackendKind::Vulkan => {
+            let e = r4d_backend_vulkan::VulkanEngine::new()
+                .map_err(|e| anyhow::anyhow!("--backend vulkan: {e}"))?;
+            eprintln!("vulkan device: {}", e.device_name());
+            let backend = r4d_backend_vulkan::VulkanMpm::new(e);
+            simulate(backend, &a, config, scene, &source, &warnings)
+        }
     }
 }
 

@@ -1,0 +1,392 @@
+//! The Vulkan device: instance, physical device choice, one compute queue, the memory
+//! allocator, buffers and the pipeline cache. Everything is destroyed in order when the last
+//! [`Device`] handle (engine or buffer) goes away.
+
+use crate::VulkanError;
+use ash::vk;
+use gpu_allocator::vulkan::{
+    Allocation, AllocationCreateDesc, AllocationScheme, Allocator, AllocatorCreateDesc,
+};
+use gpu_allocator::MemoryLocation;
+use r4d_shaders::{BindingKind, Kernel};
+use std::collections::HashMap;
+use std::ffi::CStr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+/// A compute pipeline of one kernel.
+pub(crate) struct Pipeline {
+    pub layout: vk::PipelineLayout,
+    pub set_layout: vk::DescriptorSetLayout,
+    pub pipeline: vk::Pipeline,
+    module: vk::ShaderModule,
+}
+
+/// The device and what lives as long as it.
+pub(crate) struct Device {
+    // Kept loaded for the instance's lifetime.
+    _entry: ash::Entry,
+    pub instance: ash::Instance,
+    pub device: ash::Device,
+    pub queue: Mutex<vk::Queue>,
+    pub queue_family: u32,
+    pub allocator: Mutex<Option<Allocator>>,
+    pub pipelines: Mutex<HashMap<&'static str, Arc<Pipeline>>>,
+    /// The adapter's name (`VkPhysicalDeviceProperties::deviceName`).
+    pub name: String,
+    /// The device type (discrete, integrated, virtual, CPU).
+    pub kind: vk::PhysicalDeviceType,
+    pub in_use: AtomicU64,
+    pub peak: AtomicU64,
+}
+
+/// A device buffer (storage, uniform, copy source and destination).
+pub struct VkBuffer {
+    pub(crate) buffer: vk::Buffer,
+    pub(crate) size: u64,
+    allocation: Mutex<Option<Allocation>>,
+    counted: bool,
+    pub(crate) dev: Arc<Device>,
+}
+
+impl std::fmt::Debug for VkBuffer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("VkBuffer")
+            .field("size", &self.size)
+            .finish_non_exhaustive()
+    }
+}
+
+fn vk_err(what: &'static str) -> impl Fn(vk::Result) -> VulkanError {
+    move |result| VulkanError::Vk { what, result }
+}
+
+impl Device {
+    /// Opens the Vulkan loader and a device with a compute queue. `wanted`: a substring of
+    /// the device name (`R4D_VULKAN_DEVICE`); otherwise discrete > integrated > virtual > CPU.
+    pub fn new(wanted: Option<&str>) -> Result<Arc<Device>, VulkanError> {
+        // SAFETY: loading the system's Vulkan loader; its symbols are used only through ash.
+        let entry =
+            unsafe { ash::Entry::load() }.map_err(|e| VulkanError::NoLoader(e.to_string()))?;
+        let app = vk::ApplicationInfo::default()
+            .application_name(c"resonance4d")
+            .api_version(vk::API_VERSION_1_1);
+        let ici = vk::InstanceCreateInfo::default().application_info(&app);
+        // SAFETY: valid create info; the instance is destroyed in Drop.
+        let instance =
+            unsafe { entry.create_instance(&ici, None) }.map_err(vk_err("vkCreateInstance"))?;
+        match Self::open(entry, instance.clone(), wanted) {
+            Ok(d) => Ok(d),
+            Err(e) => {
+                // SAFETY: nothing else was created from the instance.
+                unsafe { instance.destroy_instance(None) };
+                Err(e)
+            }
+        }
+    }
+
+    fn open(
+        entry: ash::Entry,
+        instance: ash::Instance,
+        wanted: Option<&str>,
+    ) -> Result<Arc<Device>, VulkanError> {
+        // SAFETY: the instance is valid.
+        let pds = unsafe { instance.enumerate_physical_devices() }
+            .map_err(vk_err("vkEnumeratePhysicalDevices"))?;
+        let rank = |t: vk::PhysicalDeviceType| match t {
+            vk::PhysicalDeviceType::DISCRETE_GPU => 0,
+            vk::PhysicalDeviceType::INTEGRATED_GPU => 1,
+            vk::PhysicalDeviceType::VIRTUAL_GPU => 2,
+            vk::PhysicalDeviceType::CPU => 3,
+            _ => 4,
+        };
+        let mut found: Vec<(
+            usize,
+            vk::PhysicalDevice,
+            u32,
+            String,
+            vk::PhysicalDeviceType,
+        )> = Vec::new();
+        let mut names = Vec::new();
+        for pd in pds {
+            // SAFETY: pd comes from this instance.
+            let props = unsafe { instance.get_physical_device_properties(pd) };
+            let name = props
+                .device_name_as_c_str()
+                .map(|c: &CStr| c.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            names.push(name.clone());
+            if props.api_version < vk::API_VERSION_1_1 {
+                continue;
+            }
+            // SAFETY: pd comes from this instance.
+            let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+            let Some(q) = families
+                .iter()
+                .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
+            else {
+                continue;
+            };
+            if wanted.is_some_and(|w| !name.contains(w)) {
+                continue;
+            }
+            found.push((
+                rank(props.device_type),
+                pd,
+                q as u32,
+                name,
+                props.device_type,
+            ));
+        }
+        found.sort_by_key(|f| f.0);
+        let Some((_, pd, queue_family, name, kind)) = found.into_iter().next() else {
+            return Err(VulkanError::NoDevice(match wanted {
+                Some(w) => format!(
+                    " matching R4D_VULKAN_DEVICE={w} (devices: {})",
+                    names.join(", ")
+                ),
+                None => format!(
+                    " with Vulkan 1.1 and a compute queue (devices: {})",
+                    if names.is_empty() {
+                        "none".to_string()
+                    } else {
+                        names.join(", ")
+                    }
+                ),
+            }));
+        };
+        let prio = [1.0f32];
+        let qci = [vk::DeviceQueueCreateInfo::default()
+            .queue_family_index(queue_family)
+            .queue_priorities(&prio)];
+        let dci = vk::DeviceCreateInfo::default().queue_create_infos(&qci);
+        // SAFETY: valid create info; destroyed in Drop.
+        let device =
+            unsafe { instance.create_device(pd, &dci, None) }.map_err(vk_err("vkCreateDevice"))?;
+        // SAFETY: the family and index exist (one queue was requested).
+        let queue = unsafe { device.get_device_queue(queue_family, 0) };
+        let allocator = Allocator::new(&AllocatorCreateDesc {
+            instance: instance.clone(),
+            device: device.clone(),
+            physical_device: pd,
+            debug_settings: Default::default(),
+            buffer_device_address: false,
+            allocation_sizes: Default::default(),
+        })
+        .map_err(|e| {
+            // SAFETY: nothing was created from the device.
+            unsafe { device.destroy_device(None) };
+            VulkanError::Alloc(e.to_string())
+        })?;
+        Ok(Arc::new(Device {
+            _entry: entry,
+            instance,
+            device,
+            queue: Mutex::new(queue),
+            queue_family,
+            allocator: Mutex::new(Some(allocator)),
+            pipelines: Mutex::new(HashMap::new()),
+            name,
+            kind,
+            in_use: AtomicU64::new(0),
+            peak: AtomicU64::new(0),
+        }))
+    }
+
+    /// A buffer of at least `bytes` bytes at `location` (not zeroed). `counted`: included in
+    /// the memory report (the engine's buffers; not staging or per-recording blocks).
+    pub fn buffer(
+        self: &Arc<Self>,
+        label: &str,
+        bytes: u64,
+        location: MemoryLocation,
+        counted: bool,
+    ) -> Result<VkBuffer, VulkanError> {
+        // Vulkan has no empty buffers; storage offsets and sizes are multiples of 4.
+        let size = bytes.max(4).div_ceil(4) * 4;
+        let info = vk::BufferCreateInfo::default()
+            .size(size)
+            .usage(
+                vk::BufferUsageFlags::STORAGE_BUFFER
+                    | vk::BufferUsageFlags::UNIFORM_BUFFER
+                    | vk::BufferUsageFlags::TRANSFER_SRC
+                    | vk::BufferUsageFlags::TRANSFER_DST,
+            )
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        // SAFETY: valid create info; the buffer is destroyed in VkBuffer's Drop.
+        let buffer =
+            unsafe { self.device.create_buffer(&info, None) }.map_err(vk_err("vkCreateBuffer"))?;
+        // SAFETY: the buffer was created from this device.
+        let requirements = unsafe { self.device.get_buffer_memory_requirements(buffer) };
+        let mut guard = self.allocator.lock().unwrap_or_else(|e| e.into_inner());
+        let allocator = guard.as_mut().ok_or(VulkanError::Lost)?;
+        let allocation = allocator
+            .allocate(&AllocationCreateDesc {
+                name: label,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            })
+            .map_err(|e| {
+                // SAFETY: the buffer is unused.
+                unsafe { self.device.destroy_buffer(buffer, None) };
+                VulkanError::OutOfMemory {
+                    label: label.to_string(),
+                    bytes: size,
+                    message: e.to_string(),
+                }
+            })?;
+        // SAFETY: the memory is unbound, large enough, and outlives the buffer.
+        unsafe {
+            self.device
+                .bind_buffer_memory(buffer, allocation.memory(), allocation.offset())
+        }
+        .map_err(vk_err("vkBindBufferMemory"))?;
+        drop(guard);
+        if counted {
+            let now = self.in_use.fetch_add(size, Ordering::Relaxed) + size;
+            self.peak.fetch_max(now, Ordering::Relaxed);
+        }
+        Ok(VkBuffer {
+            buffer,
+            size,
+            allocation: Mutex::new(Some(allocation)),
+            counted,
+            dev: self.clone(),
+        })
+    }
+
+    /// The pipeline of `kernel` (built once, then cached).
+    pub fn pipeline(&self, kernel: &'static Kernel) -> Result<Arc<Pipeline>, VulkanError> {
+        let mut cache = self.pipelines.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(p) = cache.get(kernel.name) {
+            return Ok(p.clone());
+        }
+        let d = &self.device;
+        let bindings: Vec<vk::DescriptorSetLayoutBinding> = kernel
+            .bindings
+            .iter()
+            .enumerate()
+            .map(|(i, b)| {
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(i as u32)
+                    .descriptor_type(match b.kind {
+                        BindingKind::Uniform => vk::DescriptorType::UNIFORM_BUFFER,
+                        BindingKind::Storage { .. } => vk::DescriptorType::STORAGE_BUFFER,
+                    })
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            })
+            .collect();
+        let words = kernel.spirv_words();
+        // SAFETY: valid create infos; every object is destroyed in Device's Drop.
+        unsafe {
+            let set_layout = d
+                .create_descriptor_set_layout(
+                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
+                    None,
+                )
+                .map_err(vk_err("vkCreateDescriptorSetLayout"))?;
+            let layouts = [set_layout];
+            let layout = d
+                .create_pipeline_layout(
+                    &vk::PipelineLayoutCreateInfo::default().set_layouts(&layouts),
+                    None,
+                )
+                .map_err(vk_err("vkCreatePipelineLayout"))?;
+            let module = d
+                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+                .map_err(vk_err("vkCreateShaderModule"))?;
+            let stage = vk::PipelineShaderStageCreateInfo::default()
+                .stage(vk::ShaderStageFlags::COMPUTE)
+                .module(module)
+                .name(c"main");
+            let info = [vk::ComputePipelineCreateInfo::default()
+                .stage(stage)
+                .layout(layout)];
+            let pipeline = d
+                .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
+                .map_err(|(_, result)| VulkanError::Vk {
+                    what: "vkCreateComputePipelines",
+                    result,
+                })?[0];
+            let p = Arc::new(Pipeline {
+                layout,
+                set_layout,
+                pipeline,
+                module,
+            });
+            cache.insert(kernel.name, p.clone());
+            Ok(p)
+        }
+    }
+}
+
+impl VkBuffer {
+    /// Runs `f` on the buffer's mapped bytes (host-visible buffers only).
+    pub(crate) fn mapped<R>(&self, f: impl FnOnce(&mut [u8]) -> R) -> Result<R, VulkanError> {
+        let mut a = self.allocation.lock().unwrap_or_else(|e| e.into_inner());
+        let slice = a
+            .as_mut()
+            .and_then(|a| a.mapped_slice_mut())
+            .ok_or(VulkanError::NotMapped)?;
+        Ok(f(slice))
+    }
+}
+
+impl Drop for VkBuffer {
+    fn drop(&mut self) {
+        let a = self
+            .allocation
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        // SAFETY: every submission that used the buffer has completed (the engine waits for
+        // each one before returning).
+        unsafe { self.dev.device.destroy_buffer(self.buffer, None) };
+        if let (Some(a), Some(allocator)) = (
+            a,
+            self.dev
+                .allocator
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .as_mut(),
+        ) {
+            let _ = allocator.free(a);
+        }
+        if self.counted {
+            self.dev.in_use.fetch_sub(self.size, Ordering::Relaxed);
+        }
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        // SAFETY: the last handle is gone: no buffer, submission or pipeline is in use.
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            for (_, p) in self
+                .pipelines
+                .get_mut()
+                .unwrap_or_else(|e| e.into_inner())
+                .drain()
+            {
+                self.device.destroy_pipeline(p.pipeline, None);
+                self.device.destroy_shader_module(p.module, None);
+                self.device.destroy_pipeline_layout(p.layout, None);
+                self.device
+                    .destroy_descriptor_set_layout(p.set_layout, None);
+            }
+            // The allocator frees its memory blocks before the device goes.
+            drop(
+                self.allocator
+                    .get_mut()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .take(),
+            );
+            self.device.destroy_device(None);
+            self.instance.destroy_instance(None);
+        }
+    }
+}

@@ -1,0 +1,463 @@
+//! [`VulkanEngine`]: `r4d_gpu::GpuEngine` on Vulkan. A recording becomes one command buffer:
+//! per command a compute dispatch (its pipeline, a descriptor set of the bound buffers),
+//! a fill (clear) or a copy, with a full memory barrier after each; one submission, waited
+//! for. Buffer writes and reads go through host-visible staging buffers.
+
+use crate::device::{Device, VkBuffer};
+use crate::VulkanError;
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+use r4d_gpu::{Command, GpuEngine, Recording, Resource};
+use r4d_mpm::kernels::MemoryUsage;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+
+/// The command pool and fence of the engine's submissions (used one at a time).
+struct Submitter {
+    pool: vk::CommandPool,
+    fence: vk::Fence,
+}
+
+struct Inner {
+    dev: Arc<Device>,
+    submit: Mutex<Submitter>,
+}
+
+impl Drop for Inner {
+    fn drop(&mut self) {
+        let s = self.submit.get_mut().unwrap_or_else(|e| e.into_inner());
+        // SAFETY: every submission was waited for; the pool's command buffers are freed.
+        unsafe {
+            self.dev.device.destroy_fence(s.fence, None);
+            self.dev.device.destroy_command_pool(s.pool, None);
+        }
+    }
+}
+
+/// A Vulkan device as an engine of `r4d-gpu` recordings (cheap to clone: a shared handle).
+#[derive(Clone)]
+pub struct VulkanEngine {
+    inner: Arc<Inner>,
+}
+
+impl std::fmt::Debug for VulkanEngine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("VulkanEngine")
+            .field("device", &self.inner.dev.name)
+            .finish_non_exhaustive()
+    }
+}
+
+fn vk_err(what: &'static str) -> impl Fn(vk::Result) -> VulkanError {
+    move |result| VulkanError::Vk { what, result }
+}
+
+impl VulkanEngine {
+    /// The engine on the preferred device (`R4D_VULKAN_DEVICE=name` picks one by name).
+    pub fn new() -> Result<Self, VulkanError> {
+        let wanted = std::env::var("R4D_VULKAN_DEVICE").ok();
+        let dev = Device::new(wanted.as_deref())?;
+        let d = &dev.device;
+        // SAFETY: valid create infos; destroyed in Inner's Drop.
+        let (pool, fence) = unsafe {
+            let pool = d
+                .create_command_pool(
+                    &vk::CommandPoolCreateInfo::default()
+                        .queue_family_index(dev.queue_family)
+                        .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                    None,
+                )
+                .map_err(vk_err("vkCreateCommandPool"))?;
+            let fence = d
+                .create_fence(&vk::FenceCreateInfo::default(), None)
+                .map_err(vk_err("vkCreateFence"))?;
+            (pool, fence)
+        };
+        Ok(VulkanEngine {
+            inner: Arc::new(Inner {
+                dev,
+                submit: Mutex::new(Submitter { pool, fence }),
+            }),
+        })
+    }
+
+    /// The device's name.
+    pub fn device_name(&self) -> &str {
+        &self.inner.dev.name
+    }
+
+    /// Restarts the peak of [`GpuEngine::memory_usage`] at the bytes in use now.
+    pub fn reset_peak(&self) {
+        let d = &self.inner.dev;
+        d.peak
+            .store(d.in_use.load(Ordering::Relaxed), Ordering::Relaxed);
+    }
+
+    /// Whether the device is a CPU implementation (lavapipe, SwiftShader).
+    pub fn is_cpu(&self) -> bool {
+        self.inner.dev.kind == vk::PhysicalDeviceType::CPU
+    }
+
+    /// Records commands with `record` into one command buffer, submits it and waits.
+    fn submit(
+        &self,
+        record: impl FnOnce(&ash::Device, vk::CommandBuffer) -> Result<(), VulkanError>,
+    ) -> Result<(), VulkanError> {
+        let dev = &self.inner.dev;
+        let d = &dev.device;
+        let s = self.inner.submit.lock().unwrap_or_else(|e| e.into_inner());
+        // SAFETY: the pool is used under the lock only; the command buffer is freed before
+        // returning, after the fence says the device is done with it.
+        unsafe {
+            let cb = d
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(s.pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
+                .map_err(vk_err("vkAllocateCommandBuffers"))?[0];
+            let result = (|| {
+                d.begin_command_buffer(
+                    cb,
+                    &vk::CommandBufferBeginInfo::default()
+                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                )
+                .map_err(vk_err("vkBeginCommandBuffer"))?;
+                record(d, cb)?;
+                // Make the results visible to host reads of mapped memory.
+                let barrier = vk::MemoryBarrier::default()
+                    .src_access_mask(
+                        vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE,
+                    )
+                    .dst_access_mask(vk::AccessFlags::HOST_READ);
+                d.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::HOST,
+                    vk::DependencyFlags::empty(),
+                    &[barrier],
+                    &[],
+                    &[],
+                );
+                d.end_command_buffer(cb)
+                    .map_err(vk_err("vkEndCommandBuffer"))?;
+                let cbs = [cb];
+                let submit = [vk::SubmitInfo::default().command_buffers(&cbs)];
+                {
+                    let q = dev.queue.lock().unwrap_or_else(|e| e.into_inner());
+                    d.queue_submit(*q, &submit, s.fence)
+                        .map_err(vk_err("vkQueueSubmit"))?;
+                }
+                d.wait_for_fences(&[s.fence], true, u64::MAX)
+                    .map_err(vk_err("vkWaitForFences"))?;
+                d.reset_fences(&[s.fence])
+                    .map_err(vk_err("vkResetFences"))?;
+                Ok(())
+            })();
+            d.free_command_buffers(s.pool, &[cb]);
+            result
+        }
+    }
+
+    /// A host-visible buffer holding `data`.
+    fn host_buffer(&self, label: &str, data: &[u8]) -> Result<VkBuffer, VulkanError> {
+        let b = self
+            .inner
+            .dev
+            .buffer(label, data.len() as u64, MemoryLocation::CpuToGpu, false)?;
+        b.mapped(|m| m[..data.len()].copy_from_slice(data))?;
+        Ok(b)
+    }
+}
+
+/// A barrier between two commands of a recording: every shader or transfer write before it
+/// is visible to every shader or transfer access after it.
+fn full_barrier(d: &ash::Device, cb: vk::CommandBuffer) {
+    let barrier = vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(
+            vk::AccessFlags::SHADER_READ
+                | vk::AccessFlags::SHADER_WRITE
+                | vk::AccessFlags::UNIFORM_READ
+                | vk::AccessFlags::TRANSFER_READ
+                | vk::AccessFlags::TRANSFER_WRITE,
+        );
+    let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
+    // SAFETY: cb is recording.
+    unsafe {
+        d.cmd_pipeline_barrier(
+            cb,
+            stages,
+            stages,
+            vk::DependencyFlags::empty(),
+            &[barrier],
+            &[],
+            &[],
+        );
+    }
+}
+
+impl GpuEngine for VulkanEngine {
+    type Raw = VkBuffer;
+    type Error = VulkanError;
+
+    fn name(&self) -> &'static str {
+        "vulkan"
+    }
+
+    fn alloc(&self, label: &'static str, bytes: u64) -> Result<VkBuffer, VulkanError> {
+        let b = self
+            .inner
+            .dev
+            .buffer(label, bytes, MemoryLocation::GpuOnly, true)?;
+        let (buf, size) = (b.buffer, b.size);
+        self.submit(|d, cb| {
+            // SAFETY: cb is recording; the buffer is alive until the submission ends.
+            unsafe { d.cmd_fill_buffer(cb, buf, 0, size, 0) };
+            Ok(())
+        })?;
+        Ok(b)
+    }
+
+    fn write(&self, raw: &VkBuffer, data: &[u8]) -> Result<(), VulkanError> {
+        if data.is_empty() {
+            return Ok(());
+        }
+        let staging = self.host_buffer("staging upload", data)?;
+        let (src, dst, bytes) = (staging.buffer, raw.buffer, data.len() as u64);
+        self.submit(|d, cb| {
+            full_barrier(d, cb);
+            // SAFETY: both buffers are alive until the submission ends; bytes fit both.
+            unsafe {
+                d.cmd_copy_buffer(
+                    cb,
+                    src,
+                    dst,
+                    &[vk::BufferCopy::default().size(bytes.min(raw.size))],
+                )
+            };
+            Ok(())
+        })
+    }
+
+    fn read(&self, raw: &VkBuffer, bytes: u64) -> Result<Vec<u8>, VulkanError> {
+        let bytes = bytes.min(raw.size);
+        let staging =
+            self.inner
+                .dev
+                .buffer("staging readback", bytes, MemoryLocation::GpuToCpu, false)?;
+        let (src, dst) = (raw.buffer, staging.buffer);
+        if bytes > 0 {
+            self.submit(|d, cb| {
+                full_barrier(d, cb);
+                // SAFETY: both buffers are alive until the submission ends.
+                unsafe {
+                    d.cmd_copy_buffer(cb, src, dst, &[vk::BufferCopy::default().size(bytes)])
+                };
+                Ok(())
+            })?;
+        }
+        staging.mapped(|m| m[..bytes as usize].to_vec())
+    }
+
+    fn execute(&self, rec: Recording<'_, VkBuffer>) -> Result<(), VulkanError> {
+        let dev = &self.inner.dev;
+        let uniforms = rec
+            .uniforms
+            .iter()
+            .map(|u| self.host_buffer("recording uniform", u))
+            .collect::<Result<Vec<_>, _>>()?;
+        let data = rec
+            .data
+            .iter()
+            .map(|u| self.host_buffer("recording data", u))
+            .collect::<Result<Vec<_>, _>>()?;
+        let scratch = rec
+            .scratch
+            .iter()
+            .map(|&b| dev.buffer("recording scratch", b, MemoryLocation::GpuOnly, false))
+            .collect::<Result<Vec<_>, _>>()?;
+        let buf = |r: &Resource| -> &VkBuffer {
+            match *r {
+                Resource::Buffer(i) => rec.buffers[i],
+                Resource::Uniform(i) => &uniforms[i],
+                Resource::Data(i) => &data[i],
+                Resource::Scratch(i) => &scratch[i],
+            }
+        };
+        // Pipelines and one descriptor set per dispatch, from one pool for the recording.
+        let mut dispatches = Vec::new();
+        let (mut n_uniform, mut n_storage) = (0u32, 0u32);
+        for c in &rec.commands {
+            if let Command::Dispatch { kernel, .. } = c {
+                let k = kernel.variant(false);
+                for b in k.bindings {
+                    match b.kind {
+                        r4d_shaders::BindingKind::Uniform => n_uniform += 1,
+                        r4d_shaders::BindingKind::Storage { .. } => n_storage += 1,
+                    }
+                }
+                dispatches.push(dev.pipeline(k)?);
+            }
+        }
+        let d = &dev.device;
+        let mut sizes = Vec::new();
+        if n_uniform > 0 {
+            sizes.push(
+                vk::DescriptorPoolSize::default()
+                    .ty(vk::DescriptorType::UNIFORM_BUFFER)
+                    .descriptor_count(n_uniform),
+            );
+        }
+        if n_storage > 0 {
+            sizes.push(
+                vk::DescriptorPoolSize::default()
+                    .ty(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(n_storage),
+            );
+        }
+        let pool = if dispatches.is_empty() {
+            vk::DescriptorPool::null()
+        } else {
+            // SAFETY: valid create info; destroyed below after the submission ended.
+            unsafe {
+                d.create_descriptor_pool(
+                    &vk::DescriptorPoolCreateInfo::default()
+                        .max_sets(dispatches.len() as u32)
+                        .pool_sizes(&sizes),
+                    None,
+                )
+            }
+            .map_err(vk_err("vkCreateDescriptorPool"))?
+        };
+        let result = (|| {
+            let mut sets = Vec::with_capacity(dispatches.len());
+            let mut j = 0;
+            for c in &rec.commands {
+                let Command::Dispatch { bindings, .. } = c else {
+                    continue;
+                };
+                let p = &dispatches[j];
+                j += 1;
+                let layouts = [p.set_layout];
+                // SAFETY: the pool has room for one set per dispatch.
+                let set = unsafe {
+                    d.allocate_descriptor_sets(
+                        &vk::DescriptorSetAllocateInfo::default()
+                            .descriptor_pool(pool)
+                            .set_layouts(&layouts),
+                    )
+                }
+                .map_err(vk_err("vkAllocateDescriptorSets"))?[0];
+                let kernel_bindings = match c {
+                    Command::Dispatch { kernel, .. } => kernel.variant(false).bindings,
+                    _ => &[],
+                };
+                let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings
+                    .iter()
+                    .map(|r| {
+                        [vk::DescriptorBufferInfo::default()
+                            .buffer(buf(r).buffer)
+                            .offset(0)
+                            .range(vk::WHOLE_SIZE)]
+                    })
+                    .collect();
+                let writes: Vec<vk::WriteDescriptorSet> = infos
+                    .iter()
+                    .zip(kernel_bindings)
+                    .enumerate()
+                    .map(|(i, (info, b))| {
+                        vk::WriteDescriptorSet::default()
+                            .dst_set(set)
+                            .dst_binding(i as u32)
+                            .descriptor_type(match b.kind {
+                                r4d_shaders::BindingKind::Uniform => {
+                                    vk::DescriptorType::UNIFORM_BUFFER
+                                }
+                                r4d_shaders::BindingKind::Storage { .. } => {
+                                    vk::DescriptorType::STORAGE_BUFFER
+                                }
+                            })
+                            .buffer_info(info)
+                    })
+                    .collect();
+                // SAFETY: the set and buffers are valid.
+                unsafe { d.update_descriptor_sets(&writes, &[]) };
+                sets.push(set);
+            }
+            self.submit(|d, cb| {
+                // Scratch buffers start at zero.
+                for s in &scratch {
+                    // SAFETY: cb is recording; the buffer outlives the submission.
+                    unsafe { d.cmd_fill_buffer(cb, s.buffer, 0, s.size, 0) };
+                }
+                full_barrier(d, cb);
+                let mut j = 0;
+                for c in &rec.commands {
+                    match c {
+                        Command::Dispatch { groups, .. } => {
+                            let p = &dispatches[j];
+                            // SAFETY: pipeline, layout and set are valid and compatible.
+                            unsafe {
+                                d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, p.pipeline);
+                                d.cmd_bind_descriptor_sets(
+                                    cb,
+                                    vk::PipelineBindPoint::COMPUTE,
+                                    p.layout,
+                                    0,
+                                    &[sets[j]],
+                                    &[],
+                                );
+                                d.cmd_dispatch(cb, groups[0], groups[1], groups[2]);
+                            }
+                            j += 1;
+                        }
+                        Command::Clear(r) => {
+                            let b = buf(r);
+                            // SAFETY: the buffer outlives the submission.
+                            unsafe { d.cmd_fill_buffer(cb, b.buffer, 0, b.size, 0) };
+                        }
+                        Command::Copy {
+                            src,
+                            src_offset,
+                            dst,
+                            dst_offset,
+                            bytes,
+                        } => {
+                            if *bytes > 0 {
+                                // SAFETY: both buffers outlive the submission; the recording
+                                // keeps copies inside them.
+                                unsafe {
+                                    d.cmd_copy_buffer(
+                                        cb,
+                                        buf(src).buffer,
+                                        buf(dst).buffer,
+                                        &[vk::BufferCopy::default()
+                                            .src_offset(*src_offset)
+                                            .dst_offset(*dst_offset)
+                                            .size(*bytes)],
+                                    )
+                                };
+                            }
+                        }
+                    }
+                    full_barrier(d, cb);
+                }
+                Ok(())
+            })
+        })();
+        if pool != vk::DescriptorPool::null() {
+            // SAFETY: the submission has ended (or never started).
+            unsafe { d.destroy_descriptor_pool(pool, None) };
+        }
+        result
+    }
+
+    fn memory_usage(&self) -> MemoryUsage {
+        MemoryUsage {
+            bytes_in_use: self.inner.dev.in_use.load(Ordering::Relaxed),
+            peak_bytes: self.inner.dev.peak.load(Ordering::Relaxed),
+        }
+    }
+}

@@ -1,0 +1,69 @@
+//! # r4d-backend-vulkan: the Vulkan engine of `r4d-gpu`'s recordings (ash)
+//!
+//! A second [`r4d_gpu::GpuEngine`] beside wgpu's: the same recordings (every MPM stage
+//! forward and reverse, every splatting stage), executed through Vulkan directly. Kernels are
+//! the SPIR-V that `r4d-shaders` compiles from the WGSL ([`r4d_shaders::Kernel::spirv_words`]),
+//! their descriptor set layouts come from the reflected [`r4d_shaders::Kernel::bindings`],
+//! device memory is sub-allocated by `gpu-allocator`. So the simulator and the renderer on
+//! Vulkan are [`VulkanMpm`] and [`VulkanSplat`]: `r4d_gpu::GpuMpm` / `GpuSplat` over this
+//! engine, nothing written twice.
+//!
+//! The engine is synchronous: each recording is one command buffer (a compute dispatch, fill
+//! or copy per command, a full memory barrier between commands), submitted and waited for.
+//! Scatter kernels run their compare-exchange variants (no `VK_EXT_shader_atomic_float`
+//! needed). `R4D_VULKAN_DEVICE=name` picks a device by name; otherwise discrete GPUs come
+//! first, then integrated, virtual and CPU devices (Mesa's lavapipe, which the tests use
+//! where there is no GPU).
+
+mod device;
+mod engine;
+pub mod testing;
+
+pub use device::VkBuffer;
+pub use engine::VulkanEngine;
+
+/// The simulator's kernels (forward and reverse) on Vulkan.
+pub type VulkanMpm = r4d_gpu::GpuMpm<VulkanEngine>;
+
+/// The renderer's kernels (forward and backward) on Vulkan.
+pub type VulkanSplat = r4d_gpu::GpuSplat<VulkanEngine>;
+
+/// Errors of the Vulkan engine.
+#[derive(Debug, thiserror::Error)]
+pub enum VulkanError {
+    /// The Vulkan loader (`libvulkan`) could not be opened.
+    #[error(
+        "no Vulkan loader: {0} (install a Vulkan driver, e.g. mesa-vulkan-drivers and libvulkan1)"
+    )]
+    NoLoader(String),
+    /// No device qualifies.
+    #[error("no Vulkan device{0}")]
+    NoDevice(String),
+    /// A Vulkan call failed.
+    #[error("{what} failed: {result}")]
+    Vk {
+        /// The call.
+        what: &'static str,
+        /// Its result code.
+        result: ash::vk::Result,
+    },
+    /// A buffer could not be allocated.
+    #[error("cannot allocate {bytes} bytes for '{label}' on the Vulkan device: {message}")]
+    OutOfMemory {
+        /// The buffer's label.
+        label: String,
+        /// Bytes asked for.
+        bytes: u64,
+        /// The allocator's message.
+        message: String,
+    },
+    /// The allocator could not be created.
+    #[error("Vulkan memory allocator: {0}")]
+    Alloc(String),
+    /// A host access to a buffer that is not host-visible (an engine bug).
+    #[error("a Vulkan buffer is not host-visible")]
+    NotMapped,
+    /// The device is being torn down.
+    #[error("the Vulkan device is gone")]
+    Lost,
+}

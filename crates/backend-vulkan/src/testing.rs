@@ -1,0 +1,26 @@
+//! Helpers for tests that need a Vulkan device.
+
+use crate::VulkanEngine;
+
+/// The engine for a Vulkan test, or `None` (the test then returns early) when there is no
+/// Vulkan loader or device. With `R4D_REQUIRE_GPU=1` (set in CI, where Mesa's lavapipe is
+/// installed) a missing device panics instead, so Vulkan tests can never pass by skipping.
+pub fn vulkan_or_skip(test: &str) -> Option<VulkanEngine> {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        // Mesa's drivers warn without it; any writable folder will do.
+        let d = std::env::temp_dir().join("r4d-xdg-runtime");
+        let _ = std::fs::create_dir_all(&d);
+        // SAFETY: tests set this before any thread reads the environment through Vulkan.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", d) };
+    }
+    match VulkanEngine::new() {
+        Ok(e) => Some(e),
+        Err(e) => {
+            if std::env::var("R4D_REQUIRE_GPU").is_ok_and(|v| v == "1") {
+                panic!("{test}: R4D_REQUIRE_GPU=1 but {e}");
+            }
+            eprintln!("{test}: skipped: {e}");
+            None
+        }
+    }
+}
