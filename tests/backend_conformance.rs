@@ -368,9 +368,10 @@ fn vulkan_elastic_scenes_match_cpu() {
     compare_elastic(
         "vulkan two-part object",
         TWO_PART,
-        r4d_backend_vulkan::VulkanMpm::new(e),
+        r4d_backend_vulkan::VulkanMpm::new(e.clone()),
         20,
     );
+    r4d_backend_vulkan::testing::assert_validation_clean(&e, "vulkan_elastic");
 }
 
 #[test]
@@ -405,4 +406,5 @@ fn vulkan_path_dependent_materials_match_cpu() {
             10,
         );
     }
+    r4d_backend_vulkan::testing::assert_validation_clean(&e, "vulkan_plastic");
 }

@@ -43,7 +43,8 @@ fn vulkan_fit_matches_the_cpu_fit() {
     else {
         return;
     };
-    gpu_fit_matches_the_cpu_fit(compute::vulkan(e));
+    gpu_fit_matches_the_cpu_fit(compute::vulkan(e.clone()));
+    r4d_backend_vulkan::testing::assert_validation_clean(&e, "vulkan_fit_matches_the_cpu_fit");
 }
 
 fn gpu_fit_matches_the_cpu_fit(gpu: std::sync::Arc<dyn Compute>) {

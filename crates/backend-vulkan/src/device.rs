@@ -11,7 +11,7 @@ use gpu_allocator::MemoryLocation;
 use r4d_shaders::{BindingKind, Kernel};
 use std::collections::HashMap;
 use std::ffi::CStr;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// A compute pipeline of one kernel.
@@ -22,10 +22,47 @@ pub(crate) struct Pipeline {
     module: vk::ShaderModule,
 }
 
+/// The Khronos validation layer's name.
+const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
+
+/// Counts (and prints) the validation layer's warnings and errors.
+unsafe extern "system" fn on_message(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    _types: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    user: *mut std::ffi::c_void,
+) -> vk::Bool32 {
+    if severity.intersects(
+        vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+            | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+    ) {
+        // SAFETY: `user` is the device's counter, alive as long as the messenger; `data` is
+        // valid for the call.
+        unsafe {
+            (*(user as *const AtomicUsize)).fetch_add(1, Ordering::Relaxed);
+            let msg = data
+                .as_ref()
+                .and_then(|d| d.message_as_c_str())
+                .map(|m| m.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            eprintln!("vulkan validation ({severity:?}): {msg}");
+        }
+    }
+    vk::FALSE
+}
+
+/// The validation messenger and its counter.
+struct Validation {
+    utils: ash::ext::debug_utils::Instance,
+    messenger: vk::DebugUtilsMessengerEXT,
+    count: Box<AtomicUsize>,
+}
+
 /// The device and what lives as long as it.
 pub(crate) struct Device {
     // Kept loaded for the instance's lifetime.
     _entry: ash::Entry,
+    validation: Option<Validation>,
     pub instance: ash::Instance,
     pub device: ash::Device,
     pub queue: Mutex<vk::Queue>,
@@ -71,24 +108,96 @@ impl Device {
         let app = vk::ApplicationInfo::default()
             .application_name(c"resonance4d")
             .api_version(vk::API_VERSION_1_1);
-        let ici = vk::InstanceCreateInfo::default().application_info(&app);
+        let validate = std::env::var("R4D_VULKAN_VALIDATION").is_ok_and(|v| v == "1");
+        let (layers, extensions) = if validate {
+            // SAFETY: plain queries of the loader.
+            let available = unsafe { entry.enumerate_instance_layer_properties() }
+                .map_err(vk_err("vkEnumerateInstanceLayerProperties"))?;
+            if !available
+                .iter()
+                .any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER))
+            {
+                return Err(VulkanError::NoDevice(
+                    ": R4D_VULKAN_VALIDATION=1 but the Khronos validation layer is not installed (vulkan-validationlayers)".into(),
+                ));
+            }
+            (
+                vec![VALIDATION_LAYER.as_ptr()],
+                vec![ash::ext::debug_utils::NAME.as_ptr()],
+            )
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        let ici = vk::InstanceCreateInfo::default()
+            .application_info(&app)
+            .enabled_layer_names(&layers)
+            .enabled_extension_names(&extensions);
         // SAFETY: valid create info; the instance is destroyed in Drop.
         let instance =
             unsafe { entry.create_instance(&ici, None) }.map_err(vk_err("vkCreateInstance"))?;
-        match Self::open(entry, instance.clone(), wanted) {
+        let validation = if validate {
+            let utils = ash::ext::debug_utils::Instance::new(&entry, &instance);
+            let count = Box::new(AtomicUsize::new(0));
+            let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+                .message_severity(
+                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                        | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+                )
+                .message_type(
+                    vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                        | vk::DebugUtilsMessageTypeFlagsEXT::GENERAL,
+                )
+                .pfn_user_callback(Some(on_message))
+                .user_data(&*count as *const AtomicUsize as *mut std::ffi::c_void);
+            // SAFETY: the counter is boxed and outlives the messenger (destroyed in Drop).
+            match unsafe { utils.create_debug_utils_messenger(&info, None) } {
+                Ok(messenger) => Some(Validation {
+                    utils,
+                    messenger,
+                    count,
+                }),
+                Err(result) => {
+                    // SAFETY: nothing else was created from the instance.
+                    unsafe { instance.destroy_instance(None) };
+                    return Err(VulkanError::Vk {
+                        what: "vkCreateDebugUtilsMessengerEXT",
+                        result,
+                    });
+                }
+            }
+        } else {
+            None
+        };
+        let mut validation = validation;
+        match Self::open(entry, instance.clone(), wanted, &mut validation) {
             Ok(d) => Ok(d),
             Err(e) => {
                 // SAFETY: nothing else was created from the instance.
-                unsafe { instance.destroy_instance(None) };
+                unsafe {
+                    if let Some(v) = validation {
+                        v.utils.destroy_debug_utils_messenger(v.messenger, None);
+                    }
+                    instance.destroy_instance(None)
+                };
                 Err(e)
             }
         }
     }
 
+    /// Warnings and errors the validation layer reported (0 without `R4D_VULKAN_VALIDATION=1`).
+    pub fn validation_messages(&self) -> usize {
+        self.validation
+            .as_ref()
+            .map_or(0, |v| v.count.load(Ordering::Relaxed))
+    }
+
+    /// Opens the device; `validation` moves into it on success and stays with the caller on
+    /// failure (to be destroyed with the instance).
     fn open(
         entry: ash::Entry,
         instance: ash::Instance,
         wanted: Option<&str>,
+        validation: &mut Option<Validation>,
     ) -> Result<Arc<Device>, VulkanError> {
         // SAFETY: the instance is valid.
         let pds = unsafe { instance.enumerate_physical_devices() }
@@ -180,6 +289,7 @@ impl Device {
         })?;
         Ok(Arc::new(Device {
             _entry: entry,
+            validation: validation.take(),
             instance,
             device,
             queue: Mutex::new(queue),
@@ -386,6 +496,9 @@ impl Drop for Device {
                     .take(),
             );
             self.device.destroy_device(None);
+            if let Some(v) = self.validation.take() {
+                v.utils.destroy_debug_utils_messenger(v.messenger, None);
+            }
             self.instance.destroy_instance(None);
         }
     }

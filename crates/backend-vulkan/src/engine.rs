@@ -93,6 +93,12 @@ impl VulkanEngine {
             .store(d.in_use.load(Ordering::Relaxed), Ordering::Relaxed);
     }
 
+    /// Warnings and errors the Khronos validation layer reported on this device so far
+    /// (`R4D_VULKAN_VALIDATION=1` enables the layer; 0 otherwise).
+    pub fn validation_messages(&self) -> usize {
+        self.inner.dev.validation_messages()
+    }
+
     /// Whether the device is a CPU implementation (lavapipe, SwiftShader).
     pub fn is_cpu(&self) -> bool {
         self.inner.dev.kind == vk::PhysicalDeviceType::CPU

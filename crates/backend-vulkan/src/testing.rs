@@ -2,6 +2,16 @@
 
 use crate::VulkanEngine;
 
+/// Fails `test` when the Khronos validation layer reported anything on `engine` (with
+/// `R4D_VULKAN_VALIDATION=1`, as CI runs the tests; a no-op otherwise).
+pub fn assert_validation_clean(engine: &VulkanEngine, test: &str) {
+    let n = engine.validation_messages();
+    assert_eq!(
+        n, 0,
+        "{test}: {n} Vulkan validation message(s), printed above"
+    );
+}
+
 /// The engine for a Vulkan test, or `None` (the test then returns early) when there is no
 /// Vulkan loader or device. With `R4D_REQUIRE_GPU=1` (set in CI, where Mesa's lavapipe is
 /// installed) a missing device panics instead, so Vulkan tests can never pass by skipping.

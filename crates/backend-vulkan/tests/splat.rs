@@ -35,7 +35,7 @@ fn renders_and_gradients_match_the_cpu_on_the_golden_scenes() {
     let Some(engine) = vulkan_or_skip("vulkan renderer") else {
         return;
     };
-    let mut vk = SplatRenderer::new(VulkanSplat::new(engine));
+    let mut vk = SplatRenderer::new(VulkanSplat::new(engine.clone()));
     let mut cpu = SplatRenderer::new(CpuSplat);
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/splat");
     for name in [
@@ -93,4 +93,5 @@ fn renders_and_gradients_match_the_cpu_on_the_golden_scenes() {
             }
         }
     }
+    r4d_backend_vulkan::testing::assert_validation_clean(&engine, "vulkan renderer");
 }
