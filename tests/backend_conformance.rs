@@ -372,6 +372,22 @@ fn vulkan_elastic_scenes_match_cpu() {
         20,
     );
     r4d_backend_vulkan::testing::assert_validation_clean(&e, "vulkan_elastic");
+    eprintln!("vulkan float atomics: {}", e.float_atomics());
+}
+
+#[test]
+fn vulkan_compare_exchange_scatter_matches_cpu() {
+    let Some(e) = r4d_backend_vulkan::testing::vulkan_or_skip_with("vulkan_cas", false) else {
+        return;
+    };
+    assert!(!e.float_atomics());
+    compare_elastic(
+        "vulkan (compare-exchange scatter) two-part object",
+        TWO_PART,
+        r4d_backend_vulkan::VulkanMpm::new(e.clone()),
+        20,
+    );
+    r4d_backend_vulkan::testing::assert_validation_clean(&e, "vulkan_cas");
 }
 
 #[test]

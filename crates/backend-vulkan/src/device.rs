@@ -73,6 +73,9 @@ pub(crate) struct Device {
     pub name: String,
     /// The device type (discrete, integrated, virtual, CPU).
     pub kind: vk::PhysicalDeviceType,
+    /// `VK_EXT_shader_atomic_float`'s buffer float32 add is enabled: scatter kernels run
+    /// their native variant (else their compare-exchange one).
+    pub float_atomics: bool,
     pub in_use: AtomicU64,
     pub peak: AtomicU64,
 }
@@ -101,7 +104,10 @@ fn vk_err(what: &'static str) -> impl Fn(vk::Result) -> VulkanError {
 impl Device {
     /// Opens the Vulkan loader and a device with a compute queue. `wanted`: a substring of
     /// the device name (`R4D_VULKAN_DEVICE`); otherwise discrete > integrated > virtual > CPU.
-    pub fn new(wanted: Option<&str>) -> Result<Arc<Device>, VulkanError> {
+    pub fn new(
+        wanted: Option<&str>,
+        allow_float_atomics: bool,
+    ) -> Result<Arc<Device>, VulkanError> {
         // SAFETY: loading the system's Vulkan loader; its symbols are used only through ash.
         let entry =
             unsafe { ash::Entry::load() }.map_err(|e| VulkanError::NoLoader(e.to_string()))?;
@@ -169,7 +175,13 @@ impl Device {
             None
         };
         let mut validation = validation;
-        match Self::open(entry, instance.clone(), wanted, &mut validation) {
+        match Self::open(
+            entry,
+            instance.clone(),
+            wanted,
+            allow_float_atomics,
+            &mut validation,
+        ) {
             Ok(d) => Ok(d),
             Err(e) => {
                 // SAFETY: nothing else was created from the instance.
@@ -197,6 +209,7 @@ impl Device {
         entry: ash::Entry,
         instance: ash::Instance,
         wanted: Option<&str>,
+        allow_float_atomics: bool,
         validation: &mut Option<Validation>,
     ) -> Result<Arc<Device>, VulkanError> {
         // SAFETY: the instance is valid.
@@ -268,7 +281,29 @@ impl Device {
         let qci = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&prio)];
-        let dci = vk::DeviceCreateInfo::default().queue_create_infos(&qci);
+        // Native float atomics where the device has VK_EXT_shader_atomic_float's buffer add.
+        let atomic_ext = ash::ext::shader_atomic_float::NAME;
+        // SAFETY: pd comes from this instance.
+        let has_ext = unsafe { instance.enumerate_device_extension_properties(pd) }
+            .map_err(vk_err("vkEnumerateDeviceExtensionProperties"))?
+            .iter()
+            .any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == atomic_ext));
+        let float_atomics = allow_float_atomics && has_ext && {
+            let mut af = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default();
+            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut af);
+            // SAFETY: pd comes from this instance (Vulkan 1.1 core query).
+            unsafe { instance.get_physical_device_features2(pd, &mut f2) };
+            af.shader_buffer_float32_atomic_add == vk::TRUE
+        };
+        let ext_names = [atomic_ext.as_ptr()];
+        let mut enable = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default()
+            .shader_buffer_float32_atomic_add(true);
+        let mut dci = vk::DeviceCreateInfo::default().queue_create_infos(&qci);
+        if float_atomics {
+            dci = dci
+                .enabled_extension_names(&ext_names)
+                .push_next(&mut enable);
+        }
         // SAFETY: valid create info; destroyed in Drop.
         let device =
             unsafe { instance.create_device(pd, &dci, None) }.map_err(vk_err("vkCreateDevice"))?;
@@ -298,6 +333,7 @@ impl Device {
             pipelines: Mutex::new(HashMap::new()),
             name,
             kind,
+            float_atomics,
             in_use: AtomicU64::new(0),
             peak: AtomicU64::new(0),
         }))

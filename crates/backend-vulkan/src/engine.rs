@@ -53,10 +53,18 @@ fn vk_err(what: &'static str) -> impl Fn(vk::Result) -> VulkanError {
 }
 
 impl VulkanEngine {
-    /// The engine on the preferred device (`R4D_VULKAN_DEVICE=name` picks one by name).
+    /// The engine on the preferred device (`R4D_VULKAN_DEVICE=name` picks one by name);
+    /// native float atomics where the device has them, unless `R4D_VULKAN_NO_FLOAT_ATOMICS`
+    /// is set.
     pub fn new() -> Result<Self, VulkanError> {
+        Self::with_float_atomics(std::env::var_os("R4D_VULKAN_NO_FLOAT_ATOMICS").is_none())
+    }
+
+    /// Like [`Self::new`]; `allow = false` runs the compare-exchange scatter even where the
+    /// device has float atomics (tests cover both paths).
+    pub fn with_float_atomics(allow: bool) -> Result<Self, VulkanError> {
         let wanted = std::env::var("R4D_VULKAN_DEVICE").ok();
-        let dev = Device::new(wanted.as_deref())?;
+        let dev = Device::new(wanted.as_deref(), allow)?;
         let d = &dev.device;
         // SAFETY: valid create infos; destroyed in Inner's Drop.
         let (pool, fence) = unsafe {
@@ -97,6 +105,11 @@ impl VulkanEngine {
     /// (`R4D_VULKAN_VALIDATION=1` enables the layer; 0 otherwise).
     pub fn validation_messages(&self) -> usize {
         self.inner.dev.validation_messages()
+    }
+
+    /// Whether scatter kernels use native float atomics (`VK_EXT_shader_atomic_float`).
+    pub fn float_atomics(&self) -> bool {
+        self.inner.dev.float_atomics
     }
 
     /// Whether the device is a CPU implementation (lavapipe, SwiftShader).
@@ -297,7 +310,7 @@ impl GpuEngine for VulkanEngine {
         let (mut n_uniform, mut n_storage) = (0u32, 0u32);
         for c in &rec.commands {
             if let Command::Dispatch { kernel, .. } = c {
-                let k = kernel.variant(false);
+                let k = kernel.variant(dev.float_atomics);
                 for b in k.bindings {
                     match b.kind {
                         r4d_shaders::BindingKind::Uniform => n_uniform += 1,
@@ -357,7 +370,7 @@ impl GpuEngine for VulkanEngine {
                 }
                 .map_err(vk_err("vkAllocateDescriptorSets"))?[0];
                 let kernel_bindings = match c {
-                    Command::Dispatch { kernel, .. } => kernel.variant(false).bindings,
+                    Command::Dispatch { kernel, .. } => kernel.variant(dev.float_atomics).bindings,
                     _ => &[],
                 };
                 let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings

@@ -10,8 +10,9 @@
 //!
 //! The engine is synchronous: each recording is one command buffer (a compute dispatch, fill
 //! or copy per command, a full memory barrier between commands), submitted and waited for.
-//! Scatter kernels run their compare-exchange variants (no `VK_EXT_shader_atomic_float`
-//! needed). `R4D_VULKAN_DEVICE=name` picks a device by name; otherwise discrete GPUs come
+//! Scatter kernels use native float atomics where the device has `VK_EXT_shader_atomic_float`
+//! (buffer float32 add) and their compare-exchange variants elsewhere
+//! (`R4D_VULKAN_NO_FLOAT_ATOMICS` forces the latter). `R4D_VULKAN_DEVICE=name` picks a device by name; otherwise discrete GPUs come
 //! first, then integrated, virtual and CPU devices (Mesa's lavapipe, which the tests use
 //! where there is no GPU).
 

@@ -16,6 +16,15 @@ pub fn assert_validation_clean(engine: &VulkanEngine, test: &str) {
 /// Vulkan loader or device. With `R4D_REQUIRE_GPU=1` (set in CI, where Mesa's lavapipe is
 /// installed) a missing device panics instead, so Vulkan tests can never pass by skipping.
 pub fn vulkan_or_skip(test: &str) -> Option<VulkanEngine> {
+    vulkan_or_skip_with(
+        test,
+        std::env::var_os("R4D_VULKAN_NO_FLOAT_ATOMICS").is_none(),
+    )
+}
+
+/// [`vulkan_or_skip`] with the choice of native float atomics (`false`: the compare-exchange
+/// scatter).
+pub fn vulkan_or_skip_with(test: &str, float_atomics: bool) -> Option<VulkanEngine> {
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         // Mesa's drivers warn without it; any writable folder will do.
         let d = std::env::temp_dir().join("r4d-xdg-runtime");
@@ -23,7 +32,7 @@ pub fn vulkan_or_skip(test: &str) -> Option<VulkanEngine> {
         // SAFETY: tests set this before any thread reads the environment through Vulkan.
         unsafe { std::env::set_var("XDG_RUNTIME_DIR", d) };
     }
-    match VulkanEngine::new() {
+    match VulkanEngine::with_float_atomics(float_atomics) {
         Ok(e) => Some(e),
         Err(e) => {
             if std::env::var("R4D_REQUIRE_GPU").is_ok_and(|v| v == "1") {
