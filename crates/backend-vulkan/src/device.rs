@@ -78,6 +78,11 @@ pub(crate) struct Device {
     pub float_atomics: bool,
     pub in_use: AtomicU64,
     pub peak: AtomicU64,
+    /// Buffers dropped while a pending command buffer may still use them: freed by
+    /// [`Device::collect`] once the engine has waited for its submissions.
+    graveyard: Mutex<Vec<(vk::Buffer, Option<Allocation>)>>,
+    /// Bytes in the graveyard.
+    pub graveyard_bytes: AtomicU64,
 }
 
 /// A device buffer (storage, uniform, copy source and destination).
@@ -336,6 +341,8 @@ impl Device {
             float_atomics,
             in_use: AtomicU64::new(0),
             peak: AtomicU64::new(0),
+            graveyard: Mutex::new(Vec::new()),
+            graveyard_bytes: AtomicU64::new(0),
         }))
     }
 
@@ -469,6 +476,26 @@ impl Device {
     }
 }
 
+impl Device {
+    /// Frees the dropped buffers. Call only when no submission that could use them is
+    /// pending (the engine calls it after waiting for its fence).
+    pub fn collect(&self) {
+        let dead = std::mem::take(&mut *self.graveyard.lock().unwrap_or_else(|e| e.into_inner()));
+        self.graveyard_bytes.store(0, Ordering::Relaxed);
+        if dead.is_empty() {
+            return;
+        }
+        let mut guard = self.allocator.lock().unwrap_or_else(|e| e.into_inner());
+        for (buffer, allocation) in dead {
+            // SAFETY: no pending submission uses the buffer (see above).
+            unsafe { self.device.destroy_buffer(buffer, None) };
+            if let (Some(a), Some(allocator)) = (allocation, guard.as_mut()) {
+                let _ = allocator.free(a);
+            }
+        }
+    }
+}
+
 impl VkBuffer {
     /// Runs `f` on the buffer's mapped bytes (host-visible buffers only).
     pub(crate) fn mapped<R>(&self, f: impl FnOnce(&mut [u8]) -> R) -> Result<R, VulkanError> {
@@ -488,19 +515,16 @@ impl Drop for VkBuffer {
             .get_mut()
             .unwrap_or_else(|e| e.into_inner())
             .take();
-        // SAFETY: every submission that used the buffer has completed (the engine waits for
-        // each one before returning).
-        unsafe { self.dev.device.destroy_buffer(self.buffer, None) };
-        if let (Some(a), Some(allocator)) = (
-            a,
-            self.dev
-                .allocator
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .as_mut(),
-        ) {
-            let _ = allocator.free(a);
-        }
+        // A pending command buffer may still use the buffer: destroyed once the engine has
+        // waited for it (Device::collect).
+        self.dev
+            .graveyard
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push((self.buffer, a));
+        self.dev
+            .graveyard_bytes
+            .fetch_add(self.size, Ordering::Relaxed);
         if self.counted {
             self.dev.in_use.fetch_sub(self.size, Ordering::Relaxed);
         }
@@ -512,6 +536,7 @@ impl Drop for Device {
         // SAFETY: the last handle is gone: no buffer, submission or pipeline is in use.
         unsafe {
             let _ = self.device.device_wait_idle();
+            self.collect();
             for (_, p) in self
                 .pipelines
                 .get_mut()

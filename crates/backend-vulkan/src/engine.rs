@@ -1,7 +1,11 @@
-//! [`VulkanEngine`]: `r4d_gpu::GpuEngine` on Vulkan. A recording becomes one command buffer:
-//! per command a compute dispatch (its pipeline, a descriptor set of the bound buffers),
-//! a fill (clear) or a copy, with a full memory barrier after each; one submission, waited
-//! for. Buffer writes and reads go through host-visible staging buffers.
+//! [`VulkanEngine`]: `r4d_gpu::GpuEngine` on Vulkan. Recordings are appended to one pending
+//! command buffer: per command a compute dispatch (its pipeline, a descriptor set of the
+//! bound buffers), a fill (clear) or a copy, with a full memory barrier after each. Buffer
+//! writes go through host-visible staging buffers appended the same way. A read submits the
+//! pending command buffer, once, and waits for it: a simulated frame (hundreds of substeps,
+//! thousands of dispatches) is one queue submission, ended by the frame's position readback.
+//! Transient buffers, descriptor pools and buffers dropped meanwhile are freed after the wait
+//! (more than 256 MiB of them submit early).
 
 use crate::device::{Device, VkBuffer};
 use crate::VulkanError;
@@ -12,11 +16,25 @@ use r4d_mpm::kernels::MemoryUsage;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 
-/// The command pool and fence of the engine's submissions (used one at a time).
+/// The command pool and fence of the engine's submissions, and the command buffer being
+/// recorded: recordings, writes and clears are appended to it; a read (or enough transient
+/// memory) submits it, once, and waits.
 struct Submitter {
     pool: vk::CommandPool,
     fence: vk::Fence,
+    /// The command buffer being recorded (begun), if any.
+    cb: Option<vk::CommandBuffer>,
+    /// Transient buffers its commands use (uniforms, data blocks, scratch, staging).
+    keep: Vec<VkBuffer>,
+    /// Their bytes.
+    keep_bytes: u64,
+    /// Descriptor pools of its dispatches.
+    pools: Vec<vk::DescriptorPool>,
 }
+
+/// Transient bytes (and dropped buffers) a pending command buffer may hold before it is
+/// submitted without waiting for a read.
+const FLUSH_BYTES: u64 = 256 << 20;
 
 struct Inner {
     dev: Arc<Device>,
@@ -25,7 +43,9 @@ struct Inner {
 
 impl Drop for Inner {
     fn drop(&mut self) {
+        let dev = self.dev.clone();
         let s = self.submit.get_mut().unwrap_or_else(|e| e.into_inner());
+        let _ = flush_locked(&dev, s);
         // SAFETY: every submission was waited for; the pool's command buffers are freed.
         unsafe {
             self.dev.device.destroy_fence(s.fence, None);
@@ -84,7 +104,14 @@ impl VulkanEngine {
         Ok(VulkanEngine {
             inner: Arc::new(Inner {
                 dev,
-                submit: Mutex::new(Submitter { pool, fence }),
+                submit: Mutex::new(Submitter {
+                    pool,
+                    fence,
+                    cb: None,
+                    keep: Vec::new(),
+                    keep_bytes: 0,
+                    pools: Vec::new(),
+                }),
             }),
         })
     }
@@ -117,66 +144,60 @@ impl VulkanEngine {
         self.inner.dev.kind == vk::PhysicalDeviceType::CPU
     }
 
-    /// Records commands with `record` into one command buffer, submits it and waits.
-    fn submit(
+    /// Appends commands to the pending command buffer (begun on first use); `keep`: the
+    /// transient buffers and descriptor pool they use, kept until the submission ends.
+    fn record(
         &self,
+        keep: Vec<VkBuffer>,
+        pool: Option<vk::DescriptorPool>,
         record: impl FnOnce(&ash::Device, vk::CommandBuffer) -> Result<(), VulkanError>,
     ) -> Result<(), VulkanError> {
         let dev = &self.inner.dev;
         let d = &dev.device;
-        let s = self.inner.submit.lock().unwrap_or_else(|e| e.into_inner());
-        // SAFETY: the pool is used under the lock only; the command buffer is freed before
-        // returning, after the fence says the device is done with it.
-        unsafe {
-            let cb = d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(s.pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .map_err(vk_err("vkAllocateCommandBuffers"))?[0];
-            let result = (|| {
-                d.begin_command_buffer(
-                    cb,
-                    &vk::CommandBufferBeginInfo::default()
-                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
-                )
-                .map_err(vk_err("vkBeginCommandBuffer"))?;
-                record(d, cb)?;
-                // Make the results visible to host reads of mapped memory.
-                let barrier = vk::MemoryBarrier::default()
-                    .src_access_mask(
-                        vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE,
+        let mut guard = self.inner.submit.lock().unwrap_or_else(|e| e.into_inner());
+        let s = &mut *guard;
+        let cb = match s.cb {
+            Some(cb) => cb,
+            None => {
+                // SAFETY: the pool is used under the lock only.
+                let cb = unsafe {
+                    d.allocate_command_buffers(
+                        &vk::CommandBufferAllocateInfo::default()
+                            .command_pool(s.pool)
+                            .level(vk::CommandBufferLevel::PRIMARY)
+                            .command_buffer_count(1),
                     )
-                    .dst_access_mask(vk::AccessFlags::HOST_READ);
-                d.cmd_pipeline_barrier(
-                    cb,
-                    vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::HOST,
-                    vk::DependencyFlags::empty(),
-                    &[barrier],
-                    &[],
-                    &[],
-                );
-                d.end_command_buffer(cb)
-                    .map_err(vk_err("vkEndCommandBuffer"))?;
-                let cbs = [cb];
-                let submit = [vk::SubmitInfo::default().command_buffers(&cbs)];
-                {
-                    let q = dev.queue.lock().unwrap_or_else(|e| e.into_inner());
-                    d.queue_submit(*q, &submit, s.fence)
-                        .map_err(vk_err("vkQueueSubmit"))?;
                 }
-                d.wait_for_fences(&[s.fence], true, u64::MAX)
-                    .map_err(vk_err("vkWaitForFences"))?;
-                d.reset_fences(&[s.fence])
-                    .map_err(vk_err("vkResetFences"))?;
-                Ok(())
-            })();
-            d.free_command_buffers(s.pool, &[cb]);
-            result
+                .map_err(vk_err("vkAllocateCommandBuffers"))?[0];
+                // SAFETY: a fresh command buffer.
+                unsafe {
+                    d.begin_command_buffer(
+                        cb,
+                        &vk::CommandBufferBeginInfo::default()
+                            .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                    )
+                }
+                .map_err(vk_err("vkBeginCommandBuffer"))?;
+                s.cb = Some(cb);
+                cb
+            }
+        };
+        s.keep_bytes += keep.iter().map(|b| b.size).sum::<u64>();
+        s.keep.extend(keep);
+        s.pools.extend(pool);
+        let r = record(d, cb);
+        // Bounded transient memory: a long run of recordings without a read is submitted
+        // on its own.
+        if r.is_ok() && s.keep_bytes + dev.graveyard_bytes.load(Ordering::Relaxed) > FLUSH_BYTES {
+            return flush_locked(dev, s);
         }
+        r
+    }
+
+    /// Submits the pending command buffer and waits for it (nothing to do without one).
+    fn flush(&self) -> Result<(), VulkanError> {
+        let mut guard = self.inner.submit.lock().unwrap_or_else(|e| e.into_inner());
+        flush_locked(&self.inner.dev, &mut guard)
     }
 
     /// A host-visible buffer holding `data`.
@@ -188,6 +209,61 @@ impl VulkanEngine {
         b.mapped(|m| m[..data.len()].copy_from_slice(data))?;
         Ok(b)
     }
+}
+
+/// Ends, submits and waits for the pending command buffer of `s`, then frees what it used
+/// (transient buffers, descriptor pools, buffers dropped meanwhile).
+fn flush_locked(dev: &Device, s: &mut Submitter) -> Result<(), VulkanError> {
+    let Some(cb) = s.cb.take() else {
+        dev.collect();
+        return Ok(());
+    };
+    let d = &dev.device;
+    // SAFETY: cb is recording; the fence is unsignalled; everything the commands use is in
+    // `s.keep`, the engine's buffers or the graveyard, all alive until the wait returns.
+    let result = unsafe {
+        (|| {
+            // Make the results visible to host reads of mapped memory.
+            let barrier = vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::HOST_READ);
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &[barrier],
+                &[],
+                &[],
+            );
+            d.end_command_buffer(cb)
+                .map_err(vk_err("vkEndCommandBuffer"))?;
+            let cbs = [cb];
+            let submit = [vk::SubmitInfo::default().command_buffers(&cbs)];
+            {
+                let q = dev.queue.lock().unwrap_or_else(|e| e.into_inner());
+                d.queue_submit(*q, &submit, s.fence)
+                    .map_err(vk_err("vkQueueSubmit"))?;
+            }
+            d.wait_for_fences(&[s.fence], true, u64::MAX)
+                .map_err(vk_err("vkWaitForFences"))?;
+            d.reset_fences(&[s.fence]).map_err(vk_err("vkResetFences"))
+        })()
+    };
+    // SAFETY: the submission ended (or never started): nothing uses these any more.
+    unsafe {
+        if result.is_err() {
+            let _ = d.device_wait_idle();
+        }
+        d.free_command_buffers(s.pool, &[cb]);
+        for p in s.pools.drain(..) {
+            d.destroy_descriptor_pool(p, None);
+        }
+    }
+    s.keep.clear();
+    s.keep_bytes = 0;
+    dev.collect();
+    result
 }
 
 /// A barrier between two commands of a recording: every shader or transfer write before it
@@ -231,7 +307,7 @@ impl GpuEngine for VulkanEngine {
             .dev
             .buffer(label, bytes, MemoryLocation::GpuOnly, true)?;
         let (buf, size) = (b.buffer, b.size);
-        self.submit(|d, cb| {
+        self.record(Vec::new(), None, |d, cb| {
             // SAFETY: cb is recording; the buffer is alive until the submission ends.
             unsafe { d.cmd_fill_buffer(cb, buf, 0, size, 0) };
             Ok(())
@@ -245,7 +321,8 @@ impl GpuEngine for VulkanEngine {
         }
         let staging = self.host_buffer("staging upload", data)?;
         let (src, dst, bytes) = (staging.buffer, raw.buffer, data.len() as u64);
-        self.submit(|d, cb| {
+        let size = raw.size;
+        self.record(vec![staging], None, |d, cb| {
             full_barrier(d, cb);
             // SAFETY: both buffers are alive until the submission ends; bytes fit both.
             unsafe {
@@ -253,7 +330,7 @@ impl GpuEngine for VulkanEngine {
                     cb,
                     src,
                     dst,
-                    &[vk::BufferCopy::default().size(bytes.min(raw.size))],
+                    &[vk::BufferCopy::default().size(bytes.min(size))],
                 )
             };
             Ok(())
@@ -268,7 +345,7 @@ impl GpuEngine for VulkanEngine {
                 .buffer("staging readback", bytes, MemoryLocation::GpuToCpu, false)?;
         let (src, dst) = (raw.buffer, staging.buffer);
         if bytes > 0 {
-            self.submit(|d, cb| {
+            self.record(Vec::new(), None, |d, cb| {
                 full_barrier(d, cb);
                 // SAFETY: both buffers are alive until the submission ends.
                 unsafe {
@@ -277,6 +354,8 @@ impl GpuEngine for VulkanEngine {
                 Ok(())
             })?;
         }
+        // Everything recorded so far runs now (the one submission of a frame).
+        self.flush()?;
         staging.mapped(|m| m[..bytes as usize].to_vec())
     }
 
@@ -297,12 +376,19 @@ impl GpuEngine for VulkanEngine {
             .iter()
             .map(|&b| dev.buffer("recording scratch", b, MemoryLocation::GpuOnly, false))
             .collect::<Result<Vec<_>, _>>()?;
-        let buf = |r: &Resource| -> &VkBuffer {
+        // Handles and sizes only: the transient buffers move to the pending submission.
+        let h = |b: &VkBuffer| (b.buffer, b.size);
+        let (hu, hd, hs): (Vec<_>, Vec<_>, Vec<_>) = (
+            uniforms.iter().map(h).collect(),
+            data.iter().map(h).collect(),
+            scratch.iter().map(h).collect(),
+        );
+        let buf = |r: &Resource| -> (vk::Buffer, u64) {
             match *r {
-                Resource::Buffer(i) => rec.buffers[i],
-                Resource::Uniform(i) => &uniforms[i],
-                Resource::Data(i) => &data[i],
-                Resource::Scratch(i) => &scratch[i],
+                Resource::Buffer(i) => h(rec.buffers[i]),
+                Resource::Uniform(i) => hu[i],
+                Resource::Data(i) => hd[i],
+                Resource::Scratch(i) => hs[i],
             }
         };
         // Pipelines and one descriptor set per dispatch, from one pool for the recording.
@@ -336,7 +422,7 @@ impl GpuEngine for VulkanEngine {
                     .descriptor_count(n_storage),
             );
         }
-        let pool = if dispatches.is_empty() {
+        let mut pool = if dispatches.is_empty() {
             vk::DescriptorPool::null()
         } else {
             // SAFETY: valid create info; destroyed below after the submission ended.
@@ -377,7 +463,7 @@ impl GpuEngine for VulkanEngine {
                     .iter()
                     .map(|r| {
                         [vk::DescriptorBufferInfo::default()
-                            .buffer(buf(r).buffer)
+                            .buffer(buf(r).0)
                             .offset(0)
                             .range(vk::WHOLE_SIZE)]
                     })
@@ -405,11 +491,16 @@ impl GpuEngine for VulkanEngine {
                 unsafe { d.update_descriptor_sets(&writes, &[]) };
                 sets.push(set);
             }
-            self.submit(|d, cb| {
+            let mut keep = uniforms;
+            keep.extend(data);
+            keep.extend(scratch);
+            let owned_pool = (pool != vk::DescriptorPool::null()).then_some(pool);
+            pool = vk::DescriptorPool::null();
+            self.record(keep, owned_pool, |d, cb| {
                 // Scratch buffers start at zero.
-                for s in &scratch {
+                for &(b, size) in &hs {
                     // SAFETY: cb is recording; the buffer outlives the submission.
-                    unsafe { d.cmd_fill_buffer(cb, s.buffer, 0, s.size, 0) };
+                    unsafe { d.cmd_fill_buffer(cb, b, 0, size, 0) };
                 }
                 full_barrier(d, cb);
                 let mut j = 0;
@@ -433,9 +524,9 @@ impl GpuEngine for VulkanEngine {
                             j += 1;
                         }
                         Command::Clear(r) => {
-                            let b = buf(r);
+                            let (b, size) = buf(r);
                             // SAFETY: the buffer outlives the submission.
-                            unsafe { d.cmd_fill_buffer(cb, b.buffer, 0, b.size, 0) };
+                            unsafe { d.cmd_fill_buffer(cb, b, 0, size, 0) };
                         }
                         Command::Copy {
                             src,
@@ -450,8 +541,8 @@ impl GpuEngine for VulkanEngine {
                                 unsafe {
                                     d.cmd_copy_buffer(
                                         cb,
-                                        buf(src).buffer,
-                                        buf(dst).buffer,
+                                        buf(src).0,
+                                        buf(dst).0,
                                         &[vk::BufferCopy::default()
                                             .src_offset(*src_offset)
                                             .dst_offset(*dst_offset)

@@ -8,8 +8,9 @@
 //! Vulkan are [`VulkanMpm`] and [`VulkanSplat`]: `r4d_gpu::GpuMpm` / `GpuSplat` over this
 //! engine, nothing written twice.
 //!
-//! The engine is synchronous: each recording is one command buffer (a compute dispatch, fill
-//! or copy per command, a full memory barrier between commands), submitted and waited for.
+//! Recordings are appended to one pending command buffer (a compute dispatch, fill or copy
+//! per command, a full memory barrier between commands); a read submits it and waits, so a
+//! simulated frame is one queue submission, not one per substep.
 //! Scatter kernels use native float atomics where the device has `VK_EXT_shader_atomic_float`
 //! (buffer float32 add) and their compare-exchange variants elsewhere
 //! (`R4D_VULKAN_NO_FLOAT_ATOMICS` forces the latter). `R4D_VULKAN_DEVICE=name` picks a device by name; otherwise discrete GPUs come
