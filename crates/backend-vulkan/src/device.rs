@@ -83,6 +83,9 @@ pub(crate) struct Device {
     graveyard: Mutex<Vec<(vk::Buffer, Option<Allocation>)>>,
     /// Bytes in the graveyard.
     pub graveyard_bytes: AtomicU64,
+    /// The instance and device were created here (destroyed with it); `false`: the host
+    /// application's ([`crate::HostDevice`]), left alive.
+    owned: bool,
 }
 
 /// A device buffer (storage, uniform, copy source and destination).
@@ -91,6 +94,8 @@ pub struct VkBuffer {
     pub(crate) size: u64,
     allocation: Mutex<Option<Allocation>>,
     counted: bool,
+    /// Created (and destroyed) by the engine; `false`: imported, the host's to destroy.
+    owned: bool,
     pub(crate) dev: Arc<Device>,
 }
 
@@ -343,6 +348,7 @@ impl Device {
             peak: AtomicU64::new(0),
             graveyard: Mutex::new(Vec::new()),
             graveyard_bytes: AtomicU64::new(0),
+            owned: true,
         }))
     }
 
@@ -406,6 +412,7 @@ impl Device {
             size,
             allocation: Mutex::new(Some(allocation)),
             counted,
+            owned: true,
             dev: self.clone(),
         })
     }
@@ -477,6 +484,54 @@ impl Device {
 }
 
 impl Device {
+    /// A device the host application created ([`crate::HostDevice`]); it stays the host's.
+    pub fn from_host(h: crate::HostDevice) -> Result<Arc<Device>, VulkanError> {
+        let crate::HostDevice {
+            entry,
+            instance,
+            physical_device,
+            device,
+            queue_family,
+            queue_index,
+            float_atomics,
+        } = h;
+        // SAFETY: the host guarantees the handles are valid and belong together.
+        let props = unsafe { instance.get_physical_device_properties(physical_device) };
+        let name = props
+            .device_name_as_c_str()
+            .map(|c: &CStr| c.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        // SAFETY: the host created the device with this queue.
+        let queue = unsafe { device.get_device_queue(queue_family, queue_index) };
+        let allocator = Allocator::new(&AllocatorCreateDesc {
+            instance: instance.clone(),
+            device: device.clone(),
+            physical_device,
+            debug_settings: Default::default(),
+            buffer_device_address: false,
+            allocation_sizes: Default::default(),
+        })
+        .map_err(|e| VulkanError::Alloc(e.to_string()))?;
+        Ok(Arc::new(Device {
+            _entry: entry,
+            validation: None,
+            instance,
+            device,
+            queue: Mutex::new(queue),
+            queue_family,
+            allocator: Mutex::new(Some(allocator)),
+            pipelines: Mutex::new(HashMap::new()),
+            name,
+            kind: props.device_type,
+            float_atomics,
+            in_use: AtomicU64::new(0),
+            peak: AtomicU64::new(0),
+            graveyard: Mutex::new(Vec::new()),
+            graveyard_bytes: AtomicU64::new(0),
+            owned: false,
+        }))
+    }
+
     /// Frees the dropped buffers. Call only when no submission that could use them is
     /// pending (the engine calls it after waiting for its fence).
     pub fn collect(&self) {
@@ -497,6 +552,35 @@ impl Device {
 }
 
 impl VkBuffer {
+    /// The Vulkan buffer (to share it with the host application: valid while this value
+    /// lives; usage storage, uniform, transfer source and destination).
+    pub fn handle(&self) -> vk::Buffer {
+        self.buffer
+    }
+
+    /// Its size in bytes (a multiple of 4, at least what was asked for).
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    /// A buffer of the host application's, for the engine's kernels to use.
+    ///
+    /// # Safety
+    /// `buffer` must be a buffer of `dev`'s device, at least `size` bytes long, created with
+    /// storage-buffer and transfer usage, bound to memory, and alive until the engine has
+    /// finished with it (after the engine's next read or `VulkanEngine::finish`); the engine
+    /// never destroys it.
+    pub(crate) unsafe fn import(dev: &Arc<Device>, buffer: vk::Buffer, size: u64) -> VkBuffer {
+        VkBuffer {
+            buffer,
+            size,
+            allocation: Mutex::new(None),
+            counted: false,
+            owned: false,
+            dev: dev.clone(),
+        }
+    }
+
     /// Runs `f` on the buffer's mapped bytes (host-visible buffers only).
     pub(crate) fn mapped<R>(&self, f: impl FnOnce(&mut [u8]) -> R) -> Result<R, VulkanError> {
         let mut a = self.allocation.lock().unwrap_or_else(|e| e.into_inner());
@@ -510,6 +594,9 @@ impl VkBuffer {
 
 impl Drop for VkBuffer {
     fn drop(&mut self) {
+        if !self.owned {
+            return;
+        }
         let a = self
             .allocation
             .get_mut()
@@ -556,11 +643,13 @@ impl Drop for Device {
                     .unwrap_or_else(|e| e.into_inner())
                     .take(),
             );
-            self.device.destroy_device(None);
-            if let Some(v) = self.validation.take() {
-                v.utils.destroy_debug_utils_messenger(v.messenger, None);
+            if self.owned {
+                self.device.destroy_device(None);
+                if let Some(v) = self.validation.take() {
+                    v.utils.destroy_debug_utils_messenger(v.messenger, None);
+                }
+                self.instance.destroy_instance(None);
             }
-            self.instance.destroy_instance(None);
         }
     }
 }

@@ -85,6 +85,11 @@ impl VulkanEngine {
     pub fn with_float_atomics(allow: bool) -> Result<Self, VulkanError> {
         let wanted = std::env::var("R4D_VULKAN_DEVICE").ok();
         let dev = Device::new(wanted.as_deref(), allow)?;
+        Self::on(dev)
+    }
+
+    /// The engine's command pool and fence on `dev`.
+    fn on(dev: Arc<Device>) -> Result<Self, VulkanError> {
         let d = &dev.device;
         // SAFETY: valid create infos; destroyed in Inner's Drop.
         let (pool, fence) = unsafe {
@@ -114,6 +119,39 @@ impl VulkanEngine {
                 }),
             }),
         })
+    }
+
+    /// The engine on a device the host application created and keeps (embedding in a Vulkan
+    /// renderer: the same device, memory and queue; see `examples/embed.rs`). The engine's
+    /// own objects (buffers, pipelines, pools) are destroyed with it; the instance and device
+    /// are not.
+    ///
+    /// # Safety
+    /// The handles must be valid and belong together, the device must outlive the engine and
+    /// everything made from it, and the host must not use the queue while an engine call is
+    /// running (Vulkan queues are externally synchronised; the engine submits only inside its
+    /// calls and waits before returning from a read or [`VulkanEngine::finish`]).
+    pub unsafe fn from_host(host: crate::HostDevice) -> Result<Self, VulkanError> {
+        let dev = Device::from_host(host)?;
+        Self::on(dev)
+    }
+
+    /// A buffer of the host application's, for the engine's kernels to bind (with
+    /// [`r4d_gpu::GpuBuf`]'s `raw` field, or in a recording). Buffers the engine creates
+    /// are shared the other way with [`VkBuffer::handle`].
+    ///
+    /// # Safety
+    /// `buffer` must belong to this engine's device, hold at least `size` bytes, have been
+    /// created with storage-buffer and transfer usage and bound to memory, and stay alive
+    /// until the engine is done with it (its next read, or [`VulkanEngine::finish`]).
+    pub unsafe fn import_buffer(&self, buffer: vk::Buffer, size: u64) -> VkBuffer {
+        // SAFETY: the caller's contract, passed on.
+        unsafe { VkBuffer::import(&self.inner.dev, buffer, size) }
+    }
+
+    /// Submits everything recorded so far and waits for it (a read does the same).
+    pub fn finish(&self) -> Result<(), VulkanError> {
+        self.flush()
     }
 
     /// The device's name.

@@ -21,6 +21,7 @@ mod device;
 mod engine;
 pub mod testing;
 
+pub use ash;
 pub use device::VkBuffer;
 pub use engine::VulkanEngine;
 
@@ -29,6 +30,27 @@ pub type VulkanMpm = r4d_gpu::GpuMpm<VulkanEngine>;
 
 /// The renderer's kernels (forward and backward) on Vulkan.
 pub type VulkanSplat = r4d_gpu::GpuSplat<VulkanEngine>;
+
+/// A Vulkan device the host application created and keeps (embedding: the engine shares
+/// the application's instance, device and a queue; [`VulkanEngine::from_host`]).
+pub struct HostDevice {
+    /// The loader the instance came from.
+    pub entry: ash::Entry,
+    /// The application's instance (Vulkan 1.1 or later).
+    pub instance: ash::Instance,
+    /// The physical device of `device`.
+    pub physical_device: ash::vk::PhysicalDevice,
+    /// The application's device.
+    pub device: ash::Device,
+    /// A queue family with compute.
+    pub queue_family: u32,
+    /// The queue of that family the engine submits to.
+    pub queue_index: u32,
+    /// Whether the device was created with `VK_EXT_shader_atomic_float` and its
+    /// `shaderBufferFloat32AtomicAdd` feature enabled (then scatter kernels use native float
+    /// atomics; otherwise their compare-exchange variants).
+    pub float_atomics: bool,
+}
 
 /// Errors of the Vulkan engine.
 #[derive(Debug, thiserror::Error)]
