@@ -86,6 +86,78 @@ pub(crate) struct Device {
     /// The instance and device were created here (destroyed with it); `false`: the host
     /// application's ([`crate::HostDevice`]), left alive.
     owned: bool,
+    /// The pipeline cache, loaded from and saved to `cache_path`.
+    pipeline_cache: vk::PipelineCache,
+    cache_path: Option<std::path::PathBuf>,
+}
+
+/// The largest pipeline cache file read (bytes).
+const MAX_CACHE_BYTES: u64 = 256 << 20;
+
+/// Where the pipeline cache of a device lives: `R4D_VULKAN_PIPELINE_CACHE` (a file; `off`
+/// disables it), else `$XDG_CACHE_HOME/r4d/` or `~/.cache/r4d/`, one file per vendor and
+/// device id.
+fn cache_path(props: &vk::PhysicalDeviceProperties) -> Option<std::path::PathBuf> {
+    match std::env::var_os("R4D_VULKAN_PIPELINE_CACHE") {
+        Some(p) if p == "off" => None,
+        Some(p) => Some(p.into()),
+        None => {
+            let base = std::env::var_os("XDG_CACHE_HOME")
+                .map(std::path::PathBuf::from)
+                .or_else(|| {
+                    std::env::var_os("HOME").map(|h| std::path::Path::new(&h).join(".cache"))
+                })?;
+            Some(base.join("r4d").join(format!(
+                "vulkan-pipelines-{:04x}-{:04x}.bin",
+                props.vendor_id, props.device_id
+            )))
+        }
+    }
+}
+
+/// The cache file: this magic, the checksum of the data ([`r4d_fsio::Fingerprint`], 32 hex
+/// digits), then the driver's pipeline cache data.
+const CACHE_MAGIC: &[u8; 8] = b"R4DVKPC1";
+
+fn cache_checksum(data: &[u8]) -> String {
+    let mut f = r4d_fsio::Fingerprint::new();
+    f.bytes(data);
+    f.finish()
+}
+
+/// A pipeline cache seeded with `path`'s data when it is whole (magic and checksum) and its
+/// header is this device's (Vulkan's header: length, version 1, vendor id, device id,
+/// pipeline cache UUID); anything else (missing, damaged, another device's or driver's, too
+/// large) starts empty: a driver never sees bytes it did not write.
+fn load_cache(
+    device: &ash::Device,
+    props: &vk::PhysicalDeviceProperties,
+    path: Option<&std::path::Path>,
+) -> vk::PipelineCache {
+    let data = path
+        .filter(|p| std::fs::metadata(p).is_ok_and(|m| m.len() <= MAX_CACHE_BYTES))
+        .and_then(|p| std::fs::read(p).ok())
+        .filter(|f| {
+            f.len() >= 40
+                && &f[..8] == CACHE_MAGIC
+                && f[8..40] == *cache_checksum(&f[40..]).as_bytes()
+        })
+        .map(|f| f[40..].to_vec())
+        .filter(|d| {
+            let u = |o: usize| u32::from_le_bytes([d[o], d[o + 1], d[o + 2], d[o + 3]]);
+            d.len() >= 32
+                && u(0) >= 32
+                && u(4) == 1
+                && u(8) == props.vendor_id
+                && u(12) == props.device_id
+                && d[16..32] == props.pipeline_cache_uuid
+        })
+        .unwrap_or_default();
+    let info = vk::PipelineCacheCreateInfo::default().initial_data(&data);
+    // SAFETY: valid create info (the data was checked against this device's header); an
+    // error falls back to no cache.
+    unsafe { device.create_pipeline_cache(&info, None) }
+        .unwrap_or_else(|_| vk::PipelineCache::null())
 }
 
 /// A device buffer (storage, uniform, copy source and destination).
@@ -332,7 +404,13 @@ impl Device {
             unsafe { device.destroy_device(None) };
             VulkanError::Alloc(e.to_string())
         })?;
+        // SAFETY: pd belongs to the instance.
+        let props = unsafe { instance.get_physical_device_properties(pd) };
+        let cache_path = cache_path(&props);
+        let pipeline_cache = load_cache(&device, &props, cache_path.as_deref());
         Ok(Arc::new(Device {
+            pipeline_cache,
+            cache_path,
             _entry: entry,
             validation: validation.take(),
             instance,
@@ -466,7 +544,7 @@ impl Device {
                 .stage(stage)
                 .layout(layout)];
             let pipeline = d
-                .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
+                .create_compute_pipelines(self.pipeline_cache, &info, None)
                 .map_err(|(_, result)| VulkanError::Vk {
                     what: "vkCreateComputePipelines",
                     result,
@@ -512,7 +590,11 @@ impl Device {
             allocation_sizes: Default::default(),
         })
         .map_err(|e| VulkanError::Alloc(e.to_string()))?;
+        let cache_path = cache_path(&props);
+        let pipeline_cache = load_cache(&device, &props, cache_path.as_deref());
         Ok(Arc::new(Device {
+            pipeline_cache,
+            cache_path,
             _entry: entry,
             validation: None,
             instance,
@@ -635,6 +717,23 @@ impl Drop for Device {
                 self.device.destroy_pipeline_layout(p.layout, None);
                 self.device
                     .destroy_descriptor_set_layout(p.set_layout, None);
+            }
+            if self.pipeline_cache != vk::PipelineCache::null() {
+                if let (Some(path), Ok(data)) = (
+                    &self.cache_path,
+                    self.device.get_pipeline_cache_data(self.pipeline_cache),
+                ) {
+                    // Best effort: a cache that cannot be saved costs compile time only.
+                    if let Some(dir) = path.parent() {
+                        let _ = std::fs::create_dir_all(dir);
+                    }
+                    let mut file = CACHE_MAGIC.to_vec();
+                    file.extend_from_slice(cache_checksum(&data).as_bytes());
+                    file.extend_from_slice(&data);
+                    let _ = r4d_fsio::write_atomic(path, &file);
+                }
+                self.device
+                    .destroy_pipeline_cache(self.pipeline_cache, None);
             }
             // The allocator frees its memory blocks before the device goes.
             drop(
