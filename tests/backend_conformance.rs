@@ -289,13 +289,9 @@ fn wgpu_two_part_object_matches_cpu() {
     compare_elastic("wgpu two-part object", TWO_PART, b, 20);
 }
 
-#[test]
-fn wgpu_path_dependent_materials_match_cpu() {
-    let Some(b) = wgpu("wgpu_plastic") else {
-        return;
-    };
-    let ctx = b.engine().context().clone();
-    let scenes = [
+/// The path-dependent scenes of the suite: every plastic model and the fluid.
+fn path_dependent_scenes() -> Vec<(&'static str, String)> {
+    vec![
         ("metal beam (clamped, pressed at mid-span)", METAL_BEAM.to_string()),
         (
             "sand column",
@@ -337,16 +333,23 @@ fn wgpu_path_dependent_materials_match_cpu() {
                 false,
             ),
         ),
-    ];
-    for (label, text) in scenes {
-        compare_plastic(
-            &format!("wgpu {label}"),
-            &text,
-            WgpuMpm::new(ctx.clone()),
-            10,
-        );
+    ]
+}
+
+/// Every path-dependent scene on a backend made by `make` against the CPU.
+fn path_dependent_materials_match_cpu<B: MpmKernels>(engine: &str, make: impl Fn() -> B) {
+    for (label, text) in path_dependent_scenes() {
+        compare_plastic(&format!("{engine} {label}"), &text, make(), 10);
     }
-    drop(b);
+}
+
+#[test]
+fn wgpu_path_dependent_materials_match_cpu() {
+    let Some(b) = wgpu("wgpu_plastic") else {
+        return;
+    };
+    let ctx = b.engine().context().clone();
+    path_dependent_materials_match_cpu("wgpu", || WgpuMpm::new(ctx.clone()));
 }
 
 /// The Vulkan engine (ash), or `None` (skip).
@@ -395,32 +398,6 @@ fn vulkan_path_dependent_materials_match_cpu() {
     let Some(e) = vulkan("vulkan_plastic") else {
         return;
     };
-    let scenes = [
-        ("metal beam (clamped, pressed at mid-span)", METAL_BEAM.to_string()),
-        (
-            "sand column",
-            plastic_scene(
-                "sand",
-                "youngs_modulus_pa = 2e5\npoisson_ratio = 0.3\nfriction_angle_deg = 30.0\ndensity_kg_m3 = 1600.0",
-                false,
-            ),
-        ),
-        (
-            "plasticine (pressed)",
-            plastic_scene(
-                "plasticine",
-                "youngs_modulus_pa = 3e5\npoisson_ratio = 0.3\nyield_stress_pa = 2e3\nsoftening = 0.1\ndensity_kg_m3 = 1200.0",
-                true,
-            ),
-        ),
-    ];
-    for (label, text) in scenes {
-        compare_plastic(
-            &format!("vulkan {label}"),
-            &text,
-            r4d_backend_vulkan::VulkanMpm::new(e.clone()),
-            10,
-        );
-    }
+    path_dependent_materials_match_cpu("vulkan", || r4d_backend_vulkan::VulkanMpm::new(e.clone()));
     r4d_backend_vulkan::testing::assert_validation_clean(&e, "vulkan_plastic");
 }

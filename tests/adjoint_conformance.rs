@@ -1,9 +1,11 @@
-//! The device adjoint against the parallel CPU adjoint: the one stepper
-//! (`KernelAdjoint`) on `WgpuMpm` and on `CpuBackend<f32>`, driven by the same checkpointing
+//! The device adjoint against the parallel CPU adjoint, one suite for every GPU engine (wgpu
+//! and Vulkan: `wgpu::*`, `vulkan::*`): the one stepper (`KernelAdjoint`) on `WgpuMpm` /
+//! `VulkanMpm` and on `CpuBackend<f32>`, driven by the same checkpointing
 //! driver: parameter gradients (issue 9's bound for elastic scenes: 1e-3 relative) and the
 //! adjoint of the initial state.
 
 use r4d_backend_cpu::{CpuBackend, Par};
+use r4d_backend_vulkan::{VulkanEngine, VulkanMpm};
 use r4d_backend_wgpu::testing::gpu_or_skip;
 use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
@@ -157,12 +159,38 @@ fn cpu(sim: &HostSim, params: &[PhysParams<f32>]) -> (Vec<PhysParams<f32>>, Host
     run(CpuBackend::<f32>::with_par(Par::Rayon), sim, params)
 }
 
+/// A GPU engine the suite runs on (every test below runs on each, `wgpu::*` and `vulkan::*`).
+enum Gpu {
+    Wgpu(Arc<WgpuContext>),
+    Vulkan(VulkanEngine),
+}
+
+impl Gpu {
+    fn wgpu(test: &str) -> Option<Gpu> {
+        gpu_or_skip(test).map(|c| Gpu::Wgpu(Arc::new(c)))
+    }
+
+    fn vulkan(test: &str) -> Option<Gpu> {
+        r4d_backend_vulkan::testing::vulkan_or_skip(test).map(Gpu::Vulkan)
+    }
+
+    /// No validation message on the Vulkan engine (`R4D_VULKAN_VALIDATION=1`).
+    fn check(&self, test: &str) {
+        if let Gpu::Vulkan(e) = self {
+            r4d_backend_vulkan::testing::assert_validation_clean(e, test);
+        }
+    }
+}
+
 fn gpu(
-    ctx: &Arc<WgpuContext>,
+    b: &Gpu,
     sim: &HostSim,
     params: &[PhysParams<f32>],
 ) -> (Vec<PhysParams<f32>>, HostState<f32>) {
-    run(WgpuMpm::new(ctx.clone()), sim, params)
+    match b {
+        Gpu::Wgpu(ctx) => run(WgpuMpm::new(ctx.clone()), sim, params),
+        Gpu::Vulkan(e) => run(VulkanMpm::new(e.clone()), sim, params),
+    }
 }
 
 fn rel(a: f64, b: f64) -> f64 {
@@ -184,18 +212,13 @@ fn rel_l2(a: &[f32], b: &[f32]) -> f64 {
     (d / s.max(1e-300)).sqrt()
 }
 
-#[test]
-fn device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly() {
-    let Some(ctx) = gpu_or_skip("device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly") else {
-        return;
-    };
-    let ctx = Arc::new(ctx);
+fn device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly(ctx: &Gpu) {
     for force in [ForceForm::Classic, ForceForm::Mls] {
         let (cfg, sc) = scene(force);
         let sim = HostSim::new(&cfg, &sc).unwrap();
         let params: Vec<PhysParams<f32>> = cfg.parts.iter().map(PhysParams::of).collect();
         let (gc, ac) = cpu(&sim, &params);
-        let (gg, ag) = gpu(&ctx, &sim, &params);
+        let (gg, ag) = gpu(ctx, &sim, &params);
         eprintln!("{force:?}: {} particles", sim.len());
         for s in 0..params.len() {
             let pairs = [
@@ -227,11 +250,7 @@ fn device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly() {
     }
 }
 
-#[test]
-fn per_particle_gradients_are_reduced_per_slot() {
-    let Some(ctx) = gpu_or_skip("per_particle_gradients_are_reduced_per_slot") else {
-        return;
-    };
+fn per_particle_gradients_are_reduced_per_slot(ctx: &Gpu) {
     let (cfg, sc) = scene(ForceForm::Mls);
     let sim = HostSim::new(&cfg, &sc).unwrap().per_particle();
     let params: Vec<PhysParams<f32>> = sim
@@ -240,7 +259,7 @@ fn per_particle_gradients_are_reduced_per_slot() {
         .map(|&p| PhysParams::of(&cfg.parts[p as usize]))
         .collect();
     let (gc, _) = cpu(&sim, &params);
-    let (gg, _) = gpu(&Arc::new(ctx), &sim, &params);
+    let (gg, _) = gpu(ctx, &sim, &params);
     type Field = fn(&PhysParams<f32>) -> f32;
     let fields: [(&str, Field); 3] = [
         ("E", |g| g.youngs_modulus),
@@ -326,14 +345,7 @@ fn plastic_materials() -> Vec<(&'static str, PartParams)> {
 /// measured on lavapipe, either scatter: <= 5e-4 for metal, sand, foam and plasticine, snow
 /// 1.1e-3 (d/dnu of part 1) and 6e-3 on its nearly cancelled d/dE. Initial adjoint: x, v
 /// 1e-3 (measured 1.4e-5); F 5e-2 (measured up to 1.2e-2, sand; 1.4e-4 metal).
-#[test]
-fn device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials() {
-    let Some(ctx) =
-        gpu_or_skip("device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials")
-    else {
-        return;
-    };
-    let ctx = Arc::new(ctx);
+fn device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials(ctx: &Gpu) {
     for (name, part) in plastic_materials() {
         let (mut cfg, _) = scene(ForceForm::Mls);
         cfg.parts[0] = PartParams {
@@ -350,7 +362,7 @@ fn device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials() {
         let sim = HostSim::new(&cfg, &sc).unwrap();
         let params: Vec<PhysParams<f32>> = cfg.parts.iter().map(PhysParams::of).collect();
         let (mut gc, ac) = cpu(&sim, &params);
-        let (mut gg, ag) = gpu(&ctx, &sim, &params);
+        let (mut gg, ag) = gpu(ctx, &sim, &params);
         sim.init_vjp(&ac, &mut gc);
         sim.init_vjp(&ag, &mut gg);
         for s in 0..params.len() {
@@ -396,11 +408,7 @@ fn device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials() {
 /// gradients nearly vanish: E and nu are checked to 1e-2 (measured up to 6e-3), the density's
 /// (5e-8 against 5e-3 with the boundaries: summation noise, 5-8% run to run) is only printed;
 /// the initial adjoint is well conditioned: 1e-3 relative L2 (measured 7e-7).
-#[test]
-fn particles_leaving_the_grid_match_the_cpu_adjoint() {
-    let Some(ctx) = gpu_or_skip("particles_leaving_the_grid_match_the_cpu_adjoint") else {
-        return;
-    };
+fn particles_leaving_the_grid_match_the_cpu_adjoint(ctx: &Gpu) {
     let (mut cfg, _) = scene(ForceForm::Mls);
     cfg.boundary.clear();
     cfg.solver.gravity = [0.0, 0.0, -2000.0];
@@ -409,7 +417,7 @@ fn particles_leaving_the_grid_match_the_cpu_adjoint() {
     let sim = HostSim::new(&cfg, &sc).unwrap();
     let params: Vec<PhysParams<f32>> = cfg.parts.iter().map(PhysParams::of).collect();
     let (gc, ac) = cpu(&sim, &params);
-    let (gg, ag) = gpu(&Arc::new(ctx), &sim, &params);
+    let (gg, ag) = gpu(ctx, &sim, &params);
     let host = infallible(KernelAdjoint::new(
         CpuBackend::<f32>::with_par(Par::Rayon),
         &sim,
@@ -446,3 +454,54 @@ fn particles_leaving_the_grid_match_the_cpu_adjoint() {
         assert!(r < 1e-3, "initial adjoint of {name}: rel L2 {r:e}");
     }
 }
+
+/// The suite on each GPU engine (skipped without a device unless `R4D_REQUIRE_GPU=1`).
+macro_rules! on_engine {
+    ($engine:ident) => {
+        mod $engine {
+            #[test]
+            fn device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly() {
+                if let Some(b) = super::Gpu::$engine(stringify!(
+                    device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly
+                )) {
+                    super::device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly(&b);
+                    b.check(stringify!(
+                        device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly
+                    ));
+                }
+            }
+            #[test]
+            fn per_particle_gradients_are_reduced_per_slot() {
+                if let Some(b) =
+                    super::Gpu::$engine(stringify!(per_particle_gradients_are_reduced_per_slot))
+                {
+                    super::per_particle_gradients_are_reduced_per_slot(&b);
+                    b.check(stringify!(per_particle_gradients_are_reduced_per_slot));
+                }
+            }
+            #[test]
+            fn device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials() {
+                if let Some(b) = super::Gpu::$engine(stringify!(
+                    device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials
+                )) {
+                    super::device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials(&b);
+                    b.check(stringify!(
+                        device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials
+                    ));
+                }
+            }
+            #[test]
+            fn particles_leaving_the_grid_match_the_cpu_adjoint() {
+                if let Some(b) = super::Gpu::$engine(stringify!(
+                    particles_leaving_the_grid_match_the_cpu_adjoint
+                )) {
+                    super::particles_leaving_the_grid_match_the_cpu_adjoint(&b);
+                    b.check(stringify!(particles_leaving_the_grid_match_the_cpu_adjoint));
+                }
+            }
+        }
+    };
+}
+
+on_engine!(wgpu);
+on_engine!(vulkan);
