@@ -138,6 +138,23 @@ fn benches(c: &mut Criterion) {
         }
         Err(e) => eprintln!("substep/wgpu skipped: {e}"),
     }
+    // The Vulkan engine on the first Vulkan device (the same device as wgpu's where both see
+    // one; lavapipe here). Each substep is finished (submitted and waited for).
+    match r4d_backend_vulkan::VulkanEngine::new() {
+        Ok(e) => {
+            eprintln!("vulkan device: {}", e.device_name());
+            bench_backend(
+                c,
+                "vulkan",
+                || r4d_backend_vulkan::VulkanMpm::new(e.clone()),
+                |b: &r4d_backend_vulkan::VulkanMpm| {
+                    let _ = b.engine().finish();
+                },
+                &[32_000, 100_000],
+            );
+        }
+        Err(e) => eprintln!("substep/vulkan skipped: {e}"),
+    }
 }
 
 criterion_group!(mpm, benches);

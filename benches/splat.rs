@@ -164,29 +164,74 @@ fn bench(c: &mut Criterion) {
         "wgpu adapter: {} ({:?})",
         ctx.info.name, ctx.info.device_type
     );
-    let mut group = c.benchmark_group("splat_wgpu");
+    bench_gpu_renderer(
+        c,
+        "splat_wgpu",
+        &cases,
+        &scenes,
+        || WgpuSplat::new(ctx.clone()),
+        || ctx.reset_peak(),
+        || ctx.peak_bytes(),
+    );
+    // The same renderer on the Vulkan engine (the same recordings through ash).
+    match r4d_backend_vulkan::VulkanEngine::new() {
+        Ok(e) => {
+            eprintln!("vulkan device: {}", e.device_name());
+            bench_gpu_renderer(
+                c,
+                "splat_vulkan",
+                &cases,
+                &scenes,
+                || r4d_backend_vulkan::VulkanSplat::new(e.clone()),
+                || e.reset_peak(),
+                || {
+                    use r4d_gpu::GpuEngine;
+                    e.memory_usage().peak_bytes
+                },
+            );
+        }
+        Err(e) => eprintln!("splat/vulkan skipped: {e}"),
+    }
+}
+
+/// Forward and forward+backward renders of `cases` on a GPU renderer made by `make`, with
+/// its device memory peaks.
+fn bench_gpu_renderer<B: r4d_splat::SplatKernels>(
+    c: &mut Criterion,
+    name: &str,
+    cases: &[(usize, u32, u32)],
+    scenes: &[(usize, Gaussians, Deformation)],
+    make: impl Fn() -> B,
+    reset_device_peak: impl Fn(),
+    device_peak: impl Fn() -> u64,
+) {
+    let scene_of = |n: usize| {
+        let s = scenes.iter().find(|s| s.0 == n).expect("built above");
+        (&s.1, &s.2)
+    };
+    let mut group = c.benchmark_group(name);
     group.sample_size(10);
-    for &(n, w, h) in &cases {
+    for &(n, w, h) in cases {
         let (g, d) = scene_of(n);
         let cam = Camera::look_at(w, h, 60.0, [0.0, -3.0, 0.5], [0.0; 3], [0.0, 0.0, 1.0]);
         let set = RenderSettings::default();
-        let mut r = SplatRenderer::new(WgpuSplat::new(ctx.clone()));
+        let mut r = SplatRenderer::new(make());
         let id = format!("{n}/{w}x{h}");
         // A first call builds the pipelines.
         r.render(g, Some(d), &cam, &set).unwrap();
-        ctx.reset_peak();
+        reset_device_peak();
         let base = reset_peak();
         r.render(g, Some(d), &cam, &set).unwrap();
-        let (fwd_dev, fwd_host) = (ctx.peak_bytes(), peak_since(base));
+        let (fwd_dev, fwd_host) = (device_peak(), peak_since(base));
         let d_rgb = vec![1e-3f32; (w * h * 3) as usize];
         r.render_vjp(g, Some(d), &cam, &set, &d_rgb).unwrap();
-        ctx.reset_peak();
+        reset_device_peak();
         let base = reset_peak();
         r.render_vjp(g, Some(d), &cam, &set, &d_rgb).unwrap();
-        let (bwd_dev, bwd_host) = (ctx.peak_bytes(), peak_since(base));
+        let (bwd_dev, bwd_host) = (device_peak(), peak_since(base));
         let mib = |b: u64| b as f64 / 1048576.0;
         println!(
-            "splat_wgpu {id}: {} visible, {} tile intersections; peak device memory: forward \
+            "{name} {id}: {} visible, {} tile intersections; peak device memory: forward \
              {:.1} MiB, forward+backward {:.1} MiB; peak host memory: forward {:.1} MiB, \
              forward+backward {:.1} MiB",
             r.stats.visible,
