@@ -259,6 +259,23 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
         );
         assert_eq!(records(&dir), records(&reference), "killed at {share}");
     }
+    // One and two threads: the same fit, byte for byte (the reference above ran on every
+    // core; this machine's CI has two).
+    for threads in ["1", "2"] {
+        let dir = d.join(format!("threads{threads}"));
+        let o = Command::new(env!("CARGO_BIN_EXE_r4d"))
+            .args(with_out(&dir))
+            .env("RAYON_NUM_THREADS", threads)
+            .output()
+            .unwrap();
+        ok(&o);
+        assert_eq!(
+            std::fs::read(dir.join("params.json")).unwrap(),
+            std::fs::read(reference.join("params.json")).unwrap(),
+            "{threads} thread(s): params.json differs"
+        );
+        assert_eq!(records(&dir), records(&reference), "{threads} thread(s)");
+    }
 
     // Bad inputs: a video of the wrong size, parts for another scene.
     let small = d.join("small.npy");

@@ -16,6 +16,10 @@ use r4d_splat::project::{self as pj, GaussianIn, Projected, ProjectedGrad};
 use r4d_splat::raster::{self, Contribution, TileSplats};
 use r4d_splat::{CameraConsts, SplatKernels};
 use rayon::prelude::*;
+
+/// Accumulators of the rasterizer's backward pass (see `rasterize_vjp`): fixed, so that the
+/// result does not depend on the number of threads.
+const VJP_ACCUMULATORS: usize = 4;
 use std::convert::Infallible;
 
 /// The rayon CPU renderer backend.
@@ -167,7 +171,10 @@ impl SplatKernels for CpuSplat {
         let (w, h) = (w as usize, h as usize);
         let [tiles_x, tiles_y] = cam.tiles.map(|t| t as usize);
         let bg = cam.bg();
-        let workers = rayon::current_num_threads().clamp(1, 8);
+        // A fixed number of accumulators (tile rows interleaved over them, summed in order):
+        // the gradients are bitwise the same whatever the thread count (1 thread runs the
+        // four in turn). Memory: four copies of the per-Gaussian gradients (36 B each).
+        let workers = VJP_ACCUMULATORS;
         let parts: Vec<Vec<ProjectedGrad<f32>>> = (0..workers)
             .into_par_iter()
             .map(|wk| {
