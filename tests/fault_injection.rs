@@ -148,14 +148,50 @@ fn log_records(path: &Path) -> Vec<serde_json::Value> {
         .collect()
 }
 
-/// Runs `args` (ending in `--out DIR`-style arguments made by `make(dir)`) uninterrupted,
-/// then, for several kill instants, killed and resumed with `resume(dir)` until it succeeds;
-/// returns (reference dir, resumed dirs).
-fn killed_and_resumed(
-    name: &str,
-    make: &dyn Fn(&Path) -> Vec<String>,
-    resume: &dyn Fn(&Path) -> Vec<String>,
-) -> (PathBuf, Vec<PathBuf>) {
+/// The sagging beam's truth (2 frames of `tests/fixtures/fit/beam.toml`) simulated into
+/// `root/truth`: the target of the trajectory fits below.
+fn beam_truth(root: &Path) -> String {
+    let truth = root.join("truth");
+    ok(&r4d(&strings(&[
+        "simulate",
+        "--config",
+        &repo("tests/fixtures/fit/beam.toml"),
+        "--out",
+        truth.to_str().unwrap(),
+        "--frames",
+        "2",
+    ])));
+    truth.to_str().unwrap().to_string()
+}
+
+/// `r4d fit-trajectory` of the beam from `beam_start.toml` towards `truth`, writing `out`.
+fn fit_trajectory_args(truth: &str, params: &str, iters: usize, out: &Path) -> Vec<String> {
+    strings(&[
+        "fit-trajectory",
+        "--config",
+        &repo("tests/fixtures/fit/beam_start.toml"),
+        "--target",
+        truth,
+        "--params",
+        params,
+        "--iters",
+        &iters.to_string(),
+        "--frames",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
+/// Runs the command `make(dir)` uninterrupted, then, for several kill instants, killed and
+/// resumed (the same arguments plus `--resume`) until it succeeds; returns (reference dir,
+/// resumed dirs).
+fn killed_and_resumed(name: &str, make: &dyn Fn(&Path) -> Vec<String>) -> (PathBuf, Vec<PathBuf>) {
+    let resume = |dir: &Path| {
+        let mut a = make(dir);
+        a.push("--resume".into());
+        a
+    };
     let root = tmp(name);
     let reference = root.join("reference");
     let start = Instant::now();
@@ -196,12 +232,7 @@ fn simulate_killed_at_random_instants_resumes_byte_identical() {
             dir.to_str().unwrap(),
         ])
     };
-    let resume = |dir: &Path| {
-        let mut a = make(dir);
-        a.push("--resume".into());
-        a
-    };
-    let (reference, dirs) = killed_and_resumed("simulate", &make, &resume);
+    let (reference, dirs) = killed_and_resumed("simulate", &make);
     // The frames and the final state; summary.json holds wall times.
     let skip = |n: &str| n == "summary.json";
     let want = files(&reference, &skip);
@@ -213,41 +244,9 @@ fn simulate_killed_at_random_instants_resumes_byte_identical() {
 
 #[test]
 fn fit_trajectory_killed_at_random_instants_resumes_byte_identical() {
-    let root = tmp("fit_trajectory_truth");
-    let truth = root.join("truth");
-    ok(&r4d(&strings(&[
-        "simulate",
-        "--config",
-        &repo("tests/fixtures/fit/beam.toml"),
-        "--out",
-        truth.to_str().unwrap(),
-        "--frames",
-        "2",
-    ])));
-    let truth_s = truth.to_str().unwrap().to_string();
-    let make = move |dir: &Path| {
-        strings(&[
-            "fit-trajectory",
-            "--config",
-            &repo("tests/fixtures/fit/beam_start.toml"),
-            "--target",
-            &truth_s,
-            "--params",
-            "E,density",
-            "--iters",
-            "4",
-            "--frames",
-            "2",
-            "--out",
-            dir.to_str().unwrap(),
-        ])
-    };
-    let resume = |dir: &Path| {
-        let mut a = make(dir);
-        a.push("--resume".into());
-        a
-    };
-    let (reference, dirs) = killed_and_resumed("fit_trajectory", &make, &resume);
+    let truth = beam_truth(&tmp("fit_trajectory_truth"));
+    let make = move |dir: &Path| fit_trajectory_args(&truth, "E,density", 4, dir);
+    let (reference, dirs) = killed_and_resumed("fit_trajectory", &make);
     let want_params = std::fs::read(reference.join("params.json")).unwrap();
     let want_log = log_records(&reference.join("log.jsonl"));
     assert_eq!(want_log.len(), 4);
@@ -349,18 +348,8 @@ fn one_and_two_threads_give_byte_identical_outputs() {
     let inputs = root.join("inputs");
     std::fs::create_dir_all(&inputs).unwrap();
     segment_inputs(&inputs);
-    let truth = root.join("truth");
-    ok(&r4d(&strings(&[
-        "simulate",
-        "--config",
-        &repo("tests/fixtures/fit/beam.toml"),
-        "--out",
-        truth.to_str().unwrap(),
-        "--frames",
-        "2",
-    ])));
+    let truth_s = beam_truth(&root);
     type Make = Box<dyn Fn(&Path) -> Vec<String>>;
-    let truth_s = truth.to_str().unwrap().to_string();
     let inputs2 = inputs.clone();
     let commands: Vec<(&str, Make, &[&str])> = vec![
         (
@@ -380,23 +369,7 @@ fn one_and_two_threads_give_byte_identical_outputs() {
         ),
         (
             "fit-trajectory",
-            Box::new(move |d: &Path| {
-                strings(&[
-                    "fit-trajectory",
-                    "--config",
-                    &repo("tests/fixtures/fit/beam_start.toml"),
-                    "--target",
-                    &truth_s,
-                    "--params",
-                    "E",
-                    "--iters",
-                    "2",
-                    "--frames",
-                    "2",
-                    "--out",
-                    d.to_str().unwrap(),
-                ])
-            }),
+            Box::new(move |d: &Path| fit_trajectory_args(&truth_s, "E", 2, d)),
             // The log holds wall times; its other fields are compared below.
             &["log.jsonl"],
         ),

@@ -130,7 +130,7 @@ type = "bounding_box"
         // SAFETY: the buffer belongs to the engine's device, has storage and transfer usage,
         // and is destroyed only after `engine.finish()`.
         let imported = unsafe { engine.import_buffer(app_buffer, staged.raw.size()) };
-        engine.write(&imported, bytemuck_bytes(&x))?;
+        engine.write(&imported, bytemuck::cast_slice(&x))?;
         let back = engine.read(&imported, 12)?;
         println!(
             "the engine wrote and read the application's buffer: {:?}",
@@ -151,12 +151,6 @@ type = "bounding_box"
         instance.destroy_instance(None);
     }
     Ok(())
-}
-
-/// The bytes of points.
-fn bytemuck_bytes(x: &[[f32; 3]]) -> &[u8] {
-    // SAFETY: [f32; 3] is plain data without padding.
-    unsafe { std::slice::from_raw_parts(x.as_ptr() as *const u8, std::mem::size_of_val(x)) }
 }
 
 /// The example runs as a test too (`test = true` in Cargo.toml): skipped without a Vulkan

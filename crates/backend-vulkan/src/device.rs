@@ -475,11 +475,19 @@ impl Device {
                 }
             })?;
         // SAFETY: the memory is unbound, large enough, and outlives the buffer.
-        unsafe {
+        let bound = unsafe {
             self.device
                 .bind_buffer_memory(buffer, allocation.memory(), allocation.offset())
+        };
+        if let Err(result) = bound {
+            // SAFETY: the buffer is unused; its memory goes back to the allocator.
+            unsafe { self.device.destroy_buffer(buffer, None) };
+            let _ = allocator.free(allocation);
+            return Err(VulkanError::Vk {
+                what: "vkBindBufferMemory",
+                result,
+            });
         }
-        .map_err(vk_err("vkBindBufferMemory"))?;
         drop(guard);
         if counted {
             let now = self.in_use.fetch_add(size, Ordering::Relaxed) + size;

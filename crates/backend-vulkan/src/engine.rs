@@ -433,8 +433,18 @@ impl GpuEngine for VulkanEngine {
         let mut dispatches = Vec::new();
         let (mut n_uniform, mut n_storage) = (0u32, 0u32);
         for c in &rec.commands {
-            if let Command::Dispatch { kernel, .. } = c {
+            if let Command::Dispatch {
+                kernel, bindings, ..
+            } = c
+            {
                 let k = kernel.variant(dev.float_atomics);
+                if bindings.len() != k.bindings.len() {
+                    return Err(VulkanError::Bindings {
+                        kernel: k.name,
+                        given: bindings.len(),
+                        expected: k.bindings.len(),
+                    });
+                }
                 for b in k.bindings {
                     match b.kind {
                         r4d_shaders::BindingKind::Uniform => n_uniform += 1,

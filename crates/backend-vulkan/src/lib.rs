@@ -87,6 +87,16 @@ pub enum VulkanError {
     /// A host access to a buffer that is not host-visible (an engine bug).
     #[error("a Vulkan buffer is not host-visible")]
     NotMapped,
+    /// A dispatch bound another number of buffers than the kernel declares (a bug).
+    #[error("kernel '{kernel}' binds {expected} buffers, the dispatch gave {given}")]
+    Bindings {
+        /// The kernel.
+        kernel: &'static str,
+        /// Buffers given.
+        given: usize,
+        /// Bindings the kernel's entry point uses.
+        expected: usize,
+    },
     /// The device is being torn down.
     #[error("the Vulkan device is gone")]
     Lost,

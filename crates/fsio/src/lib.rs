@@ -41,6 +41,21 @@ fn named(path: &Path, e: io::Error) -> io::Error {
     io::Error::new(e.kind(), format!("{}: {e}", path.display()))
 }
 
+/// Reads a whole file of at most `max` bytes: a larger one is refused from its size before
+/// anything is read (an `InvalidData` error giving its size and the limit), so a file cannot
+/// make a reader allocate without bound. The errors do not repeat the path: callers' error
+/// types name the file.
+pub fn read_bounded(path: &Path, max: u64) -> io::Result<Vec<u8>> {
+    let len = std::fs::metadata(path)?.len();
+    if len > max {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("{len} bytes, more than the {max} read from such a file"),
+        ));
+    }
+    std::fs::read(path)
+}
+
 /// Writes `bytes` to `path` atomically (see the crate docs).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     let mut f = AtomicFile::create(path)?;
@@ -292,6 +307,22 @@ mod tests {
         write_atomic(&p, b"new").unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"new");
         assert!(!temp_path(&p).exists());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn bounded_reads_refuse_larger_files_by_their_size() {
+        let d = dir("bounded");
+        let p = d.join("big.bin");
+        write_atomic(&p, &[7u8; 100]).unwrap();
+        assert_eq!(read_bounded(&p, 100).unwrap().len(), 100);
+        let e = read_bounded(&p, 99).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidData);
+        assert!(
+            e.to_string().contains("100 bytes") && e.to_string().contains("99"),
+            "{e}"
+        );
+        assert!(read_bounded(&d.join("none"), 1).is_err());
         std::fs::remove_dir_all(&d).unwrap();
     }
 

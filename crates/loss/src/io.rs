@@ -123,7 +123,10 @@ pub fn read_frames<T: Real>(files: &[PathBuf], what: &Path) -> Result<Video<T>, 
     let mut data = Vec::new();
     let mut size = None;
     for f in files {
-        let img = decode_image(&read_bounded(f)?, f)?;
+        let img = decode_image(
+            &r4d_fsio::read_bounded(f, MAX_IMAGE_BYTES).map_err(io_err(f))?,
+            f,
+        )?;
         let wh = (img.width(), img.height());
         match size {
             None => {
@@ -164,18 +167,6 @@ pub fn read_frames<T: Real>(files: &[PathBuf], what: &Path) -> Result<Video<T>, 
             message: e.to_string(),
         }
     })
-}
-
-/// A file's bytes, refusing one larger than [`MAX_IMAGE_BYTES`] before reading it.
-fn read_bounded(path: &Path) -> Result<Vec<u8>, VideoIoError> {
-    let len = std::fs::metadata(path).map_err(io_err(path))?.len();
-    if len > MAX_IMAGE_BYTES {
-        return Err(VideoIoError::Png {
-            path: path.to_path_buf(),
-            message: format!("{len} bytes: image files are read up to {MAX_IMAGE_BYTES} bytes"),
-        });
-    }
-    std::fs::read(path).map_err(io_err(path))
 }
 
 /// Decodes an image file's bytes (PNG, JPEG; the format from the content), within
@@ -259,16 +250,8 @@ fn push_rgb<T: Real>(
 }
 
 fn read_npy<T: Real>(path: &Path) -> Result<Video<T>, VideoIoError> {
-    let len = std::fs::metadata(path).map_err(io_err(path))?.len();
-    if len > MAX_VIDEO_BYTES {
-        return Err(VideoIoError::Npy {
-            path: path.to_path_buf(),
-            message: format!(
-                "{len} bytes: videos are read up to {MAX_VIDEO_BYTES} bytes (r4d_loss::io::MAX_VIDEO_BYTES; select fewer frames or a smaller size)"
-            ),
-        });
-    }
-    let bytes = std::fs::read(path).map_err(io_err(path))?;
+    // r4d_loss::io::MAX_VIDEO_BYTES: a larger file is refused from its size.
+    let bytes = r4d_fsio::read_bounded(path, MAX_VIDEO_BYTES).map_err(io_err(path))?;
     decode_npy_video(&bytes, path)
 }
 

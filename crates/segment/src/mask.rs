@@ -478,14 +478,7 @@ fn decode_png(bytes: &[u8], path: &Path) -> Result<image::DynamicImage> {
 
 /// A mask file's bytes, refusing one larger than [`MAX_IMAGE_BYTES`] before reading it.
 fn read_bounded(path: &Path) -> Result<Vec<u8>> {
-    let len = std::fs::metadata(path).map_err(Error::io(path))?.len();
-    if len > MAX_IMAGE_BYTES {
-        return Err(Error::mask(
-            path.display(),
-            format!("{len} bytes: mask files are read up to {MAX_IMAGE_BYTES} bytes"),
-        ));
-    }
-    std::fs::read(path).map_err(Error::io(path))
+    r4d_fsio::read_bounded(path, MAX_IMAGE_BYTES).map_err(Error::io(path))
 }
 
 const GRAY_ONLY: &str = "an indexed (palette) PNG: save the label indices as grayscale, \
