@@ -284,6 +284,8 @@ fn scale(g: &[PhysParams<f32>], field: &str) -> f64 {
             "yield" => p.yield_stress,
             "viscosity" => p.plastic_viscosity,
             "friction" => p.friction_angle_deg,
+            "hardening" => p.hardening,
+            "softening" => p.softening,
             _ => p.density,
         })
         .fold(0.0f64, |m, x| m.max(x.abs() as f64))
@@ -333,7 +335,7 @@ fn plastic_materials() -> Vec<(&'static str, PartParams)> {
             "plasticine",
             PartParams {
                 yield_stress_pa: 20.0,
-                softening: 5.0,
+                softening: 200.0,
                 ..base(Material::Plasticine)
             },
         ),
@@ -381,6 +383,8 @@ fn device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials(ctx: &Gp
                     gg[s].friction_angle_deg,
                 ),
                 ("density", gc[s].density, gg[s].density),
+                ("hardening", gc[s].hardening, gg[s].hardening),
+                ("softening", gc[s].softening, gg[s].softening),
             ];
             for (field, c, g) in pairs {
                 // Relative to the field's largest gradient over the slots (one slot's may

@@ -15,6 +15,7 @@ use r4d_mpm::adjoint::particle_vjp::{particle_stage_vjp, ParticleForward};
 use r4d_mpm::adjoint::transfer_vjp::{g2p_vjp, grid_node_vjp, G2pBar};
 use r4d_mpm::kernels::{Grid, GridBc, Particles, StepConsts};
 use r4d_mpm::math::Real;
+use r4d_mpm::params::PARAM_ADJOINTS;
 use r4d_mpm::reference::reduce_slots_in_order;
 use r4d_mpm::substep::{SubstepTables, Tape};
 use r4d_mpm::transfer::{in_domain, k};
@@ -167,9 +168,9 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
 
     fn reduce_slots(
         &self,
-        pgrad: &Vec<[T; 5]>,
+        pgrad: &Vec<[T; PARAM_ADJOINTS]>,
         slot: &Vec<u32>,
-        grad: &mut Vec<[T; 5]>,
+        grad: &mut Vec<[T; PARAM_ADJOINTS]>,
     ) -> Result<(), Infallible> {
         reduce_slots_in_order(pgrad, slot, grad);
         Ok(())

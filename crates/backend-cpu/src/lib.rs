@@ -23,6 +23,7 @@ use r4d_mpm::kernels::{
     BLOCK, HEALTH_OUT_OF_DOMAIN,
 };
 use r4d_mpm::math::Real;
+use r4d_mpm::params::MAT_CONSTS;
 use r4d_mpm::transfer::{
     damped_affine, g2p_finish, gather, grid_node_update, in_domain, k, out_of_domain_coordinate,
     particle_bcs, particle_stress, record, scatter, stencil,
@@ -169,7 +170,7 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
         &self,
         p: &mut Particles<Self>,
         parts: &Vec<PartConsts>,
-        mats: &Vec<[T; 4]>,
+        mats: &Vec<[T; MAT_CONSTS]>,
         g: &mut Grid<Self>,
         c: &StepConsts,
     ) -> Result<(), Infallible> {

@@ -18,6 +18,7 @@ use crate::engine::{GpuBuf, GpuEngine};
 use crate::recording::Recording;
 use bytemuck::{Pod, Zeroable};
 use r4d_mpm::kernels::{Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts};
+use r4d_mpm::params::MAT_CONSTS;
 use r4d_mpm::PartConsts;
 use r4d_shaders::mpm as k;
 use std::sync::Mutex;
@@ -159,7 +160,7 @@ impl<E: GpuEngine> MpmKernels for GpuMpm<E> {
         p: &mut Particles<Self>,
         parts: &GpuBuf<E, PartConsts>,
         // The f32 kernels read the material constants from `parts` (the same values).
-        _mats: &GpuBuf<E, [f32; 4]>,
+        _mats: &GpuBuf<E, [f32; MAT_CONSTS]>,
         g: &mut Grid<Self>,
         c: &StepConsts,
     ) -> Result<(), E::Error> {

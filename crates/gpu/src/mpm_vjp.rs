@@ -38,6 +38,7 @@ use crate::mpm::{Counts, GpuMpm};
 use crate::recording::Recording;
 use r4d_mpm::adjoint::engine::{AdjointScratch, MpmAdjointKernels, StateBufs};
 use r4d_mpm::kernels::{Grid, GridBc, Particles, StepConsts};
+use r4d_mpm::params::PARAM_ADJOINTS;
 use r4d_mpm::substep::{SubstepTables, Tape};
 use r4d_shaders::mpm as k;
 
@@ -201,9 +202,9 @@ impl<E: GpuEngine> MpmAdjointKernels for GpuMpm<E> {
 
     fn reduce_slots(
         &self,
-        pgrad: &GpuBuf<E, [f32; 5]>,
+        pgrad: &GpuBuf<E, [f32; PARAM_ADJOINTS]>,
         slot: &GpuBuf<E, u32>,
-        grad: &mut GpuBuf<E, [f32; 5]>,
+        grad: &mut GpuBuf<E, [f32; PARAM_ADJOINTS]>,
     ) -> Result<(), E::Error> {
         let mut r = Recording::new();
         let bind = [
@@ -230,5 +231,14 @@ mod tests {
             "const INFO_STRIDE: u32 = {}u;",
             super::INFO_STRIDE
         )));
+        for src in [
+            r4d_shaders::mpm::PARTICLE_VJP.wgsl,
+            r4d_shaders::mpm::REDUCE_SLOTS.wgsl,
+        ] {
+            assert!(src.contains(&format!(
+                "const PGRAD_STRIDE: u32 = {}u;",
+                super::PARAM_ADJOINTS
+            )));
+        }
     }
 }

@@ -132,6 +132,9 @@ pub struct ModelIn<S> {
     pub eta: S,
     /// Drucker-Prager alpha.
     pub alpha: S,
+    /// Hardening coefficient ([`PartConsts::hardening_coeff`]): metal's xi, plasticine's
+    /// softening.
+    pub h: S,
 }
 
 impl<T: Real> ModelIn<T> {
@@ -144,6 +147,7 @@ impl<T: Real> ModelIn<T> {
             lambda: T::c(pc.lambda as f64),
             eta: T::c(pc.plastic_viscosity as f64),
             alpha: T::c(pc.dp_alpha as f64),
+            h: T::c(pc.hardening_coeff() as f64),
         }
     }
 }
@@ -192,8 +196,9 @@ fn stvk_hencky<S: Scalar>(s: [S; 3], mu: S, lambda: S) -> [S; 3] {
 
 /// The scalar part of every isotropic model: return mapping on the singular values, plastic
 /// state update and principal Kirchhoff stresses. `pc` supplies the material id and the
-/// constants that are not differentiated (hardening, softening, snow limits); `dt` is the
-/// substep (foam's viscoplastic update depends on it).
+/// constants that are not differentiated (snow limits); `m` the differentiable ones, metal's
+/// hardening and plasticine's softening among them (`m.h`); `dt` is the substep (foam's
+/// viscoplastic update depends on it).
 pub fn scalar_model<S: Scalar>(pc: &PartConsts, m: ModelIn<S>, dt: f64) -> ModelOut<S> {
     let (mu, lambda) = (m.mu, m.lambda);
     let two = S::cst(2.0);
@@ -240,12 +245,14 @@ pub fn scalar_model<S: Scalar>(pc: &PartConsts, m: ModelIn<S>, dt: f64) -> Model
                     stvk_hencky(sigma_e, mu, lambda)
                 };
                 if plasticine {
-                    state[0] = y - S::cst(pc.softening as f64) * nh * kk.abs();
+                    state[0] = y - m.h * nh * kk.abs();
                     if state[0].re() <= 0.0 {
                         stress = zero;
                     }
-                } else if pc.hardening_xi != 0.0 {
-                    state[0] = y + two * mu * S::cst(pc.hardening_xi as f64) * dgamma;
+                } else {
+                    // Without hardening (h = 0) this is y exactly: its derivative in h is
+                    // still there, so a fit can start hardening from none.
+                    state[0] = y + two * mu * m.h * dgamma;
                 }
                 ModelOut {
                     sigma_e,
@@ -345,6 +352,8 @@ pub struct MaterialParams<T> {
     pub eta: T,
     /// Drucker-Prager alpha.
     pub alpha: T,
+    /// Hardening coefficient ([`PartConsts::hardening_coeff`]).
+    pub h: T,
 }
 
 impl<T: Real> MaterialParams<T> {
@@ -355,6 +364,7 @@ impl<T: Real> MaterialParams<T> {
             lambda: T::c(pc.lambda as f64),
             eta: T::c(pc.plastic_viscosity as f64),
             alpha: T::c(pc.dp_alpha as f64),
+            h: T::c(pc.hardening_coeff() as f64),
         }
     }
 }
@@ -391,6 +401,7 @@ pub fn stress_update_with<T: Real>(
         lambda: p.lambda,
         eta: p.eta,
         alpha: p.alpha,
+        h: p.h,
     };
     let out = scalar_model(pc, input, dt.f64());
     *state = out.state;

@@ -11,6 +11,7 @@
 
 use crate::material::PartConsts;
 use crate::math::Real;
+use crate::params::MAT_CONSTS;
 use bytemuck::{Pod, Zeroable};
 
 /// Memory a backend has allocated, in bytes (for benches and `memory_plan` checks).
@@ -256,7 +257,7 @@ pub trait MpmKernels: Sized + Send + Sync + 'static {
         &self,
         p: &mut Particles<Self>,
         parts: &Self::Buf<PartConsts>,
-        mats: &Self::Buf<[Self::Scalar; 4]>,
+        mats: &Self::Buf<[Self::Scalar; MAT_CONSTS]>,
         g: &mut Grid<Self>,
         c: &StepConsts,
     ) -> Result<(), Self::Error>;

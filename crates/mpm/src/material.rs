@@ -315,6 +315,19 @@ pub struct PartConsts {
     pub material: u32,
 }
 
+impl PartConsts {
+    /// The hardening coefficient of this part's model, the differentiable constant `h` of
+    /// [`crate::constitutive::MaterialParams`]: metal's `hardening_xi` (0 when hardening is
+    /// off), plasticine's `softening`, 0 for the models that have none.
+    pub fn hardening_coeff(&self) -> f32 {
+        match self.material {
+            1 => self.hardening_xi,
+            5 => self.softening,
+            _ => 0.0,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -22,7 +22,20 @@ pub struct PhysParams<T> {
     pub friction_angle_deg: T,
     /// Density (kg/m^3).
     pub density: T,
+    /// Metal's hardening coefficient xi (0 for a metal whose `hardening` is off).
+    pub hardening: T,
+    /// Plasticine's softening rate.
+    pub softening: T,
 }
+
+/// Floats per slot of the differentiable material constants table ([`SlotTables::mats`]):
+/// `[mu, lambda, plastic viscosity, Drucker-Prager alpha, hardening coefficient]`.
+pub const MAT_CONSTS: usize = 5;
+
+/// Floats per particle and per slot of the parameter adjoints the reverse sweep accumulates:
+/// `[mu, lambda, plastic viscosity, Drucker-Prager alpha, density, hardening coefficient]`
+/// (the adjoints of the [`SlotTables::mats`] entries and of the density).
+pub const PARAM_ADJOINTS: usize = 6;
 
 /// PhysGaussian's degrees-to-radians factor (its truncated pi), kept for identical yields.
 #[expect(clippy::approx_constant, reason = "PhysGaussian's truncated pi")]
@@ -38,11 +51,25 @@ impl<T: Real> PhysParams<T> {
             plastic_viscosity: T::c(p.plastic_viscosity_pa_s),
             friction_angle_deg: T::c(p.friction_angle_deg),
             density: T::c(p.density_kg_m3),
+            hardening: T::c(if p.hardening { p.xi } else { 0.0 }),
+            softening: T::c(p.softening),
         }
     }
 
-    /// The constants the constitutive model reads: mu, lambda, plastic viscosity, alpha.
-    pub fn material(&self) -> MaterialParams<T> {
+    /// The hardening coefficient model `model` ([`crate::Material::kernel_id`]) reads:
+    /// metal's xi, plasticine's softening, 0 for the others
+    /// ([`PartConsts::hardening_coeff`]).
+    pub fn hardening_coeff(&self, model: u32) -> T {
+        match model {
+            1 => self.hardening,
+            5 => self.softening,
+            _ => T::zero(),
+        }
+    }
+
+    /// The constants model `model` ([`crate::Material::kernel_id`]) reads: mu, lambda,
+    /// plastic viscosity, alpha, hardening coefficient.
+    pub fn material(&self, model: u32) -> MaterialParams<T> {
         let (e, nu) = (self.youngs_modulus, self.poisson_ratio);
         let one = T::one();
         let two = T::c(2.0);
@@ -53,12 +80,13 @@ impl<T: Real> PhysParams<T> {
             lambda: e * nu / ((one + nu) * (one - two * nu)),
             eta: self.plastic_viscosity,
             alpha: T::c((2.0f64 / 3.0).sqrt()) * two * sp / (T::c(3.0) - sp),
+            h: self.hardening_coeff(model),
         }
     }
 
-    /// Chain rule of [`PhysParams::material`]: adds the gradient of the physical parameters
-    /// given that of the material constants.
-    pub fn add_material_vjp(&self, bar: &MaterialParams<T>, out: &mut PhysParams<T>) {
+    /// Chain rule of [`PhysParams::material`] for model `model`: adds the gradient of the
+    /// physical parameters given that of the material constants.
+    pub fn add_material_vjp(&self, bar: &MaterialParams<T>, model: u32, out: &mut PhysParams<T>) {
         let (e, nu) = (self.youngs_modulus, self.poisson_ratio);
         let one = T::one();
         let two = T::c(2.0);
@@ -72,6 +100,11 @@ impl<T: Real> PhysParams<T> {
         let da = T::c((2.0f64 / 3.0).sqrt()) * two * T::c(3.0) * cp
             / ((T::c(3.0) - sp) * (T::c(3.0) - sp));
         out.friction_angle_deg += bar.alpha * da * T::c(DEG);
+        match model {
+            1 => out.hardening += bar.h,
+            5 => out.softening += bar.h,
+            _ => {}
+        }
     }
 }
 
@@ -85,21 +118,24 @@ impl<T: Real> PhysParams<T> {
             plastic_viscosity: self.plastic_viscosity.f64(),
             friction_angle_deg: self.friction_angle_deg.f64(),
             density: self.density.f64(),
+            hardening: self.hardening.f64(),
+            softening: self.softening.f64(),
         }
     }
 
-    /// The gradient of these parameters from a slot's accumulated adjoints `[mu, lambda,
-    /// eta, alpha, density, ..]` (the kernels' parameter adjoints): the chain rule of
-    /// [`PhysParams::material`] and of the masses.
-    pub fn from_slot_adjoint(&self, a: &[T]) -> PhysParams<T> {
+    /// The gradient of these parameters, for a slot of model `model`, from the slot's
+    /// accumulated adjoints (the kernels' parameter adjoints, [`PARAM_ADJOINTS`]): the chain
+    /// rule of [`PhysParams::material`] and of the masses.
+    pub fn from_slot_adjoint(&self, a: &[T; PARAM_ADJOINTS], model: u32) -> PhysParams<T> {
         let mut out = PhysParams::default();
         let bar = MaterialParams {
             mu: a[0],
             lambda: a[1],
             eta: a[2],
             alpha: a[3],
+            h: a[5],
         };
-        self.add_material_vjp(&bar, &mut out);
+        self.add_material_vjp(&bar, model, &mut out);
         out.density += a[4];
         out
     }
@@ -107,14 +143,14 @@ impl<T: Real> PhysParams<T> {
 
 /// What the kernels read about the parameters: per slot the fixed constants ([`PartConsts`],
 /// with the differentiable fields overwritten from the slot's parameters, rounded to f32) and
-/// the material constants `[mu, lambda, plastic viscosity, alpha]` in the scalar type `S`; per
-/// particle its mass `density x V0`.
+/// the material constants ([`MAT_CONSTS`]: mu, lambda, plastic viscosity, alpha, hardening
+/// coefficient) in the scalar type `S`; per particle its mass `density x V0`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SlotTables<S> {
     /// Constants per slot.
     pub parts: Vec<PartConsts>,
-    /// `[mu, lambda, plastic viscosity, Drucker-Prager alpha]` per slot.
-    pub mats: Vec<[S; 4]>,
+    /// `[mu, lambda, plastic viscosity, Drucker-Prager alpha, hardening coefficient]` per slot.
+    pub mats: Vec<[S; MAT_CONSTS]>,
     /// Mass per particle.
     pub mass: Vec<S>,
 }
@@ -133,15 +169,18 @@ impl<S: Real> SlotTables<S> {
         let mut parts = Vec::with_capacity(params.len());
         let mut mats = Vec::with_capacity(params.len());
         for (p, &part) in params.iter().zip(slot_part) {
-            let m = p.material();
-            mats.push([m.mu, m.lambda, m.eta, m.alpha]);
+            let base = &part_consts[part as usize];
+            let m = p.material(base.material);
+            mats.push([m.mu, m.lambda, m.eta, m.alpha, m.h]);
             parts.push(PartConsts {
                 mu: m.mu.f64() as f32,
                 lambda: m.lambda.f64() as f32,
                 plastic_viscosity: m.eta.f64() as f32,
                 dp_alpha: m.alpha.f64() as f32,
                 yield_stress: p.yield_stress.f64() as f32,
-                ..part_consts[part as usize]
+                hardening_xi: p.hardening.f64() as f32,
+                softening: p.softening.f64() as f32,
+                ..*base
             });
         }
         let mass = vol0
@@ -155,12 +194,13 @@ impl<S: Real> SlotTables<S> {
 
 /// The material constants of a `mats` table entry.
 #[inline(always)]
-pub fn material_of<S: Real>(m: &[S; 4]) -> MaterialParams<S> {
+pub fn material_of<S: Real>(m: &[S; MAT_CONSTS]) -> MaterialParams<S> {
     MaterialParams {
         mu: m[0],
         lambda: m[1],
         eta: m[2],
         alpha: m[3],
+        h: m[4],
     }
 }
 

@@ -10,6 +10,7 @@ use crate::kernels::{
 };
 use crate::material::PartConsts;
 use crate::math::Real;
+use crate::params::{MAT_CONSTS, PARAM_ADJOINTS};
 use crate::substep::{SubstepTables, Tape};
 use crate::transfer::{
     damped_affine, g2p_finish, gather, grid_node_update, in_domain, k, out_of_domain_coordinate,
@@ -61,7 +62,7 @@ impl<T: Real> MpmKernels for ReferenceBackend<T> {
         &self,
         p: &mut Particles<Self>,
         parts: &Vec<PartConsts>,
-        mats: &Vec<[T; 4]>,
+        mats: &Vec<[T; MAT_CONSTS]>,
         g: &mut Grid<Self>,
         c: &StepConsts,
     ) -> Result<(), Infallible> {
@@ -260,9 +261,9 @@ impl<T: Real> MpmAdjointKernels for ReferenceBackend<T> {
 
     fn reduce_slots(
         &self,
-        pgrad: &Vec<[T; 5]>,
+        pgrad: &Vec<[T; PARAM_ADJOINTS]>,
         slot: &Vec<u32>,
-        grad: &mut Vec<[T; 5]>,
+        grad: &mut Vec<[T; PARAM_ADJOINTS]>,
     ) -> Result<(), Infallible> {
         reduce_slots_in_order(pgrad, slot, grad);
         Ok(())
@@ -271,11 +272,15 @@ impl<T: Real> MpmAdjointKernels for ReferenceBackend<T> {
 
 /// Adds per-particle parameter adjoints to their slots' sums, in particle index order (the
 /// host backends' deterministic reduction).
-pub fn reduce_slots_in_order<T: Real>(pgrad: &[[T; 5]], slot: &[u32], grad: &mut [[T; 5]]) {
+pub fn reduce_slots_in_order<T: Real>(
+    pgrad: &[[T; PARAM_ADJOINTS]],
+    slot: &[u32],
+    grad: &mut [[T; PARAM_ADJOINTS]],
+) {
     for (g, &s) in pgrad.iter().zip(slot) {
         let acc = &mut grad[s as usize];
-        for q in 0..5 {
-            acc[q] += g[q];
+        for (a, v) in acc.iter_mut().zip(g) {
+            *a += *v;
         }
     }
 }

@@ -9,7 +9,7 @@ use crate::kernels::{
 };
 use crate::material::{PartConsts, PartParams};
 use crate::math::Real;
-use crate::params::{phys_params, SlotTables};
+use crate::params::{phys_params, SlotTables, MAT_CONSTS};
 use crate::scene::ParticleSet;
 use crate::substep::{self, SubstepTables};
 
@@ -146,7 +146,7 @@ pub struct MpmSim<B: MpmKernels> {
     grid_bcs: B::Buf<GridBc>,
     particle_bcs: B::Buf<ParticleBc>,
     parts: B::Buf<PartConsts>,
-    mats: B::Buf<[B::Scalar; 4]>,
+    mats: B::Buf<[B::Scalar; MAT_CONSTS]>,
     part_consts: Vec<PartConsts>,
     slot_part: Vec<u32>,
     uploaded: Vec<PartParams>,

@@ -18,13 +18,14 @@
 use crate::adjoint::engine::{AdjointScratch, MpmAdjointKernels, StateBufs};
 use crate::kernels::{Grid, GridBc, MpmKernels, ParticleBc, Particles, StepConsts};
 use crate::material::PartConsts;
+use crate::params::MAT_CONSTS;
 
 /// The tables a substep reads besides the particles and the grid.
 pub struct SubstepTables<'a, B: MpmKernels> {
     /// Fixed constants per parameter slot.
     pub parts: &'a B::Buf<PartConsts>,
     /// Material constants per parameter slot (`[mu, lambda, eta, alpha]`).
-    pub mats: &'a B::Buf<[B::Scalar; 4]>,
+    pub mats: &'a B::Buf<[B::Scalar; MAT_CONSTS]>,
     /// Grid boundary conditions (at least one element; `StepConsts::n_grid_bcs` are used).
     pub grid_bcs: &'a B::Buf<GridBc>,
     /// Particle boundary conditions (at least one element).

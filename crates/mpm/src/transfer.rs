@@ -20,7 +20,7 @@ use crate::kernels::{
 };
 use crate::material::PartConsts;
 use crate::math::{Mat3, Real};
-use crate::params::material_of;
+use crate::params::{material_of, MAT_CONSTS};
 
 /// A device constant (stored as f32) in the kernel's scalar type.
 #[inline(always)]
@@ -159,7 +159,7 @@ pub fn particle_stress<T: Real>(
     c_affine: &[T; 9],
     vol0: T,
     pc: &PartConsts,
-    mat: &[T; 4],
+    mat: &[T; MAT_CONSTS],
     c: &StepConsts,
 ) -> [T; 9] {
     let f_trial = Mat3::from_array(*f);

@@ -1,14 +1,14 @@
 //! Adjoint of the isotropic constitutive models ([`crate::constitutive::stress_update_with`]):
 //! from the adjoints of `F_elastic`, `tau` and the plastic state after the substep to those of
 //! `F_trial`, the plastic state before it and the material constants (mu, lambda, plastic
-//! viscosity, Drucker-Prager alpha).
+//! viscosity, Drucker-Prager alpha, hardening coefficient).
 //!
 //! # Method
 //!
 //! With `F_trial = U diag(s) V^T`, every model is `F_e = U diag(g(s)) V^T`,
 //! `tau = U diag(t(s)) U^T`, `state' = h(s, state)`, where `(g, t, h)` come from
 //! [`scalar_model`]. The Jacobian of that scalar part is computed by forward-mode dual numbers
-//! ([`Dual`], 9 directions: 3 singular values, 2 state entries, 4 constants), so the scalar
+//! ([`Dual`], 10 directions: 3 singular values, 2 state entries, 5 constants), so the scalar
 //! math exists once. The matrix part uses the classic derivative of isotropic matrix
 //! functions (Ogden; Irving, Teran and Fedkiw 2004): in the rotated frame
 //! `dF^ = U^T dF V`,
@@ -35,8 +35,8 @@ use crate::math::{svd3, Mat3, Real};
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 /// Number of dual directions: 3 singular values, 2 plastic state entries, mu, lambda,
-/// plastic viscosity, Drucker-Prager alpha.
-pub const DIRS: usize = 9;
+/// plastic viscosity, Drucker-Prager alpha, hardening coefficient.
+pub const DIRS: usize = 10;
 
 /// A forward-mode dual number with `N` tangent directions.
 #[derive(Clone, Copy, Debug)]
@@ -214,6 +214,7 @@ pub fn stress_update_vjp<T: Real>(
             lambda: c(p.lambda),
             eta: c(p.eta),
             alpha: c(p.alpha),
+            h: c(p.h),
         },
         c(dt),
         fe_bar.cast(),
@@ -229,6 +230,7 @@ pub fn stress_update_vjp<T: Real>(
             lambda: t(b.params.lambda),
             eta: t(b.params.eta),
             alpha: t(b.params.alpha),
+            h: t(b.params.h),
         },
     }
 }
@@ -258,12 +260,13 @@ fn stress_update_vjp_inner<T: Real>(
         lambda: var(p.lambda, 6),
         eta: var(p.eta, 7),
         alpha: var(p.alpha, 8),
+        h: var(p.h, 9),
     };
     let out = scalar_model(pc, input, dt.f64());
     let (u, v) = (svd.u, svd.v);
     let g_hat = u.transpose() * fe_bar * v;
     let t_hat = u.transpose() * tau_bar.sym() * u;
-    // Adjoint of the 9 scalar inputs.
+    // Adjoint of the 10 scalar inputs.
     let mut d_bar = [T::zero(); DIRS];
     for i in 0..3 {
         for (e, db) in d_bar.iter_mut().enumerate() {
@@ -308,6 +311,7 @@ fn stress_update_vjp_inner<T: Real>(
             lambda: d_bar[6],
             eta: d_bar[7],
             alpha: d_bar[8],
+            h: d_bar[9],
         },
     }
 }

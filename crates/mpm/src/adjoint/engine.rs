@@ -25,7 +25,7 @@ use super::host::{HostSim, HostState};
 use crate::kernels::{Grid, GridBc, MpmKernels, ParticleBc, Particles, StepConsts};
 use crate::material::PartConsts;
 use crate::math::Real;
-use crate::params::{PhysParams, SlotTables};
+use crate::params::{PhysParams, SlotTables, MAT_CONSTS, PARAM_ADJOINTS};
 use crate::substep::{self, SubstepTables, Tape};
 use std::sync::Mutex;
 
@@ -128,7 +128,7 @@ pub struct AdjointScratch<B: MpmKernels> {
     /// F_elastic adjoint from `g2p_vjp`, per particle.
     pub fe_bar: B::Buf<[B::Scalar; 9]>,
     /// Parameter adjoints `[mu, lambda, eta, alpha, density]` per particle (`p2g_vjp`).
-    pub pgrad: B::Buf<[B::Scalar; 5]>,
+    pub pgrad: B::Buf<[B::Scalar; PARAM_ADJOINTS]>,
 }
 
 impl<B: MpmKernels> AdjointScratch<B> {
@@ -192,9 +192,9 @@ pub trait MpmAdjointKernels: MpmKernels {
     /// (`slot` of each particle); deterministic (particle index order on the host).
     fn reduce_slots(
         &self,
-        pgrad: &Self::Buf<[Self::Scalar; 5]>,
+        pgrad: &Self::Buf<[Self::Scalar; PARAM_ADJOINTS]>,
         slot: &Self::Buf<u32>,
-        grad: &mut Self::Buf<[Self::Scalar; 5]>,
+        grad: &mut Self::Buf<[Self::Scalar; PARAM_ADJOINTS]>,
     ) -> Result<(), Self::Error>;
 }
 
@@ -202,7 +202,7 @@ pub trait MpmAdjointKernels: MpmKernels {
 /// density]`.
 pub struct SlotGrad<B: MpmKernels> {
     /// One entry per parameter slot.
-    pub acc: B::Buf<[B::Scalar; 5]>,
+    pub acc: B::Buf<[B::Scalar; PARAM_ADJOINTS]>,
 }
 
 struct Work<B: MpmKernels> {
@@ -213,7 +213,7 @@ struct Work<B: MpmKernels> {
     /// never holds them).
     reverse: Option<(Tape<B>, AdjointScratch<B>)>,
     parts: B::Buf<PartConsts>,
-    mats: B::Buf<[B::Scalar; 4]>,
+    mats: B::Buf<[B::Scalar; MAT_CONSTS]>,
     params: Option<Vec<PhysParams<B::Scalar>>>,
 }
 
@@ -312,8 +312,8 @@ impl<'a, B: MpmAdjointKernels> KernelAdjoint<'a, B> {
         let acc = self.b.download(&g.acc)?;
         Ok(params
             .iter()
-            .zip(&acc)
-            .map(|(p, a)| p.from_slot_adjoint(a))
+            .zip(acc.iter().zip(&self.slot_part))
+            .map(|(p, (a, &part))| p.from_slot_adjoint(a, self.sim.consts[part as usize].material))
             .collect())
     }
 

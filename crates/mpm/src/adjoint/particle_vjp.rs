@@ -7,7 +7,7 @@ use super::transfer_vjp::{damped_affine_vjp, particle_bcs_vjp, scatter_vjp, Scat
 use crate::kernels::{ParticleBc, StepConsts};
 use crate::material::PartConsts;
 use crate::math::{Mat3, Real};
-use crate::params::material_of;
+use crate::params::{material_of, MAT_CONSTS, PARAM_ADJOINTS};
 use crate::transfer::{damped_affine, in_domain, k, stencil, stress_scale};
 
 /// What the reverse of one particle's P2G stage reads from the forward pass.
@@ -34,7 +34,7 @@ pub struct ParticleForward<'a, T> {
     /// The slot's constants.
     pub pc: &'a PartConsts,
     /// The slot's material constants `[mu, lambda, eta, alpha]`.
-    pub mat: &'a [T; 4],
+    pub mat: &'a [T; MAT_CONSTS],
 }
 
 /// One particle's adjoint state before the substep.
@@ -67,10 +67,10 @@ pub fn particle_stage_vjp<T: Real>(
     fe_bar: &[T; 9],
     x_bar_g2p: &[T; 3],
     plastic_bar: &[T; 2],
-) -> (ParticleBar<T>, [T; 5]) {
+) -> (ParticleBar<T>, [T; PARAM_ADJOINTS]) {
     let z = T::zero();
     if !in_domain(fw.x, k::<T>(c.inv_dx), n) {
-        return (ParticleBar::default(), [z; 5]);
+        return (ParticleBar::default(), [z; PARAM_ADJOINTS]);
     }
     let st = stencil(fw.x, k::<T>(c.inv_dx));
     let a = damped_affine(fw.c, c.rpic_damping);
@@ -108,5 +108,5 @@ pub fn particle_stage_vjp<T: Real>(
         plastic: cb.state,
     };
     let p = cb.params;
-    (bar, [p.mu, p.lambda, p.eta, p.alpha, m_bar * fw.vol0])
+    (bar, [p.mu, p.lambda, p.eta, p.alpha, m_bar * fw.vol0, p.h])
 }

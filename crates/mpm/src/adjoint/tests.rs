@@ -527,14 +527,15 @@ mod constitutive {
                     bar.state[e].abs().max(g.abs()).max(1e-12),
                 );
             }
-            let pv = [p0.mu, p0.lambda, p0.eta, p0.alpha];
+            let pv = [p0.mu, p0.lambda, p0.eta, p0.alpha, p0.h];
             let pb = [
                 bar.params.mu,
                 bar.params.lambda,
                 bar.params.eta,
                 bar.params.alpha,
+                bar.params.h,
             ];
-            for e in 0..4 {
+            for e in 0..5 {
                 let g = fd(
                     |t| {
                         let mut q = pv;
@@ -547,6 +548,7 @@ mod constitutive {
                                 lambda: q[1],
                                 eta: q[2],
                                 alpha: q[3],
+                                h: q[4],
                             },
                         )
                     },
@@ -685,7 +687,7 @@ mod trajectory {
                     f,
                     &sim.consts[part],
                     &mut st,
-                    params[part].material(),
+                    params[part].material(sim.consts[part].material),
                     2e-4,
                 );
                 if (fe - f).frobenius() > 1e-12 {
@@ -747,6 +749,8 @@ mod trajectory {
             ("plastic_viscosity", g.plastic_viscosity),
             ("friction_angle", g.friction_angle_deg),
             ("density", g.density),
+            ("hardening", g.hardening),
+            ("softening", g.softening),
         ];
         let p0 = params[0];
         let values = [
@@ -756,6 +760,8 @@ mod trajectory {
             p0.plastic_viscosity,
             p0.friction_angle_deg,
             p0.density,
+            p0.hardening,
+            p0.softening,
         ];
         for (e, (pname, a)) in analytic.iter().enumerate() {
             let h = 1e-4 * values[e].abs().max(1e-3);
@@ -769,6 +775,8 @@ mod trajectory {
                     plastic_viscosity: q[3],
                     friction_angle_deg: q[4],
                     density: q[5],
+                    hardening: q[6],
+                    softening: q[7],
                 };
                 run(&eng, &[pp], &v0, &w).0
             };
@@ -872,7 +880,9 @@ mod trajectory {
         check_material(
             "plasticine",
             PartParams {
-                softening: 5.0,
+                // Strong enough that the softening's own gradient is well above the
+                // finite difference's round-off.
+                softening: 200.0,
                 yield_stress_pa: 20.0,
                 ..base(Material::Plasticine)
             },
@@ -896,7 +906,7 @@ mod precision {
     use crate::reference::ReferenceBackend;
     use crate::scene::{ParticleSet, Shape};
 
-    fn grad<T: Real>(sim: &HostSim, part: &PartParams, w: &[Vec<[f64; 3]>]) -> [f64; 6] {
+    fn grad<T: Real>(sim: &HostSim, part: &PartParams, w: &[Vec<[f64; 3]>]) -> [f64; 8] {
         let params = vec![PhysParams::<T>::of(part)];
         let v0 = vec![[T::zero(); 3]; sim.len()];
         let stepper = KernelAdjoint::new(ReferenceBackend::<T>::in_scalar(), sim).unwrap();
@@ -929,6 +939,8 @@ mod precision {
             g.plastic_viscosity,
             g.friction_angle_deg,
             g.density,
+            g.hardening,
+            g.softening,
         ]
         .map(|x| x.f64())
     }
@@ -1052,6 +1064,8 @@ mod precision {
                 "plastic_viscosity",
                 "friction_angle",
                 "density",
+                "hardening",
+                "softening",
             ]
             .iter()
             .enumerate()

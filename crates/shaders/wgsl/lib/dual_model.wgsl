@@ -1,15 +1,15 @@
-// Forward-mode dual numbers (9 directions: 3 singular values, 2 plastic state entries, mu,
-// lambda, plastic viscosity, Drucker-Prager alpha) and the scalar part of every isotropic model
+// Forward-mode dual numbers (10 directions: 3 singular values, 2 plastic state entries, mu,
+// lambda, plastic viscosity, Drucker-Prager alpha, hardening coefficient) and the scalar part of every isotropic model
 // on them: a WGSL mirror of `Dual` in crates/mpm/src/adjoint/constitutive_vjp.rs and of
 // `scalar_model` in crates/mpm/src/constitutive.rs (same formulas and branch order; f32 here,
 // f64 on the CPU).
 #import lib/structs.wgsl
 
-const DIRS: u32 = 9u;
+const DIRS: u32 = 10u;
 
 struct Dual {
     v: f32,
-    d: array<f32, 9>,
+    d: array<f32, 10>,
 }
 
 fn dcst(x: f32) -> Dual {
@@ -181,7 +181,7 @@ fn dzero3() -> array<Dual, 3> {
 }
 
 // `scalar_model` on duals: sigma (3), state (2) and the constants are the inputs.
-fn dual_scalar_model(pc: PartConsts, sigma: array<Dual, 3>, state: array<Dual, 2>, mu: Dual, lambda: Dual, eta: Dual, alpha: Dual, dt: f32) -> DualOut {
+fn dual_scalar_model(pc: PartConsts, sigma: array<Dual, 3>, state: array<Dual, 2>, mu: Dual, lambda: Dual, eta: Dual, alpha: Dual, h: Dual, dt: f32) -> DualOut {
     let two = dcst(2.0);
     let three = dcst(3.0);
     let one = dcst(1.0);
@@ -227,15 +227,14 @@ fn dual_scalar_model(pc: PartConsts, sigma: array<Dual, 3>, state: array<Dual, 2
                 var stress: array<Dual, 3>;
                 if plasticine {
                     stress = dfixed_corotated(sigma_e, mu, lambda);
-                    st[0] = dsub(y, dmul(dmul(dcst(pc.softening), nh), dabs(kk)));
+                    st[0] = dsub(y, dmul(dmul(h, nh), dabs(kk)));
                     if st[0].v <= 0.0 {
                         stress = dzero3();
                     }
                 } else {
                     stress = dstvk_hencky(sigma_e, mu, lambda);
-                    if pc.hardening_xi != 0.0 {
-                        st[0] = dadd(y, dmul(dmul(dmul(two, mu), dcst(pc.hardening_xi)), dgamma));
-                    }
+                    // y exactly without hardening (h = 0), with its derivative in h.
+                    st[0] = dadd(y, dmul(dmul(dmul(two, mu), h), dgamma));
                 }
                 return DualOut(sigma_e, stress, st, false);
             } else if plasticine {

@@ -39,6 +39,23 @@ struct PartConsts {
     material: u32,
 }
 
+// Floats per particle and per slot of the parameter adjoints (`pgrad` and the slot sums):
+// mu, lambda, plastic viscosity, Drucker-Prager alpha, density, hardening coefficient
+// (Rust `r4d_mpm::params::PARAM_ADJOINTS`).
+const PGRAD_STRIDE: u32 = 6u;
+
+// The hardening coefficient a part's model reads (Rust `PartConsts::hardening_coeff`):
+// metal's xi, plasticine's softening, 0 for the others.
+fn hardening_coeff(pc: PartConsts) -> f32 {
+    if pc.material == 1u {
+        return pc.hardening_xi;
+    }
+    if pc.material == 5u {
+        return pc.softening;
+    }
+    return 0.0;
+}
+
 struct GridBc {
     kind: u32,
     mode: u32,

@@ -48,10 +48,11 @@ fn vjp_node(st: Stencil, off: vec3<u32>, n: u32) -> u32 {
 // Per-particle scratch of the reverse sweep (`sbar`, SBAR_STRIDE floats per particle):
 // x (0..3), v (3..6), damped C (6..15, rows), mass (15), stress term (16..25, rows),
 // adjoints of mu (25), lambda (26), plastic viscosity (27), Drucker-Prager alpha (28), the
-// in-domain flag (29: 1 or 0), padding.
+// in-domain flag (29: 1 or 0), the adjoint of the hardening coefficient (30), padding.
 const SBAR_STRIDE: u32 = 32u;
 const SBAR_PARAMS: u32 = 25u;
 const SBAR_FLAG: u32 = 29u;
+const SBAR_HARDENING: u32 = 30u;
 
 // Per-particle constants (`info`, 8 floats): x0 (0..3), vol0 (3), mass (4), slot bits (5).
 const INFO_STRIDE: u32 = 8u;

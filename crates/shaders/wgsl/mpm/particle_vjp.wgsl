@@ -2,8 +2,8 @@
 // boundary conditions (impulses, velocity overrides, in reverse order) and of the RPIC
 // damping, the particle's adjoint state before the substep (in place: `adj_x` holds the G2P
 // position adjoint on entry), and its parameter adjoints [mu, lambda, plastic viscosity,
-// Drucker-Prager alpha, density] (`pgrad`, 5 floats per particle; `reduce_slots` sums them
-// per slot). Mirrors the end of `r4d_mpm::adjoint::particle_vjp::particle_stage_vjp`.
+// Drucker-Prager alpha, density, hardening coefficient] (`pgrad`, 6 floats per particle,
+// `r4d_mpm::params::PARAM_ADJOINTS`; `reduce_slots` sums them per slot). Mirrors the end of `r4d_mpm::adjoint::particle_vjp::particle_stage_vjp`.
 #import lib/transfer_vjp.wgsl
 
 @group(0) @binding(0) var<uniform> c: StepConsts;
@@ -17,8 +17,9 @@
 @group(0) @binding(8) var<storage, read_write> adj_plastic: array<f32>;
 @group(0) @binding(9) var<storage, read_write> pgrad: array<f32>;
 
-// Returns [mu, lambda, eta, alpha] adjoints; the density adjoint goes to `dens`.
-fn finish(i: u32, dens: ptr<function, f32>) -> vec4<f32> {
+// Returns [mu, lambda, eta, alpha] adjoints; the density adjoint goes to `dens`, the
+// hardening coefficient's to `hard`.
+fn finish(i: u32, dens: ptr<function, f32>, hard: ptr<function, f32>) -> vec4<f32> {
     let o = SBAR_STRIDE * i;
     if sbar[o + SBAR_FLAG] == 0.0 {
         for (var q = 0u; q < 3u; q++) {
@@ -31,6 +32,7 @@ fn finish(i: u32, dens: ptr<function, f32>) -> vec4<f32> {
         adj_plastic[2u * i] = 0.0;
         adj_plastic[2u * i + 1u] = 0.0;
         *dens = 0.0;
+        *hard = 0.0;
         return vec4<f32>(0.0);
     }
     let ib = INFO_STRIDE * i;
@@ -65,6 +67,7 @@ fn finish(i: u32, dens: ptr<function, f32>) -> vec4<f32> {
         adj_c[9u * i + e] = cb[e];
     }
     *dens = m_bar * vol0;
+    *hard = sbar[o + SBAR_HARDENING];
     let q = o + SBAR_PARAMS;
     return vec4<f32>(sbar[q], sbar[q + 1u], sbar[q + 2u], sbar[q + 3u]);
 }
@@ -76,10 +79,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     var dens = 0.0;
-    let val = finish(i, &dens);
-    pgrad[5u * i] = val.x;
-    pgrad[5u * i + 1u] = val.y;
-    pgrad[5u * i + 2u] = val.z;
-    pgrad[5u * i + 3u] = val.w;
-    pgrad[5u * i + 4u] = dens;
+    var hard = 0.0;
+    let val = finish(i, &dens, &hard);
+    pgrad[PGRAD_STRIDE * i] = val.x;
+    pgrad[PGRAD_STRIDE * i + 1u] = val.y;
+    pgrad[PGRAD_STRIDE * i + 2u] = val.z;
+    pgrad[PGRAD_STRIDE * i + 3u] = val.w;
+    pgrad[PGRAD_STRIDE * i + 4u] = dens;
+    pgrad[PGRAD_STRIDE * i + 5u] = hard;
 }

@@ -1,5 +1,5 @@
-// Sums the per-particle parameter adjoints `pgrad` (5 floats per particle) into their slots'
-// accumulators `grad` (5 floats per slot): in workgroup memory first (one tree reduction per
+// Sums the per-particle parameter adjoints `pgrad` (6 floats per particle) into their slots'
+// accumulators `grad` (6 floats per slot): in workgroup memory first (one tree reduction per
 // slot present in the workgroup; particles of a part are contiguous, so usually one or two),
 // then one float atomic per slot and field. Mirrors
 // `r4d_mpm::reference::reduce_slots_in_order` up to the summation order.
@@ -14,7 +14,7 @@
 const NO_SLOT: u32 = 0xffffffffu;
 
 var<workgroup> s_red: array<vec4<f32>, 64>;
-var<workgroup> s_red_d: array<f32, 64>;
+var<workgroup> s_red_d: array<vec2<f32>, 64>;
 var<workgroup> s_lo: atomic<u32>;
 var<workgroup> s_hi: atomic<u32>;
 var<workgroup> s_lo_copy: u32;
@@ -29,12 +29,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     workgroupBarrier();
     var val = vec4<f32>(0.0);
-    var dens = 0.0;
+    // density, hardening coefficient
+    var dens = vec2<f32>(0.0);
     var slot = NO_SLOT;
     if i < counts.particles {
-        let o = 5u * i;
+        let o = PGRAD_STRIDE * i;
         val = vec4<f32>(pgrad[o], pgrad[o + 1u], pgrad[o + 2u], pgrad[o + 3u]);
-        dens = pgrad[o + 4u];
+        dens = vec2<f32>(pgrad[o + 4u], pgrad[o + 5u]);
         slot = slot_of[i];
         atomicMin(&s_lo, slot);
         atomicMax(&s_hi, slot);
@@ -51,7 +52,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     for (var s = lo; s <= hi; s++) {
         s_red[lid] = select(vec4<f32>(0.0), val, slot == s);
-        s_red_d[lid] = select(0.0, dens, slot == s);
+        s_red_d[lid] = select(vec2<f32>(0.0), dens, slot == s);
         workgroupBarrier();
         for (var stride = 32u; stride > 0u; stride = stride / 2u) {
             if lid < stride {
@@ -62,12 +63,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         }
         if lid == 0u {
             let t = s_red[0];
-            let b = 5u * s;
+            let b = PGRAD_STRIDE * s;
             grid_add(b, t.x);
             grid_add(b + 1u, t.y);
             grid_add(b + 2u, t.z);
             grid_add(b + 3u, t.w);
-            grid_add(b + 4u, s_red_d[0]);
+            grid_add(b + 4u, s_red_d[0].x);
+            grid_add(b + 5u, s_red_d[0].y);
         }
         workgroupBarrier();
     }

@@ -1,8 +1,8 @@
 // Reverse of the particle stress stage (return mapping and Kirchhoff stress), one thread per
 // particle. `adj_f` holds the adjoint of F_elastic on entry and that of F_trial on return,
 // `adj_plastic` that of the plastic state after the substep on entry and before it on return;
-// the particle's adjoints of mu, lambda, plastic viscosity and alpha go to `sbar` (reduced
-// per slot by particle_vjp).
+// the particle's adjoints of mu, lambda, plastic viscosity, alpha and the hardening
+// coefficient go to `sbar` (reduced per slot by particle_vjp).
 //
 // Jelly (fixed corotated, F_e = F_trial, plastic state untouched) has a closed form:
 //   tau = 2 mu (F F^T - R F^T) + lambda J (J - 1) I,   R = U V^T, R F^T = U diag(s) U^T,
@@ -40,6 +40,8 @@ struct StressBar {
     state: vec2<f32>,
     // mu, lambda, eta, alpha
     params: vec4<f32>,
+    // hardening coefficient
+    h: f32,
 }
 
 // Jelly, closed form (`fe_bar` passes through: F_e = F_trial).
@@ -67,7 +69,7 @@ fn jelly_vjp(f: mat3x3<f32>, pc: PartConsts, tb: mat3x3<f32>, fe_bar: mat3x3<f32
     }
     let polar_bar = u * g * transpose(vv);
     let fbar = (tb * f * 2.0 - tb * rot - polar_bar) * (2.0 * pc.mu) + cofactor(f) * (pc.lambda * trb * (2.0 * j - 1.0));
-    return StressBar(fe_bar + fbar, state_bar, vec4<f32>(mu_bar, lambda_bar, 0.0, 0.0));
+    return StressBar(fe_bar + fbar, state_bar, vec4<f32>(mu_bar, lambda_bar, 0.0, 0.0), 0.0);
 }
 
 // 4 sqrt(f32 epsilon).
@@ -97,12 +99,12 @@ fn general_vjp(f: mat3x3<f32>, pc: PartConsts, state: vec2<f32>, tb: mat3x3<f32>
     let s = svd.sigma;
     let sig = array<Dual, 3>(dvar(s.x, 0u), dvar(s.y, 1u), dvar(s.z, 2u));
     let st = array<Dual, 2>(dvar(state.x, 3u), dvar(state.y, 4u));
-    var out = dual_scalar_model(pc, sig, st, dvar(pc.mu, 5u), dvar(pc.lambda, 6u), dvar(pc.plastic_viscosity, 7u), dvar(pc.dp_alpha, 8u), c.dt);
+    var out = dual_scalar_model(pc, sig, st, dvar(pc.mu, 5u), dvar(pc.lambda, 6u), dvar(pc.plastic_viscosity, 7u), dvar(pc.dp_alpha, 8u), dvar(hardening_coeff(pc), 9u), c.dt);
     let u = svd.u;
     let v = svd.v;
     let g_hat = transpose(u) * fe_bar * v;
     let t_hat = transpose(u) * tb * u;
-    var d_bar: array<f32, 9>;
+    var d_bar: array<f32, 10>;
     for (var i = 0u; i < 3u; i++) {
         for (var e = 0u; e < DIRS; e++) {
             d_bar[e] += t_hat[i][i] * out.t[i].d[e];
@@ -140,7 +142,7 @@ fn general_vjp(f: mat3x3<f32>, pc: PartConsts, state: vec2<f32>, tb: mat3x3<f32>
     if out.unchanged {
         f_bar = f_bar + fe_bar;
     }
-    return StressBar(f_bar, vec2<f32>(d_bar[3], d_bar[4]), vec4<f32>(d_bar[5], d_bar[6], d_bar[7], d_bar[8]));
+    return StressBar(f_bar, vec2<f32>(d_bar[3], d_bar[4]), vec4<f32>(d_bar[5], d_bar[6], d_bar[7], d_bar[8]), d_bar[9]);
 }
 
 @compute @workgroup_size(64)
@@ -189,4 +191,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     for (var e = 0u; e < 4u; e++) {
         sbar[o + SBAR_PARAMS + e] = res.params[e];
     }
+    sbar[o + SBAR_HARDENING] = res.h;
 }
