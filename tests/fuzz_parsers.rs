@@ -292,6 +292,7 @@ fn targets() -> Vec<Target> {
         )
         .ok();
         s.starts = vec![r4d_optim::record::StartResult {
+            failed: None,
             candidate: 0,
             score: Some(0.9),
             loss: 0.5,

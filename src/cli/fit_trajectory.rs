@@ -23,7 +23,8 @@ pub struct FitTrajectoryArgs {
     #[arg(long)]
     target: PathBuf,
     /// Comma-separated free parameters: E, nu, yield_stress, plastic_viscosity,
-    /// friction_angle, density.
+    /// friction_angle, density, hardening (metal with `hardening = true`), softening
+    /// (plasticine). A parameter a part's model does not read is refused.
     #[arg(long, default_value = "E")]
     params: String,
     /// Output folder: params.json and log.jsonl.

@@ -136,11 +136,24 @@ impl FitHooks for RunHooks {
     }
 
     fn on_start(&mut self, r: &resonance4d::video_fit::StartResult) {
+        if r.loss == f64::MAX {
+            eprintln!(
+                "multi-start: candidate #{} (MS-SSIM {:.4}) failed: {}",
+                r.candidate,
+                r.score.unwrap_or(f64::NAN),
+                r.failed.as_deref().unwrap_or("")
+            );
+            return;
+        }
         eprintln!(
-            "multi-start: candidate #{} (MS-SSIM {:.4}) reached loss {:.5e}",
+            "multi-start: candidate #{} (MS-SSIM {:.4}) reached loss {:.5e}{}",
             r.candidate,
             r.score.unwrap_or(f64::NAN),
-            r.loss
+            r.loss,
+            r.failed
+                .as_deref()
+                .map(|f| format!(" (then stopped: {f})"))
+                .unwrap_or_default()
         );
     }
 

@@ -336,11 +336,12 @@ pub struct DemoRun {
 }
 
 /// Target tolerance of a quantity (issue targets): yield stress 10%, friction angle 2
-/// degrees, plastic viscosity 20%, `E` and density 10%; none for Poisson's ratio.
+/// degrees, plastic viscosity, hardening and softening 20%, `E` and density 10%; none for
+/// Poisson's ratio.
 pub fn tolerance(k: ParamKind) -> Option<f64> {
     match k {
         ParamKind::YieldStress | ParamKind::YoungsModulus | ParamKind::Density => Some(0.10),
-        ParamKind::PlasticViscosity => Some(0.20),
+        ParamKind::PlasticViscosity | ParamKind::Hardening | ParamKind::Softening => Some(0.20),
         ParamKind::FrictionAngle => Some(2.0),
         ParamKind::PoissonRatio => None,
     }

@@ -1,7 +1,7 @@
 //! The plasticine blob: a block of plasticine thrown down onto the floor (gravity plus a
 //! short force impulse, so the absolute density enters the motion) flattens plastically on
-//! impact and keeps its squashed shape. Free: `E`, `nu`, yield stress, density (softening
-//! fixed at its default). Two views.
+//! impact and keeps its squashed shape, its yield stress dropping as it flows (softening).
+//! Free: `E`, `nu`, yield stress, softening, density. Two views.
 
 use super::{bounds_around, push_force, sim_config, stage, with, SceneSpec, Size};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
@@ -17,6 +17,7 @@ pub fn truth() -> PartParams {
         poisson_ratio: 0.3,
         yield_stress_pa: 4e3,
         density_kg_m3: 1200.0,
+        softening: 5e3,
         ..Default::default()
     }
 }
@@ -84,11 +85,16 @@ num_dt = {n}
         dx,
     );
     let t = truth();
-    let start = vec![with(t, ParamKind::YieldStress, 3e4)];
+    let start = vec![with(
+        with(t, ParamKind::YieldStress, 3e4),
+        ParamKind::Softening,
+        1.5e4,
+    )];
     let free = vec![vec![
         ParamKind::YoungsModulus,
         ParamKind::PoissonRatio,
         ParamKind::YieldStress,
+        ParamKind::Softening,
         ParamKind::Density,
     ]];
     let bounds = vec![bounds_around(
@@ -97,6 +103,7 @@ num_dt = {n}
             (ParamKind::YoungsModulus, 3.0),
             (ParamKind::PoissonRatio, 0.0),
             (ParamKind::YieldStress, 3.0),
+            (ParamKind::Softening, 3.0),
             (ParamKind::Density, 3.0),
         ],
     )];
@@ -113,7 +120,7 @@ num_dt = {n}
     SceneSpec {
         scene: super::DemoScene::Plasticine,
         description: format!(
-            "a plasticine blob thrown onto the floor, {frames} frames at {}x{} from two views; fitting E, nu, yield stress and density",
+            "a plasticine blob thrown onto the floor, {frames} frames at {}x{} from two views; fitting E, nu, yield stress, softening and density",
             res.0, res.1
         ),
         config,
@@ -132,6 +139,7 @@ num_dt = {n}
             (0, ParamKind::YoungsModulus, ParamKind::YieldStress),
             (0, ParamKind::YoungsModulus, ParamKind::Density),
             (0, ParamKind::PoissonRatio, ParamKind::YieldStress),
+            (0, ParamKind::YieldStress, ParamKind::Softening),
         ],
         fit,
         profile_offsets: vec![-0.3, -0.15, -0.05, 0.05, 0.15, 0.3],

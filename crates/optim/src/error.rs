@@ -40,6 +40,16 @@ pub enum FitError {
 }
 
 impl FitError {
+    /// Whether this error belongs to the parameters evaluated (the simulation exploded, a
+    /// value or gradient became non-finite, the simulator refused the parameters): another
+    /// point of the search may well succeed.
+    pub fn is_divergence(&self) -> bool {
+        matches!(
+            self,
+            FitError::NonFinite(_) | FitError::Exploded(_) | FitError::Mpm(_) | FitError::Splat(_)
+        )
+    }
+
     /// A backend's error, named.
     pub fn backend(name: &str, e: impl std::error::Error + Send + Sync + 'static) -> FitError {
         FitError::Backend {

@@ -210,10 +210,14 @@ pub struct StartResult {
     pub candidate: usize,
     /// Its MS-SSIM score.
     pub score: Option<f64>,
-    /// Lowest loss of the short fit.
+    /// Lowest loss of the short fit (`f64::MAX` when it failed before any evaluation).
     pub loss: f64,
     /// The parameters of that loss (the fit's free parameters).
     pub theta: Vec<f64>,
+    /// Why the short fit stopped early (its simulation diverged), if it did: the start keeps
+    /// the lowest loss it reached before, and the other starts go on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failed: Option<String>,
 }
 
 /// Loss terms (absent terms were not evaluated; the trajectory fit has the total only).

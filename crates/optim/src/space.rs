@@ -32,6 +32,8 @@ pub fn get(p: &PartParams, k: ParamKind) -> f64 {
         ParamKind::PlasticViscosity => p.plastic_viscosity_pa_s,
         ParamKind::FrictionAngle => p.friction_angle_deg,
         ParamKind::Density => p.density_kg_m3,
+        ParamKind::Hardening => p.xi,
+        ParamKind::Softening => p.softening,
     }
 }
 
@@ -44,6 +46,8 @@ pub fn set(p: &mut PartParams, k: ParamKind, v: f64) {
         ParamKind::PlasticViscosity => p.plastic_viscosity_pa_s = v,
         ParamKind::FrictionAngle => p.friction_angle_deg = v,
         ParamKind::Density => p.density_kg_m3 = v,
+        ParamKind::Hardening => p.xi = v,
+        ParamKind::Softening => p.softening = v,
     }
 }
 
@@ -56,25 +60,84 @@ pub fn grad_of(g: &PhysParams<f64>, k: ParamKind) -> f64 {
         ParamKind::PlasticViscosity => g.plastic_viscosity,
         ParamKind::FrictionAngle => g.friction_angle_deg,
         ParamKind::Density => g.density,
+        ParamKind::Hardening => g.hardening,
+        ParamKind::Softening => g.softening,
     }
 }
 
-/// The parameters a material's model reads, free by default: `E`, `nu` and density for all;
-/// yield stress for metal, foam and plasticine; plastic viscosity for foam; friction angle for
-/// sand.
-pub fn default_free(m: Material) -> Vec<ParamKind> {
-    let mut v = vec![ParamKind::YoungsModulus, ParamKind::PoissonRatio];
-    match m {
-        Material::Metal | Material::Plasticine => v.push(ParamKind::YieldStress),
-        Material::Foam => {
-            v.push(ParamKind::YieldStress);
-            v.push(ParamKind::PlasticViscosity);
-        }
-        Material::Sand => v.push(ParamKind::FrictionAngle),
-        _ => {}
+/// Whether part `p`'s model reads `k`: `E`, `nu` and density for all; yield stress for metal,
+/// foam and plasticine; plastic viscosity for foam and fluid; friction angle for sand; the
+/// hardening coefficient for a metal whose `hardening` is on; softening for plasticine.
+pub fn reads(p: &PartParams, k: ParamKind) -> bool {
+    use Material as M;
+    match k {
+        ParamKind::YoungsModulus | ParamKind::PoissonRatio | ParamKind::Density => true,
+        ParamKind::YieldStress => matches!(p.material, M::Metal | M::Foam | M::Plasticine),
+        ParamKind::PlasticViscosity => matches!(p.material, M::Foam | M::Fluid),
+        ParamKind::FrictionAngle => p.material == M::Sand,
+        ParamKind::Hardening => p.material == M::Metal && p.hardening,
+        ParamKind::Softening => p.material == M::Plasticine,
     }
-    v.push(ParamKind::Density);
-    v
+}
+
+/// The parameters part `p`'s model reads ([`reads`]), free by default; the hardening and
+/// softening coefficients only when set (a positive value: a log-domain fit cannot start
+/// from 0).
+pub fn default_free(p: &PartParams) -> Vec<ParamKind> {
+    ParamKind::ALL
+        .into_iter()
+        .filter(|&k| reads(p, k))
+        .filter(|&k| !matches!(k, ParamKind::Hardening | ParamKind::Softening) || get(p, k) > 0.0)
+        .collect()
+}
+
+/// Checks free kinds against the parts' models: a kind a part's model does not read
+/// ([`reads`]) would receive a zero gradient and be reported as if fitted, so it is refused
+/// (at object granularity when no part reads it), naming the part, its material and what it
+/// reads.
+pub fn check_free(
+    parts: &[PartParams],
+    free: &[Vec<ParamKind>],
+    granularity: Granularity,
+) -> Result<(), String> {
+    let names = |p: &PartParams| {
+        ParamKind::ALL
+            .into_iter()
+            .filter(|&k| reads(p, k))
+            .map(|k| k.name())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let hint = |p: &PartParams, k: ParamKind| {
+        if k == ParamKind::Hardening && p.material == Material::Metal {
+            " (set `hardening = true` on the part to use metal hardening)"
+        } else {
+            ""
+        }
+    };
+    if granularity == Granularity::Object {
+        for k in free.iter().flatten() {
+            if !parts.iter().any(|p| reads(p, *k)) {
+                return Err(format!(
+                    "free parameter {}: no part's model reads it",
+                    k.name()
+                ));
+            }
+        }
+        return Ok(());
+    }
+    for (i, (p, kinds)) in parts.iter().zip(free).enumerate() {
+        if let Some(&k) = kinds.iter().find(|&&k| !reads(p, k)) {
+            return Err(format!(
+                "free parameter {} of part {i}: the {} model does not read it (it reads: {}){}",
+                k.name(),
+                format!("{:?}", p.material).to_lowercase(),
+                names(p),
+                hint(p, k)
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// One free parameter.
@@ -246,7 +309,7 @@ mod tests {
     fn part_and_object_spaces_round_trip() {
         let mut parts = vec![PartParams::default(), PartParams::default()];
         parts[1].material = Material::Sand;
-        let free: Vec<Vec<ParamKind>> = parts.iter().map(|p| default_free(p.material)).collect();
+        let free: Vec<Vec<ParamKind>> = parts.iter().map(default_free).collect();
         let sp = ParamSpace::new(Granularity::Part, &free, &[0, 1], |_, k| k.default_bounds());
         assert_eq!(sp.len(), 3 + 4);
         assert_eq!(sp.names()[6], "part1.density");
@@ -268,5 +331,55 @@ mod tests {
             },
         ];
         assert_eq!(*ob.gather(&g).last().unwrap(), 5.0);
+    }
+
+    /// Hardening and softening are free only where the model reads them, and a kind a part's
+    /// model does not read is refused with the part, its material and what it reads.
+    #[test]
+    fn free_kinds_follow_the_models() {
+        let metal = PartParams::new(Material::Metal);
+        assert!(!default_free(&metal).contains(&ParamKind::Hardening));
+        let hardened = PartParams {
+            hardening: true,
+            xi: 0.4,
+            ..metal
+        };
+        assert!(default_free(&hardened).contains(&ParamKind::Hardening));
+        let plasticine = PartParams::new(Material::Plasticine);
+        assert!(default_free(&plasticine).contains(&ParamKind::Softening));
+        assert!(!default_free(&PartParams::new(Material::Jelly)).contains(&ParamKind::Softening));
+        let free = vec![vec![ParamKind::YoungsModulus, ParamKind::Hardening]];
+        let e = check_free(&[metal], &free, Granularity::Part).unwrap_err();
+        assert!(
+            e.contains("hardening") && e.contains("part 0") && e.contains("hardening = true"),
+            "{e}"
+        );
+        check_free(&[hardened], &free, Granularity::Part).unwrap();
+        let e = check_free(
+            &[PartParams::default()],
+            &[vec![ParamKind::FrictionAngle]],
+            Granularity::Part,
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("jelly model") && e.contains("E, nu, density"),
+            "{e}"
+        );
+        // Object granularity: refused only when no part reads it.
+        let two = [PartParams::default(), PartParams::new(Material::Sand)];
+        let free = vec![vec![ParamKind::FrictionAngle]; 2];
+        check_free(&two, &free, Granularity::Object).unwrap();
+        assert!(check_free(&two, &free, Granularity::Part).is_err());
+        // The values round-trip through get/set and the gradient entries.
+        let mut p = plasticine;
+        set(&mut p, ParamKind::Softening, 123.0);
+        assert_eq!(get(&p, ParamKind::Softening), 123.0);
+        let g = PhysParams {
+            softening: 2.0,
+            hardening: 3.0,
+            ..Default::default()
+        };
+        assert_eq!(grad_of(&g, ParamKind::Softening), 2.0);
+        assert_eq!(grad_of(&g, ParamKind::Hardening), 3.0);
     }
 }

@@ -190,6 +190,7 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
     // The free parameters (one mapping for every fit): `opts.params` of every slot, or of
     // the whole object, in the order given.
     let free = vec![opts.params.clone(); config.parts.len()];
+    crate::space::check_free(&config.parts, &free, opts.granularity).map_err(FitError::Input)?;
     let mut space = ParamSpace::new(opts.granularity, &free, &slot_parts, |_, k| {
         k.default_bounds()
     });

@@ -39,7 +39,7 @@
 //! ```
 
 use crate::compute::Precision;
-use crate::space::{default_free, Granularity};
+use crate::space::{check_free, default_free, Granularity};
 use crate::FitError;
 use crate::{AdamW, ParamKind};
 use r4d_loss::DmsConfig;
@@ -149,8 +149,8 @@ pub struct FitConfig {
     pub init: InitConfig,
     /// Per-part overrides.
     pub parts: Vec<PartFit>,
-    /// Flat-direction probe: when the gradient of a yield stress, plastic viscosity or
-    /// friction angle is exactly zero at an iteration (no particle is on the branch of the
+    /// Flat-direction probe: when the gradient of a yield stress, plastic viscosity,
+    /// friction angle, hardening or softening coefficient is exactly zero at an iteration (no particle is on the branch of the
     /// return mapping it acts through, e.g. a yield stress so high that nothing yields), the
     /// loss is evaluated at this many log-spaced values across the parameter's bounds, the
     /// others fixed, and the parameter jumps to the best one when that lowers the loss
@@ -344,10 +344,15 @@ impl FitConfig {
                     .or(self.free.as_ref())
                 {
                     Some(names) => kinds(names, &format!("part {i}")),
-                    None => Ok(default_free(p.material)),
+                    None => Ok(default_free(p)),
                 }
             })
-            .collect()
+            .collect::<Result<Vec<_>, FitError>>()
+            .and_then(|free| {
+                check_free(parts, &free, self.granularity)
+                    .map_err(FitError::Input)
+                    .map(|()| free)
+            })
     }
 
     /// Bounds of `kind` for `part` (the override, else the kind's default).

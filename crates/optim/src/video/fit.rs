@@ -124,7 +124,11 @@ pub fn terms_of(ev: &Evaluation) -> Terms {
 fn branch_kind(k: ParamKind) -> bool {
     matches!(
         k,
-        ParamKind::YieldStress | ParamKind::PlasticViscosity | ParamKind::FrictionAngle
+        ParamKind::YieldStress
+            | ParamKind::PlasticViscosity
+            | ParamKind::FrictionAngle
+            | ParamKind::Hardening
+            | ParamKind::Softening
     )
 }
 
@@ -507,23 +511,32 @@ pub fn run_fit(
             let slots0: Vec<PartParams> = slot_parts.iter().map(|&p| parts[p as usize]).collect();
             let mut o = new_stepper(cfg, &space, space.values(&slots0))?;
             let mut best: Option<(f64, Vec<f64>)> = None;
+            let mut failed = None;
             for it in 0..cfg.multi_start_iters {
-                let st = iterate(
+                // A start whose simulation diverges ends there; the others go on.
+                match iterate(
                     &obj,
                     &space,
                     &slots0,
                     &mut o,
                     cfg,
                     (it, cfg.multi_start_iters),
-                )?;
-                keep_best(&mut best, st.ev.total, &st.theta);
+                ) {
+                    Ok(st) => keep_best(&mut best, st.ev.total, &st.theta),
+                    Err(e) if e.is_divergence() => {
+                        failed = Some(format!("iteration {it}: {e}"));
+                        break;
+                    }
+                    Err(e) => return Err(e),
+                }
             }
-            let (loss, theta) = best.unwrap_or((f64::INFINITY, space.values(&slots0)));
+            let (loss, theta) = best.unwrap_or((f64::MAX, space.values(&slots0)));
             let r = StartResult {
                 candidate: c.index,
                 score: c.score,
                 loss,
                 theta,
+                failed,
             };
             hooks.on_start(&r);
             state.starts.push(r);
@@ -532,7 +545,7 @@ pub fn run_fit(
         if let Some(b) = state
             .starts
             .iter()
-            .filter(|r| r.loss.is_finite())
+            .filter(|r| r.loss < f64::MAX)
             .min_by(|a, b| a.loss.total_cmp(&b.loss))
         {
             space.apply(&mut base_slots, &b.theta);

@@ -949,19 +949,16 @@ struct FrameGrad {
 /// A non-finite parameter gradient is an error.
 fn check_grad(g: Option<Vec<PhysParams<f64>>>) -> Result<Option<Vec<PhysParams<f64>>>, FitError> {
     if let Some(g) = &g {
-        if g.iter().any(|p| {
-            ![
-                p.youngs_modulus,
-                p.poisson_ratio,
-                p.yield_stress,
-                p.plastic_viscosity,
-                p.friction_angle_deg,
-                p.density,
-            ]
-            .iter()
-            .all(|x| x.is_finite())
-        }) {
-            return Err(FitError::NonFinite("the parameter gradient".into()));
+        for (slot, p) in g.iter().enumerate() {
+            for k in crate::ParamKind::ALL {
+                let v = crate::space::grad_of(p, k);
+                if !v.is_finite() {
+                    return Err(FitError::NonFinite(format!(
+                        "the gradient of slot {slot}'s {} ({v})",
+                        k.name()
+                    )));
+                }
+            }
         }
     }
     Ok(g)
