@@ -159,6 +159,20 @@ impl Compute for VulkanCompute {
         self.engine.reset_peak();
     }
 
+    fn set_profiling(&self, on: bool) -> Result<bool, FitError> {
+        self.engine
+            .set_profiling(on)
+            .map_err(|e| FitError::backend("vulkan", e))
+    }
+
+    fn kernel_times(&self) -> Result<Vec<r4d_mpm::KernelTime>, FitError> {
+        // Pending dispatches are timed once submitted.
+        self.engine
+            .finish()
+            .map_err(|e| FitError::backend("vulkan", e))?;
+        Ok(self.engine.kernel_times())
+    }
+
     fn device_peak_bytes(&self) -> Option<u64> {
         use r4d_gpu::GpuEngine;
         Some(self.engine.memory_usage().peak_bytes)

@@ -54,7 +54,12 @@ fn small(scene: DemoScene) -> (SceneSpec, VideoProblem, FitConfig) {
     let spec = scene.spec(Size::Small);
     let problem = spec.problem(resonance4d::compute::cpu()).expect("problem");
     let mut cfg = spec.fit_config(&Default::default());
-    cfg.init.candidates = 12;
+    // The metal's five free parameters (hardening among them) need the scene's 64 candidates:
+    // from 24 the fit settled in a local minimum at nu -44%, hardening -44%
+    // (docs/fitting.md).
+    if scene != DemoScene::Metal {
+        cfg.init.candidates = 12;
+    }
     cfg.iters = 30;
     (spec, problem, cfg)
 }
@@ -66,7 +71,7 @@ fn fit_small(scene: DemoScene) -> (SceneSpec, FitOutcome) {
 }
 
 #[test]
-fn metal_recovers_e_nu_yield_stress_and_density() {
+fn metal_recovers_e_yield_stress_hardening_and_density() {
     let (spec, o) = fit_small(DemoScene::Metal);
     check(
         &spec,
@@ -74,6 +79,7 @@ fn metal_recovers_e_nu_yield_stress_and_density() {
         &[
             (ParamKind::YoungsModulus, 0.10),
             (ParamKind::YieldStress, 0.10),
+            (ParamKind::Hardening, 0.20),
             (ParamKind::Density, 0.10),
         ],
     );
@@ -102,12 +108,16 @@ fn foam_recovers_yield_stress_and_plastic_viscosity() {
 }
 
 #[test]
-fn plasticine_recovers_yield_stress_and_density() {
+fn plasticine_recovers_yield_stress_softening_and_density() {
     let (spec, o) = fit_small(DemoScene::Plasticine);
     check(
         &spec,
         &o,
-        &[(ParamKind::YieldStress, 0.10), (ParamKind::Density, 0.10)],
+        &[
+            (ParamKind::YieldStress, 0.10),
+            (ParamKind::Softening, 0.20),
+            (ParamKind::Density, 0.10),
+        ],
     );
 }
 

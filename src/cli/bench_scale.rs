@@ -11,6 +11,10 @@ pub struct BenchScaleArgs {
     /// Where the simulation, rendering and their backward passes run: cpu or wgpu.
     #[arg(long, value_enum, default_value_t = super::BackendKind::Cpu)]
     backend: super::BackendKind,
+    /// Print the GPU time of every kernel when the command ends (timestamp queries; the
+    /// Vulkan backend measures it, the others say they cannot).
+    #[arg(long)]
+    profile: bool,
     /// Cells per side of the simulated block (8 particles per cell; 23: 97 336 particles).
     #[arg(long, default_value_t = 23)]
     cells: usize,
@@ -77,6 +81,7 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
         .validate()
         .map_err(|e| anyhow::anyhow!("--{}", e.to_string().replace(" = ", " ")))?;
     let backend = a.backend.compute()?;
+    let _profile = super::profile::Profile::on_compute(&backend, a.profile)?;
     eprintln!(
         "bench-scale: building the scene and the reference video ({}) ...",
         a.reference

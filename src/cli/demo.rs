@@ -45,6 +45,10 @@ pub struct DemoArgs {
     /// reference videos are always simulated on the CPU).
     #[arg(long, value_enum, default_value_t = super::BackendKind::Cpu)]
     backend: super::BackendKind,
+    /// Print the GPU time of every kernel when the command ends (timestamp queries; the
+    /// Vulkan backend measures it, the others say they cannot).
+    #[arg(long)]
+    profile: bool,
     /// LPIPS weights for the final report's metrics (as `r4d metrics --lpips-weights`).
     /// Repeatable. Default: $R4D_LPIPS_DIR.
     #[arg(long = "lpips-weights", value_name = "FILE")]
@@ -72,6 +76,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     opts.seed = a.seed;
     let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
     let backend = a.backend.compute()?;
+    let _profile = super::profile::Profile::on_compute(&backend, a.profile)?;
     let out = a.out.clone().unwrap_or_else(|| match scene {
         DemoScene::Plant => PathBuf::from("out/demo"),
         s => PathBuf::from(format!("out/demo-{}", s.name())),

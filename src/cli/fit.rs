@@ -65,6 +65,10 @@ pub struct FitArgs {
     /// on the CPU either way.
     #[arg(long, value_enum, default_value_t = super::BackendKind::Cpu)]
     backend: super::BackendKind,
+    /// Print the GPU time of every kernel when the command ends (timestamp queries; the
+    /// Vulkan backend measures it, the others say they cannot).
+    #[arg(long)]
+    profile: bool,
     /// Particles (PLY x, y, z[, volume]); default: the sim config's particles.
     #[arg(long)]
     particles: Option<PathBuf>,
@@ -448,6 +452,7 @@ pub fn run(a: FitArgs) -> Result<()> {
         }
     };
     let backend = a.backend.compute()?;
+    let _profile = super::profile::Profile::on_compute(&backend, a.profile)?;
     // Loaded (and checked) before the fit, used by its final report.
     let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
     let mut cfg = match &a.config {

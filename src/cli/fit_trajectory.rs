@@ -65,6 +65,10 @@ pub struct FitTrajectoryArgs {
     /// gradient oracle; slow).
     #[arg(long, value_enum, default_value_t = super::BackendKind::Cpu)]
     backend: super::BackendKind,
+    /// Print the GPU time of every kernel when the command ends (timestamp queries; the
+    /// Vulkan backend measures it, the others say they cannot).
+    #[arg(long)]
+    profile: bool,
 }
 
 fn read_targets(dir: &Path, max: usize) -> Result<Vec<Vec<[f32; 3]>>> {
@@ -130,6 +134,7 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     };
     adam.validate().map_err(|e| anyhow::anyhow!("--{e}"))?;
     let backend = a.backend.compute()?;
+    let _profile = super::profile::Profile::on_compute(&backend, a.profile)?;
     let targets = read_targets(&a.target, config.time.frames)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let log_path = a.out.join("log.jsonl");

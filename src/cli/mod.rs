@@ -12,6 +12,7 @@ mod metrics;
 mod metrics_trajectory;
 mod npy;
 mod prepare;
+mod profile;
 mod render;
 mod run_hooks;
 mod scene;

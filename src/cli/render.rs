@@ -67,6 +67,10 @@ pub struct RenderArgs {
     /// Renderer backend.
     #[arg(long, value_enum, default_value_t = BackendKind::Cpu)]
     backend: BackendKind,
+    /// Print the GPU time of every kernel when the command ends (timestamp queries; the
+    /// Vulkan backend measures it, the others say they cannot).
+    #[arg(long)]
+    profile: bool,
 }
 
 /// Runs the command.
@@ -101,6 +105,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
     settings
         .validate("--background")
         .map_err(|e| anyhow::anyhow!(e))?;
+    let vulkan = matches!(a.backend, BackendKind::Vulkan);
+    let mut _profile = super::profile::Profile::unsupported(a.backend.name(), a.profile && !vulkan);
     let mut renderer: Box<dyn Renderer> = match a.backend {
         BackendKind::Cpu => Box::new(SplatRenderer::new(CpuSplat)),
         BackendKind::Reference => Box::new(SplatRenderer::new(ReferenceSplat)),
@@ -115,6 +121,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
             let e = r4d_backend_vulkan::VulkanEngine::new()
                 .map_err(|e| anyhow::anyhow!("--backend vulkan: {e}"))?;
             eprintln!("vulkan device: {}", e.device_name());
+            _profile = super::profile::Profile::on_vulkan(&e, a.profile)?;
             Box::new(SplatRenderer::new(r4d_backend_vulkan::VulkanSplat::new(e)))
         }
     };

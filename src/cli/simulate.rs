@@ -25,6 +25,10 @@ pub struct SimulateArgs {
     /// Compute backend.
     #[arg(long, value_enum, default_value_t = BackendKind::Cpu)]
     backend: BackendKind,
+    /// Print the GPU time of every kernel when the command ends (timestamp queries; the
+    /// Vulkan backend measures it, the others say they cannot).
+    #[arg(long)]
+    profile: bool,
     /// Also write the deformation gradient as f00..f22 (fij = F_ij = dx_i / dX_j).
     #[arg(long)]
     write_f: bool,
@@ -45,6 +49,8 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         config.time.frames = f;
     }
     let (scene, source, warnings) = (loaded.scene, loaded.source, loaded.warnings);
+    let vulkan = matches!(a.backend, BackendKind::Vulkan);
+    let _unmeasured = super::profile::Profile::unsupported(a.backend.name(), a.profile && !vulkan);
     match a.backend {
         BackendKind::Cpu => simulate(CpuBackend::default(), &a, config, scene, &source, &warnings),
         BackendKind::Reference => simulate(
@@ -65,6 +71,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
             let e = r4d_backend_vulkan::VulkanEngine::new()
                 .map_err(|e| anyhow::anyhow!("--backend vulkan: {e}"))?;
             eprintln!("vulkan device: {}", e.device_name());
+            let _profile = super::profile::Profile::on_vulkan(&e, a.profile)?;
             let backend = r4d_backend_vulkan::VulkanMpm::new(e);
             simulate(backend, &a, config, scene, &source, &warnings)
         }

@@ -76,6 +76,10 @@ pub(crate) struct Device {
     /// `VK_EXT_shader_atomic_float`'s buffer float32 add is enabled: scatter kernels run
     /// their native variant (else their compare-exchange one).
     pub float_atomics: bool,
+    /// Nanoseconds per timestamp tick (`VkPhysicalDeviceLimits::timestampPeriod`).
+    pub timestamp_period_ns: f32,
+    /// Valid bits of the queue family's timestamps (0: none).
+    pub timestamp_bits: u32,
     pub in_use: AtomicU64,
     pub peak: AtomicU64,
     /// Buffers dropped while a pending command buffer may still use them: freed by
@@ -89,6 +93,15 @@ pub(crate) struct Device {
     /// The pipeline cache, loaded from and saved to `cache_path`.
     pipeline_cache: vk::PipelineCache,
     cache_path: Option<std::path::PathBuf>,
+}
+
+/// The valid timestamp bits of queue family `family` of `pd` (0 when out of range).
+fn timestamp_bits(instance: &ash::Instance, pd: vk::PhysicalDevice, family: u32) -> u32 {
+    // SAFETY: pd belongs to the instance.
+    let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+    families
+        .get(family as usize)
+        .map_or(0, |f| f.timestamp_valid_bits)
 }
 
 /// The largest pipeline cache file read (bytes).
@@ -406,9 +419,12 @@ impl Device {
         })?;
         // SAFETY: pd belongs to the instance.
         let props = unsafe { instance.get_physical_device_properties(pd) };
+        let timestamp_bits = timestamp_bits(&instance, pd, queue_family);
         let cache_path = cache_path(&props);
         let pipeline_cache = load_cache(&device, &props, cache_path.as_deref());
         Ok(Arc::new(Device {
+            timestamp_period_ns: props.limits.timestamp_period,
+            timestamp_bits,
             pipeline_cache,
             cache_path,
             _entry: entry,
@@ -589,6 +605,7 @@ impl Device {
             .unwrap_or_default();
         // SAFETY: the host created the device with this queue.
         let queue = unsafe { device.get_device_queue(queue_family, queue_index) };
+        let timestamp_bits = timestamp_bits(&instance, physical_device, queue_family);
         let allocator = Allocator::new(&AllocatorCreateDesc {
             instance: instance.clone(),
             device: device.clone(),
@@ -601,6 +618,8 @@ impl Device {
         let cache_path = cache_path(&props);
         let pipeline_cache = load_cache(&device, &props, cache_path.as_deref());
         Ok(Arc::new(Device {
+            timestamp_period_ns: props.limits.timestamp_period,
+            timestamp_bits,
             pipeline_cache,
             cache_path,
             _entry: entry,

@@ -8,11 +8,12 @@
 //! (more than 256 MiB of them submit early).
 
 use crate::device::{Device, VkBuffer};
+use crate::profile::Profiler;
 use crate::VulkanError;
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 use r4d_gpu::{Command, GpuEngine, Recording, Resource};
-use r4d_mpm::kernels::MemoryUsage;
+use r4d_mpm::kernels::{KernelTime, MemoryUsage};
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 
@@ -30,7 +31,13 @@ struct Submitter {
     keep_bytes: u64,
     /// Descriptor pools of its dispatches.
     pools: Vec<vk::DescriptorPool>,
+    /// Per-kernel timing, when on ([`VulkanEngine::set_profiling`]).
+    profiler: Option<Profiler>,
 }
+
+/// The timestamps a recording may write: the profiler, the first pair of the recording's
+/// dispatches and how many of them are timed.
+type Timing<'a> = Option<(&'a Profiler, usize, usize)>;
 
 /// Transient bytes (and dropped buffers) a pending command buffer may hold before it is
 /// submitted without waiting for a read.
@@ -46,6 +53,9 @@ impl Drop for Inner {
         let dev = self.dev.clone();
         let s = self.submit.get_mut().unwrap_or_else(|e| e.into_inner());
         let _ = flush_locked(&dev, s);
+        if let Some(p) = s.profiler.take() {
+            p.destroy(&dev.device);
+        }
         // SAFETY: every submission was waited for; the pool's command buffers are freed.
         unsafe {
             self.dev.device.destroy_fence(s.fence, None);
@@ -116,6 +126,7 @@ impl VulkanEngine {
                     keep: Vec::new(),
                     keep_bytes: 0,
                     pools: Vec::new(),
+                    profiler: None,
                 }),
             }),
         })
@@ -177,23 +188,61 @@ impl VulkanEngine {
         self.inner.dev.float_atomics
     }
 
+    /// Turns per-kernel GPU timing on (timestamp queries around every dispatch; see
+    /// [`VulkanEngine::kernel_times`]) or off. Returns whether the device can measure it
+    /// (a queue family without timestamps cannot; profiling then stays off). Turning it on
+    /// starts the totals afresh.
+    pub fn set_profiling(&self, on: bool) -> Result<bool, VulkanError> {
+        let dev = &self.inner.dev;
+        let mut guard = self.inner.submit.lock().unwrap_or_else(|e| e.into_inner());
+        flush_locked(dev, &mut guard)?;
+        if let Some(p) = guard.profiler.take() {
+            p.destroy(&dev.device);
+        }
+        if on {
+            guard.profiler =
+                Profiler::new(&dev.device, dev.timestamp_period_ns, dev.timestamp_bits)?;
+            return Ok(guard.profiler.is_some());
+        }
+        Ok(false)
+    }
+
+    /// GPU time per kernel since profiling was turned on, slowest first (empty when it is
+    /// off). Dispatches still pending are counted once submitted (after the next read or
+    /// [`VulkanEngine::finish`]).
+    pub fn kernel_times(&self) -> Vec<KernelTime> {
+        let guard = self.inner.submit.lock().unwrap_or_else(|e| e.into_inner());
+        guard
+            .profiler
+            .as_ref()
+            .map(Profiler::times)
+            .unwrap_or_default()
+    }
+
     /// Whether the device is a CPU implementation (lavapipe, SwiftShader).
     pub fn is_cpu(&self) -> bool {
         self.inner.dev.kind == vk::PhysicalDeviceType::CPU
     }
 
     /// Appends commands to the pending command buffer (begun on first use); `keep`: the
-    /// transient buffers and descriptor pool they use, kept until the submission ends.
+    /// transient buffers and descriptor pool they use, kept until the submission ends;
+    /// `timed`: the kernels of the dispatches to time while profiling (in order; the
+    /// closure gets where their timestamps go).
     fn record(
         &self,
         keep: Vec<VkBuffer>,
         pool: Option<vk::DescriptorPool>,
-        record: impl FnOnce(&ash::Device, vk::CommandBuffer) -> Result<(), VulkanError>,
+        timed: &[&'static str],
+        record: impl FnOnce(&ash::Device, vk::CommandBuffer, Timing<'_>) -> Result<(), VulkanError>,
     ) -> Result<(), VulkanError> {
         let dev = &self.inner.dev;
         let d = &dev.device;
         let mut guard = self.inner.submit.lock().unwrap_or_else(|e| e.into_inner());
         let s = &mut *guard;
+        // A full query pool submits what is pending first.
+        if s.cb.is_some() && s.profiler.as_ref().is_some_and(|p| p.room() < timed.len()) {
+            flush_locked(dev, s)?;
+        }
         let cb = match s.cb {
             Some(cb) => cb,
             None => {
@@ -216,6 +265,9 @@ impl VulkanEngine {
                     )
                 }
                 .map_err(vk_err("vkBeginCommandBuffer"))?;
+                if let Some(p) = &s.profiler {
+                    p.begin(d, cb);
+                }
                 s.cb = Some(cb);
                 cb
             }
@@ -223,7 +275,19 @@ impl VulkanEngine {
         s.keep_bytes += keep.iter().map(|b| b.size).sum::<u64>();
         s.keep.extend(keep);
         s.pools.extend(pool);
-        let r = record(d, cb);
+        let timing = match &mut s.profiler {
+            Some(p) if !timed.is_empty() => {
+                let (base, n) = (p.pending.len(), timed.len().min(p.room()));
+                p.pending.extend_from_slice(&timed[..n]);
+                Some((base, n))
+            }
+            _ => None,
+        };
+        let r = record(
+            d,
+            cb,
+            timing.and_then(|(base, n)| s.profiler.as_ref().map(|p| (p, base, n))),
+        );
         // Bounded transient memory: a long run of recordings without a read is submitted
         // on its own.
         if r.is_ok() && s.keep_bytes + dev.graveyard_bytes.load(Ordering::Relaxed) > FLUSH_BYTES {
@@ -288,6 +352,15 @@ fn flush_locked(dev: &Device, s: &mut Submitter) -> Result<(), VulkanError> {
             d.reset_fences(&[s.fence]).map_err(vk_err("vkResetFences"))
         })()
     };
+    // The timestamps of a completed submission are read before anything else is recorded.
+    let result = match (&mut s.profiler, result) {
+        (Some(p), Ok(())) => p.resolve(d),
+        (Some(p), Err(e)) => {
+            p.pending.clear();
+            Err(e)
+        }
+        (None, r) => r,
+    };
     // SAFETY: the submission ended (or never started): nothing uses these any more.
     unsafe {
         if result.is_err() {
@@ -345,7 +418,7 @@ impl GpuEngine for VulkanEngine {
             .dev
             .buffer(label, bytes, MemoryLocation::GpuOnly, true)?;
         let (buf, size) = (b.buffer, b.size);
-        self.record(Vec::new(), None, |d, cb| {
+        self.record(Vec::new(), None, &[], |d, cb, _| {
             // SAFETY: cb is recording; the buffer is alive until the submission ends.
             unsafe { d.cmd_fill_buffer(cb, buf, 0, size, 0) };
             Ok(())
@@ -360,7 +433,7 @@ impl GpuEngine for VulkanEngine {
         let staging = self.host_buffer("staging upload", data)?;
         let (src, dst, bytes) = (staging.buffer, raw.buffer, data.len() as u64);
         let size = raw.size;
-        self.record(vec![staging], None, |d, cb| {
+        self.record(vec![staging], None, &[], |d, cb, _| {
             full_barrier(d, cb);
             // SAFETY: both buffers are alive until the submission ends; bytes fit both.
             unsafe {
@@ -383,7 +456,7 @@ impl GpuEngine for VulkanEngine {
                 .buffer("staging readback", bytes, MemoryLocation::GpuToCpu, false)?;
         let (src, dst) = (raw.buffer, staging.buffer);
         if bytes > 0 {
-            self.record(Vec::new(), None, |d, cb| {
+            self.record(Vec::new(), None, &[], |d, cb, _| {
                 full_barrier(d, cb);
                 // SAFETY: both buffers are alive until the submission ends.
                 unsafe {
@@ -431,6 +504,7 @@ impl GpuEngine for VulkanEngine {
         };
         // Pipelines and one descriptor set per dispatch, from one pool for the recording.
         let mut dispatches = Vec::new();
+        let mut names = Vec::new();
         let (mut n_uniform, mut n_storage) = (0u32, 0u32);
         for c in &rec.commands {
             if let Command::Dispatch {
@@ -452,6 +526,7 @@ impl GpuEngine for VulkanEngine {
                     }
                 }
                 dispatches.push(dev.pipeline(k)?);
+                names.push(k.name);
             }
         }
         let d = &dev.device;
@@ -544,7 +619,7 @@ impl GpuEngine for VulkanEngine {
             keep.extend(scratch);
             let owned_pool = (pool != vk::DescriptorPool::null()).then_some(pool);
             pool = vk::DescriptorPool::null();
-            self.record(keep, owned_pool, |d, cb| {
+            self.record(keep, owned_pool, &names, |d, cb, timing| {
                 // Scratch buffers start at zero.
                 for &(b, size) in &hs {
                     // SAFETY: cb is recording; the buffer outlives the submission.
@@ -556,6 +631,10 @@ impl GpuEngine for VulkanEngine {
                     match c {
                         Command::Dispatch { groups, .. } => {
                             let p = &dispatches[j];
+                            let stamp = timing.filter(|t| j < t.2);
+                            if let Some((prof, base, _)) = stamp {
+                                prof.stamp(d, cb, base + j, false);
+                            }
                             // SAFETY: pipeline, layout and set are valid and compatible.
                             unsafe {
                                 d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, p.pipeline);
@@ -568,6 +647,9 @@ impl GpuEngine for VulkanEngine {
                                     &[],
                                 );
                                 d.cmd_dispatch(cb, groups[0], groups[1], groups[2]);
+                            }
+                            if let Some((prof, base, _)) = stamp {
+                                prof.stamp(d, cb, base + j, true);
                             }
                             j += 1;
                         }

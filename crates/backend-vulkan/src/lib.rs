@@ -19,6 +19,7 @@
 
 mod device;
 mod engine;
+mod profile;
 pub mod testing;
 
 pub use ash;

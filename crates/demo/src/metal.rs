@@ -117,12 +117,10 @@ start_time = 0.2
         lr: 0.1,
         beta1: 0.6,
         optimizer: OptimizerKind::TrustBfgs,
-        precision: Precision::F32,
+        precision: Precision::F64,
         ..Default::default()
     };
-    fit.init.candidates = 24;
-    fit.multi_start = 4;
-    fit.multi_start_iters = 8;
+    fit.init.candidates = 64;
     fit.init.frames = frames;
     SceneSpec {
         scene: super::DemoScene::Metal,

@@ -23,6 +23,18 @@ pub struct MemoryUsage {
     pub peak_bytes: u64,
 }
 
+/// GPU time of one kernel, summed over its dispatches (from timestamp queries; a GPU
+/// backend's `kernel_times`, printed by the CLI's `--profile`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct KernelTime {
+    /// The kernel's name (`p2g`, `splat_rasterize`, ...).
+    pub name: String,
+    /// Dispatches timed.
+    pub dispatches: u64,
+    /// Their summed GPU time, in seconds.
+    pub seconds: f64,
+}
+
 /// Constants of one substep, shared by every stage.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]

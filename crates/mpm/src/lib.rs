@@ -60,7 +60,7 @@ pub mod transfer;
 pub use boundary::{BoundaryCondition, Surface};
 pub use config::{Domain, ForceForm, OutOfDomain, SimConfig, SolverConfig, TimeConfig};
 pub use error::{Error, Result};
-pub use kernels::{Grid, MemoryUsage, MpmKernels, Particles, StepConsts};
+pub use kernels::{Grid, KernelTime, MemoryUsage, MpmKernels, Particles, StepConsts};
 pub use material::{Material, PartConsts, PartParams};
 pub use scene::{ParticleSet, Shape};
 pub use sim::{MpmSim, SimSetup, SimState, Simulator};

@@ -95,6 +95,16 @@ pub trait Compute: Send + Sync + std::fmt::Debug {
     }
     /// Starts a new device-memory peak ([`Compute::device_peak_bytes`]).
     fn reset_device_peak(&self) {}
+    /// Turns per-kernel GPU timing on or off (`--profile`); returns whether this backend
+    /// measures it (GPU timestamp queries: the Vulkan backend; `false` elsewhere).
+    fn set_profiling(&self, _on: bool) -> Result<bool, FitError> {
+        Ok(false)
+    }
+    /// GPU time per kernel since profiling was turned on, slowest first (empty where it is
+    /// not measured).
+    fn kernel_times(&self) -> Result<Vec<r4d_mpm::KernelTime>, FitError> {
+        Ok(Vec::new())
+    }
     /// The device's peak of allocated bytes since [`Compute::reset_device_peak`]; `None` for
     /// host backends (their memory is the process heap).
     fn device_peak_bytes(&self) -> Option<u64> {
