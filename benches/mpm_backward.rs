@@ -7,7 +7,9 @@
 //!   (`KernelAdjoint<CpuBackend<f32>>`, all cores);
 //! * `adjoint_substep/wgpu/{forward,backward}/N`: the device adjoint
 //!   (`KernelAdjoint<WgpuMpm>`, the same stepper) when a wgpu adapter exists; every call waits
-//!   for the device, so times are execution times.
+//!   for the device, so times are execution times;
+//! * `adjoint_substep/vulkan/{forward,backward}/N`: the same on the Vulkan engine
+//!   (`KernelAdjoint<VulkanMpm>`; each call ends with `VulkanEngine::finish`).
 //!
 //! The input of every timed call is the same: the state after 20 warm-up substeps (run on
 //! the CPU, uploaded for wgpu) and, for the backward, an adjoint seeded as by a loss on the
@@ -26,7 +28,7 @@
 //! * `R4D_BENCH_MPM_SIZES=10648,97336` replaces the particle counts (each rounded to a cube
 //!   of 8 particles per cell; on Mesa's lavapipe, a CPU emulation of Vulkan, use small ones:
 //!   `R4D_BENCH_MPM_SIZES=4000`);
-//! * `R4D_BENCH_MPM_BACKENDS=cpu,wgpu` picks the steppers (criterion's name filter skips the
+//! * `R4D_BENCH_MPM_BACKENDS=cpu,wgpu,vulkan` picks the steppers (criterion's name filter skips the
 //!   timing but not a backend's setup, which on lavapipe compiles the pipelines).
 //!
 //! `cargo bench --bench mpm_backward [-- [--quick] [FILTER]]`.
@@ -38,8 +40,11 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use r4d_backend_cpu::{CpuBackend, Par};
+use r4d_backend_vulkan::{VulkanEngine, VulkanMpm};
 use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
+use r4d_gpu::GpuEngine;
 use r4d_mpm::adjoint::checkpoint::Differentiable;
+use r4d_mpm::adjoint::engine::MpmAdjointKernels;
 use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
 use r4d_mpm::{
@@ -258,14 +263,59 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
             timeout: None,
         });
     };
-    let mut group = c.benchmark_group("adjoint_substep/wgpu");
+    let dev = Device {
+        name: "wgpu",
+        wait: &wait,
+        reset_peak: &|| ctx.reset_peak(),
+        peak_bytes: &|| ctx.peak_bytes(),
+    };
+    bench_device(c, cases, &dev, || WgpuMpm::new(ctx.clone()));
+}
+
+fn bench_vulkan(c: &mut Criterion, cases: &[Case]) {
+    let engine = match VulkanEngine::new() {
+        Ok(e) => e,
+        Err(e) => {
+            eprintln!("adjoint_substep/vulkan skipped: {e}");
+            return;
+        }
+    };
+    eprintln!("vulkan device: {}", engine.device_name());
+    let dev = Device {
+        name: "vulkan",
+        wait: &|| engine.finish().expect("vulkan submission"),
+        reset_peak: &|| engine.reset_peak(),
+        peak_bytes: &|| engine.memory_usage().peak_bytes,
+    };
+    bench_device(c, cases, &dev, || VulkanMpm::new(engine.clone()));
+}
+
+/// A GPU engine as the bench drives it: waiting for its work and its memory peak.
+struct Device<'a> {
+    name: &'static str,
+    wait: &'a dyn Fn(),
+    reset_peak: &'a dyn Fn(),
+    peak_bytes: &'a dyn Fn() -> u64,
+}
+
+/// The device adjoint (`KernelAdjoint` over a GPU backend's kernels): the same cases and
+/// measurements on every GPU engine.
+fn bench_device<B: MpmAdjointKernels<Scalar = f32>>(
+    c: &mut Criterion,
+    cases: &[Case],
+    dev: &Device,
+    make: impl Fn() -> B,
+) {
+    let wait = dev.wait;
+    let name = dev.name;
+    let mut group = c.benchmark_group(format!("adjoint_substep/{name}"));
     group.sample_size(10);
     for case in cases {
         let np = case.sim.len();
-        let stepper = match KernelAdjoint::new(WgpuMpm::new(ctx.clone()), &case.sim) {
+        let stepper = match KernelAdjoint::new(make(), &case.sim) {
             Ok(s) => s,
             Err(e) => {
-                eprintln!("adjoint_substep/wgpu/{np} skipped: {e}");
+                eprintln!("adjoint_substep/{name}/{np} skipped: {e}");
                 continue;
             }
         };
@@ -287,7 +337,7 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
             let mut s = stepper.clone_state(&before).unwrap();
             let mut adj = stepper.clone_state(&adj0).unwrap();
             wait();
-            ctx.reset_peak();
+            (dev.reset_peak)();
             let base = reset_peak();
             if backward {
                 stepper
@@ -297,7 +347,7 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
                 stepper.step(&mut s, &case.params, k).unwrap();
             }
             wait();
-            peaks.push((peak_since(base) as u64, ctx.peak_bytes()));
+            peaks.push((peak_since(base) as u64, (dev.peak_bytes)()));
         }
         let g = stepper
             .grad_to_host(&grad, &case.params)
@@ -305,7 +355,7 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
         assert!(g[0].youngs_modulus.is_finite(), "non-finite gradient");
         for (what, (host, dev)) in ["forward", "backward"].into_iter().zip(peaks) {
             println!(
-                "adjoint_substep/wgpu/{what}/{np}: peak device memory {:.1} MiB ({dev} B, \
+                "adjoint_substep/{name}/{what}/{np}: peak device memory {:.1} MiB ({dev} B, \
                  {:.0} B/particle: every live buffer of the backend, i.e. the stepper's scratch \
                  and grids and the bench's checkpoint, adjoint seed and working copies), peak \
                  host memory of one call {:.2} MiB ({host} B)",
@@ -354,13 +404,16 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
 }
 
 fn benches(c: &mut Criterion) {
-    let backends = env_list("R4D_BENCH_MPM_BACKENDS", "cpu,wgpu");
+    let backends = env_list("R4D_BENCH_MPM_BACKENDS", "cpu,wgpu,vulkan");
     let cases: Vec<Case> = sizes().into_iter().map(Case::new).collect();
     if backends.iter().any(|b| b == "cpu") {
         bench_cpu(c, &cases);
     }
     if backends.iter().any(|b| b == "wgpu") {
         bench_wgpu(c, &cases);
+    }
+    if backends.iter().any(|b| b == "vulkan") {
+        bench_vulkan(c, &cases);
     }
 }
 

@@ -599,6 +599,27 @@ fn gpu_simulation_matches_the_cpu_in_the_video_fit() {
     let Some(ctx) = r4d_backend_wgpu::testing::gpu_or_skip("gpu_video_fit") else {
         return;
     };
+    let wgpu = resonance4d::compute::WgpuCompute::new(std::sync::Arc::new(ctx));
+    assert!(
+        wgpu.render_on_gpu,
+        "the wgpu backend renders on the GPU by default"
+    );
+    video_fit_parity(std::sync::Arc::new(wgpu), "wgpu");
+}
+
+/// The same video-fit parity on the Vulkan engine (`VulkanMpm`, `VulkanSplat`), under the
+/// validation layer in CI.
+#[test]
+fn vulkan_simulation_matches_the_cpu_in_the_video_fit() {
+    let Some(engine) = r4d_backend_vulkan::testing::vulkan_or_skip("vulkan_video_fit") else {
+        return;
+    };
+    video_fit_parity(resonance4d::compute::vulkan(engine.clone()), "vulkan");
+    r4d_backend_vulkan::testing::assert_validation_clean(&engine, "vulkan_video_fit");
+}
+
+/// Loss, gradients and a 3-iteration fit of `compute` against the CPU's f32 run.
+fn video_fit_parity(compute: std::sync::Arc<dyn resonance4d::compute::Compute>, name: &str) {
     let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
     let mut p = small_problem(&truth, 3);
     let start = [jelly(1.4e4, 1000.0), jelly(1.1e4, 1200.0)];
@@ -606,14 +627,9 @@ fn gpu_simulation_matches_the_cpu_in_the_video_fit() {
     let mut cpu = Objective::new(&p, None, &loss, false).unwrap();
     cpu.precision = Precision::F32;
     let (ev, g) = cpu.value_and_grad(&start).unwrap();
-    let wgpu = resonance4d::compute::WgpuCompute::new(std::sync::Arc::new(ctx));
-    assert!(
-        wgpu.render_on_gpu,
-        "the wgpu backend renders on the GPU by default"
-    );
-    p.compute = std::sync::Arc::new(wgpu);
+    p.compute = compute;
     let gpu = Objective::new(&p, None, &loss, false).unwrap();
-    assert_eq!(gpu.compute.name(), "wgpu");
+    assert_eq!(gpu.compute.name(), name);
     let (ev2, g2) = gpu.value_and_grad(&start).unwrap();
     let prof = gpu.profile();
     assert!(prof.device_peak_bytes.unwrap_or(0) > 0, "{prof:?}");

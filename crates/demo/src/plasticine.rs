@@ -115,7 +115,9 @@ num_dt = {n}
         precision: Precision::F64,
         ..Default::default()
     };
-    fit.init.candidates = 24;
+    fit.init.candidates = 64;
+    fit.multi_start = 4;
+    fit.multi_start_iters = 8;
     fit.init.frames = frames;
     SceneSpec {
         scene: super::DemoScene::Plasticine,
