@@ -197,8 +197,9 @@ fn vk_err(what: &'static str) -> impl Fn(vk::Result) -> VulkanError {
 }
 
 impl Device {
-    /// Opens the Vulkan loader and a device with a compute queue. `wanted`: a substring of
-    /// the device name (`R4D_VULKAN_DEVICE`); otherwise discrete > integrated > virtual > CPU.
+    /// Opens the Vulkan loader and a device with a compute queue. `wanted`
+    /// (`R4D_VULKAN_DEVICE`): the device's index in the loader's enumeration (a number), or
+    /// a substring of its name; otherwise discrete > integrated > virtual > CPU.
     pub fn new(
         wanted: Option<&str>,
         allow_float_atomics: bool,
@@ -270,8 +271,11 @@ impl Device {
             None
         };
         let mut validation = validation;
+        // `open` keeps a clone of the loader on success; this one stays loaded until the
+        // instance is destroyed on failure (dropping the last clone unloads libvulkan, and
+        // destroying the instance after that crashed: found by `tests/device_choice.rs`).
         match Self::open(
-            entry,
+            entry.clone(),
             instance.clone(),
             wanted,
             allow_float_atomics,
@@ -286,6 +290,7 @@ impl Device {
                     }
                     instance.destroy_instance(None)
                 };
+                drop(entry);
                 Err(e)
             }
         }
@@ -325,14 +330,15 @@ impl Device {
             vk::PhysicalDeviceType,
         )> = Vec::new();
         let mut names = Vec::new();
-        for pd in pds {
+        let wanted_index = wanted.and_then(|w| w.trim().parse::<usize>().ok());
+        for (index, pd) in pds.into_iter().enumerate() {
             // SAFETY: pd comes from this instance.
             let props = unsafe { instance.get_physical_device_properties(pd) };
             let name = props
                 .device_name_as_c_str()
                 .map(|c: &CStr| c.to_string_lossy().into_owned())
                 .unwrap_or_default();
-            names.push(name.clone());
+            names.push(format!("{index}: {name}"));
             if props.api_version < vk::API_VERSION_1_1 {
                 continue;
             }
@@ -344,7 +350,12 @@ impl Device {
             else {
                 continue;
             };
-            if wanted.is_some_and(|w| !name.contains(w)) {
+            let chosen = match (wanted_index, wanted) {
+                (Some(k), _) => k == index,
+                (None, Some(w)) => name.contains(w),
+                (None, None) => true,
+            };
+            if !chosen {
                 continue;
             }
             found.push((

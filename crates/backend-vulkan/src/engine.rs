@@ -83,7 +83,7 @@ fn vk_err(what: &'static str) -> impl Fn(vk::Result) -> VulkanError {
 }
 
 impl VulkanEngine {
-    /// The engine on the preferred device (`R4D_VULKAN_DEVICE=name` picks one by name);
+    /// The engine on the preferred device (`R4D_VULKAN_DEVICE=name` or `=index` picks one);
     /// native float atomics where the device has them, unless `R4D_VULKAN_NO_FLOAT_ATOMICS`
     /// is set.
     pub fn new() -> Result<Self, VulkanError> {

@@ -13,7 +13,7 @@
 //! simulated frame is one queue submission, not one per substep.
 //! Scatter kernels use native float atomics where the device has `VK_EXT_shader_atomic_float`
 //! (buffer float32 add) and their compare-exchange variants elsewhere
-//! (`R4D_VULKAN_NO_FLOAT_ATOMICS` forces the latter). `R4D_VULKAN_DEVICE=name` picks a device by name; otherwise discrete GPUs come
+//! (`R4D_VULKAN_NO_FLOAT_ATOMICS` forces the latter). `R4D_VULKAN_DEVICE=name` (or an index) picks a device; otherwise discrete GPUs come
 //! first, then integrated, virtual and CPU devices (Mesa's lavapipe, which the tests use
 //! where there is no GPU).
 
