@@ -13,7 +13,7 @@
 
 use r4d_segment::mask::MaskData;
 use r4d_segment::synthetic::plant::{self, corrupt_parts, mislabel_part, per_part, PlantScene};
-use r4d_segment::{segment, InMemoryMasks, LiftConfig, SegmentConfig, SmoothConfig};
+use r4d_segment::{segment, InMemoryMasks, LiftConfig, SegmentConfig, SmoothConfig, ViewVote};
 use r4d_splat::Camera;
 
 const PARTS: [&str; 5] = ["pot", "soil", "stem", "leaves", "petals"];
@@ -138,29 +138,68 @@ fn clean_masks_per_part_and_every_stage_helps() {
 
 #[test]
 fn corrupted_masks_per_part_table() {
-    let (mut sum_classic, mut sum_new) = (0.0, 0.0);
-    let seeds = 3;
+    let (mut sum_classic, mut sum_summed, mut sum_new) = (0.0, 0.0, 0.0);
+    let seeds = 5;
     for seed in 0..seeds {
         let (scene, cams, masks) = setup(seed);
         let bad = corrupted(&masks, seed);
         let old = score_with(&scene, &cams, &bad, before());
         let classic = score(&scene, &cams, &bad, LiftConfig::classic());
+        let summed = score(
+            &scene,
+            &cams,
+            &bad,
+            LiftConfig {
+                vote: ViewVote::Sum,
+                ..Default::default()
+            },
+        );
         let new = score(&scene, &cams, &bad, LiftConfig::default());
         println!("seed {seed} corrupted: {}", row("before", &old));
         println!("seed {seed} corrupted: {}", row("classic", &classic));
+        println!("seed {seed} corrupted: {}", row("sum", &summed));
         println!("seed {seed} corrupted: {}", row("default", &new));
         sum_classic += classic.1;
+        sum_summed += summed.1;
         sum_new += new.1;
-        assert!(new.1 >= 0.87, "seed {seed}: {}", new.1);
-        assert!(new.1 > old.1 + 0.01, "seed {seed}: {} vs {}", new.1, old.1);
+        assert!(new.1 >= 0.9, "seed {seed}: {}", new.1);
+        assert!(new.1 > old.1 + 0.02, "seed {seed}: {} vs {}", new.1, old.1);
+        // The per-view confusion matrices keep or improve the summed votes' total on every
+        // seed, and lift the worst part.
+        assert!(
+            new.1 > summed.1 - 0.005,
+            "seed {seed}: {} vs {}",
+            new.1,
+            summed.1
+        );
+        let worst = |p: &[f64]| p[1..].iter().copied().fold(1.0, f64::min);
+        assert!(
+            worst(&new.0) > worst(&summed.0) + 0.05,
+            "seed {seed}: worst part {} vs {}",
+            worst(&new.0),
+            worst(&summed.0)
+        );
         // The static floor survives the corruption.
         assert!(new.0[0] >= 0.97, "seed {seed}, floor: {}", new.0[0]);
     }
+    let n = seeds as f64;
+    println!(
+        "mean over {seeds} seeds: classic {:.4}, sum {:.4}, default (confusion) {:.4}",
+        sum_classic / n,
+        sum_summed / n,
+        sum_new / n
+    );
     assert!(
-        sum_new >= sum_classic + 0.045,
+        sum_new >= sum_summed + 0.02 * n,
         "mean {} vs {}",
-        sum_new / 3.0,
-        sum_classic / 3.0
+        sum_new / n,
+        sum_summed / n
+    );
+    assert!(
+        sum_new >= sum_classic + 0.06 * n,
+        "mean {} vs {}",
+        sum_new / n,
+        sum_classic / n
     );
 }
 

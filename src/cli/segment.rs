@@ -59,10 +59,25 @@ pub struct SegmentArgs {
     /// the Gaussian itself (edge-on Gaussians then vote with their whole blurred line).
     #[arg(long)]
     no_footprint_trust: bool,
+    /// How the views are combined: confusion (each view gets a confusion matrix estimated
+    /// against the other views, and its labels count by what its record says they are
+    /// worth: a view that erodes a thin part away or calls one part another loses its say
+    /// on that part) or sum (every pixel's vote summed over the views).
+    #[arg(long, value_enum, default_value_t = Vote::Confusion)]
+    vote: Vote,
     /// The lift as it was before visibility-aware voting (sum of alpha T times the mask over
-    /// every view and pixel); overrides the three options above.
+    /// every view and pixel); overrides the four options above.
     #[arg(long)]
     classic: bool,
+}
+
+/// `--vote`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum Vote {
+    /// Per-view confusion matrices (Dawid-Skene, one round).
+    Confusion,
+    /// Summed pixel votes.
+    Sum,
 }
 
 const Y0: f32 = 0.282_094_8;
@@ -110,6 +125,11 @@ pub fn run(a: SegmentArgs) -> Result<()> {
         }
     };
     let lift_cfg = LiftConfig {
+        vote: match (a.classic, a.vote) {
+            (true, _) => base.vote,
+            (false, Vote::Confusion) => r4d_segment::ViewVote::Confusion,
+            (false, Vote::Sum) => r4d_segment::ViewVote::Sum,
+        },
         temperature: a.temperature,
         mode: set.mode.unwrap_or_default(),
         par: Par::Rayon,

@@ -37,6 +37,7 @@
 //! ```
 
 pub mod boundary;
+pub mod confusion;
 pub mod error;
 pub mod label_map;
 pub mod labels;

@@ -39,13 +39,18 @@ use r4d_splat::{Camera, Gaussians, RasterizeMode};
 pub enum ViewVote {
     /// Every pixel's vote summed over every view: a view that sees a Gaussian over many
     /// pixels outweighs one that sees it over few (LUDVIG's uplifting).
-    #[default]
     Sum,
     /// Each view first makes up its own mind about each Gaussian (its class distribution),
     /// then the views vote with their confidence in that Gaussian: how well they see it
     /// (saturating) and, over [`LiftConfig::consistency_iters`] rounds, how well they agree
     /// with the other views.
     Confidence,
+    /// Dawid and Skene's EM ([`crate::confusion`]): every view gets a confusion matrix,
+    /// estimated from the current labels, and its votes count by what its record says they
+    /// are worth (a view that erodes a thin part away, or calls one part another, loses its
+    /// say on that part), starting from [`ViewVote::Sum`]'s evidence.
+    #[default]
+    Confusion,
 }
 
 /// Settings of the lift.
@@ -58,9 +63,10 @@ pub struct LiftConfig {
     pub mode: RasterizeMode,
     /// Parallelism.
     pub par: Par,
-    /// How views are combined. Default [`ViewVote::Sum`] (on the potted-plant scene the
-    /// confidence vote lost 1-4 points of accuracy on clean masks and did not help on
-    /// corrupted ones).
+    /// How views are combined. Default [`ViewVote::Confusion`] (on the potted-plant scene,
+    /// five seeds: part Gaussians right with corrupted masks 90.8% -> 93.7%, clean masks
+    /// 99.73% -> 99.90%; the confidence vote lost 1-4 points on clean masks and did not help
+    /// on corrupted ones).
     pub vote: ViewVote,
     /// A pixel votes for a Gaussian with `(alpha T)^p`: `p > 1` lets the pixels a Gaussian
     /// dominates speak for it, not the tails of its footprint over a neighbour's pixels.
@@ -106,6 +112,8 @@ pub struct LiftConfig {
     /// label only (0: off). Default 0 (one round on the potted plant: +0.7 points with
     /// corrupted masks, -0.35 with clean ones, the stem losing most).
     pub view_consistency_iters: u32,
+    /// [`ViewVote::Confusion`]: the EM's settings.
+    pub confusion: crate::confusion::ConfusionConfig,
     /// A view "sees" a Gaussian (diagnostics: [`Lifted::views`]) when its compositing weight
     /// there reaches this. Default 0.05.
     pub seen_weight: f32,
@@ -117,7 +125,7 @@ impl Default for LiftConfig {
             temperature: 0.1,
             mode: RasterizeMode::Classic,
             par: Par::Rayon,
-            vote: ViewVote::Sum,
+            vote: ViewVote::Confusion,
             weight_power: 1.0,
             boundary_px: 0.0,
             saturation: 0.5,
@@ -126,6 +134,7 @@ impl Default for LiftConfig {
             full_visibility: 4.0,
             background_weight: 0.25,
             view_consistency_iters: 0,
+            confusion: Default::default(),
             seen_weight: 0.05,
         }
     }
@@ -154,7 +163,8 @@ pub struct Lifted {
     pub num_parts: usize,
     /// The combined class evidence `W[g][c]`, `N x (M + 1)` row-major; column 0 is the
     /// background ([`ViewVote::Sum`]: sums of pixel votes; [`ViewVote::Confidence`]: sums of
-    /// the views' class distributions times their weights).
+    /// the views' class distributions times their weights; [`ViewVote::Confusion`]: the
+    /// posterior class probabilities times the summed votes).
     pub class_weights: Vec<f64>,
     /// Label per Gaussian (-1: background/static or unobserved).
     pub labels: Vec<i32>,
@@ -164,7 +174,7 @@ pub struct Lifted {
     pub visibility: Vec<f32>,
     /// Number of views that see each Gaussian ([`LiftConfig::seen_weight`]).
     pub views: Vec<u16>,
-    /// Per view ([`ViewVote::Sum`]; 0 otherwise), over the Gaussians it sees fully and is
+    /// Per view ([`ViewVote::Sum`] and [`ViewVote::Confusion`]; 0 otherwise), over the Gaussians it sees fully and is
     /// sure about (90% of its own votes on one class), the share of its votes on which it
     /// disagrees with the other views combined (leave-one-out): a view that labels a part as
     /// another, or misses it, stands out.
@@ -250,6 +260,25 @@ fn check_config(cfg: &LiftConfig) -> Result<()> {
         return Err(Error::Input(format!(
             "seen weight {} (must be >= 0 and finite)",
             cfg.seen_weight
+        )));
+    }
+    let c = &cfg.confusion;
+    if !(1..=100).contains(&c.iters) {
+        return Err(Error::Input(format!(
+            "{} confusion EM rounds (must lie in 1..=100)",
+            c.iters
+        )));
+    }
+    if !(c.diagonal_prior.is_finite() && c.diagonal_prior >= 0.0) {
+        return Err(Error::Input(format!(
+            "confusion diagonal prior {} (must be >= 0 and finite)",
+            c.diagonal_prior
+        )));
+    }
+    if !(c.floor.is_finite() && c.floor > 0.0) {
+        return Err(Error::Input(format!(
+            "confusion floor {} (must be positive and finite)",
+            c.floor
         )));
     }
     if cfg.consistency_iters > 100 {
@@ -520,7 +549,7 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
             if wv >= cfg.seen_weight as f64 {
                 views[gi] = views[gi].saturating_add(1);
             }
-            if cfg.vote == ViewVote::Sum {
+            if cfg.vote != ViewVote::Confidence {
                 for (cw, r) in class_weights[gi * s..(gi + 1) * s].iter_mut().zip(&row) {
                     *cw += r;
                 }
@@ -562,7 +591,26 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
         }
         let _ = w;
     }
-    let sums = sums.as_deref().unwrap_or(&class_weights);
+    let summed = (cfg.vote == ViewVote::Confusion).then(|| class_weights.clone());
+    if let Some(init) = &summed {
+        let table = crate::confusion::VoteTable {
+            votes: &votes,
+            totals: &view_totals,
+            n,
+            s,
+            nv,
+        };
+        crate::confusion::combine(&table, init, &cfg.confusion, &mut class_weights);
+        // Posterior times the summed evidence: `total_weight` keeps its meaning.
+        for (row, i) in class_weights.chunks_exact_mut(s).zip(init.chunks_exact(s)) {
+            let t: f64 = i.iter().sum();
+            row.iter_mut().for_each(|x| *x *= t);
+        }
+    }
+    let sums = sums
+        .as_deref()
+        .or(summed.as_deref())
+        .unwrap_or(&class_weights);
     let (labels, mut confidence) = classify(&class_weights, m, cfg.temperature);
     if cfg.full_visibility > 0.0 {
         for (g, (c, &v)) in confidence.iter_mut().zip(&visibility).enumerate() {
@@ -575,8 +623,8 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
             }
         }
     }
-    let view_disagreement = if cfg.vote == ViewVote::Sum {
-        leave_one_out_disagreement(&votes, &view_totals, &class_weights, n, s, nv)
+    let view_disagreement = if cfg.vote != ViewVote::Confidence {
+        leave_one_out_disagreement(&votes, &view_totals, sums, n, s, nv)
     } else {
         vec![0.0; nv]
     };
