@@ -68,22 +68,33 @@ pub struct TrustRegionBfgs {
     /// The coordinate search in progress, if any.
     #[serde(default)]
     pattern: Option<Pattern>,
+    /// Length of the next coordinate search's first probes, in units of the first radius:
+    /// doubles each time a search from the same point finds nothing, 1 after an accepted
+    /// trial.
+    #[serde(default = "one")]
+    probe_scale: f64,
     /// Settings.
     pub settings: TrustRegion,
 }
 
-/// A coordinate (pattern) search around `x`: trials `x + sign h e_i` in `order`, then `h / 2`.
-/// Used where the gradient has failed at every radius twice: on a loss whose kinks make the
-/// local gradient point uphill at every finite step, probing each coordinate both ways
-/// still finds a lower point when there is one nearby.
+/// A coordinate (pattern) search around `x`: trials `x + sign h e_i` in `order`; when every
+/// probe of a round fails, one more trial at the minimum of the separable quadratic through
+/// the probes (per coordinate, the parabola through `f(x - h e_i)`, `f(x)`, `f(x + h e_i)`:
+/// a finite-difference step at scale `h`, which moves several coordinates at once), then
+/// `h / 2`. Used where the gradient has failed at every radius twice: on a loss whose kinks
+/// make the local gradient point uphill at every finite step, probing each coordinate both
+/// ways still finds a lower point when there is one nearby.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 struct Pattern {
     /// `(coordinate, sign)` in the order they are tried.
     order: Vec<(usize, f64)>,
-    /// The next entry of `order`.
+    /// The next entry of `order` (`order.len()`: the separable-quadratic trial).
     next: usize,
     /// The probe length (log units).
     h: f64,
+    /// The losses of this round's probes, in `order` (non-finite: `+inf`).
+    #[serde(default)]
+    losses: Vec<f64>,
 }
 
 impl Pattern {
@@ -98,8 +109,42 @@ impl Pattern {
                 [(i, down), (i, -down)]
             })
             .collect();
-        Pattern { order, next: 0, h }
+        Pattern {
+            order,
+            next: 0,
+            h,
+            losses: Vec::new(),
+        }
     }
+
+    /// The minimum of the separable quadratic through this round's probes and `f0 = f(x)`
+    /// (zero where a coordinate's probes give no upward parabola), within `h` per coordinate.
+    fn separable_step(&self, n: usize, f0: f64) -> Vec<f64> {
+        let mut plus = vec![f64::INFINITY; n];
+        let mut minus = vec![f64::INFINITY; n];
+        for (&(i, sign), &l) in self.order.iter().zip(&self.losses) {
+            if sign > 0.0 {
+                plus[i] = l;
+            } else {
+                minus[i] = l;
+            }
+        }
+        let h = self.h;
+        (0..n)
+            .map(|i| {
+                let (fp, fm) = (plus[i], minus[i]);
+                let curv = (fp + fm - 2.0 * f0) / (h * h);
+                if !(fp.is_finite() && fm.is_finite() && curv > 0.0) {
+                    return 0.0;
+                }
+                (-(fp - fm) / (2.0 * h) / curv).clamp(-h, h)
+            })
+            .collect()
+    }
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -207,6 +252,7 @@ impl TrustRegionBfgs {
             restarts: 0,
             restarted_at: None,
             pattern: None,
+            probe_scale: 1.0,
             settings,
         })
     }
@@ -257,8 +303,18 @@ impl TrustRegionBfgs {
                 );
             }
         }
+        if !(self.probe_scale.is_finite() && self.probe_scale >= 1.0) {
+            return bad(
+                0,
+                format!(
+                    "damaged trust-region state: probe scale {}",
+                    self.probe_scale
+                ),
+            );
+        }
         if let Some(p) = &self.pattern {
-            let ok = p.next < p.order.len()
+            let ok = p.next <= p.order.len()
+                && p.losses.len() <= p.order.len()
                 && p.order
                     .iter()
                     .all(|&(i, sg)| i < n && (sg == 1.0 || sg == -1.0))
@@ -409,6 +465,7 @@ impl TrustRegionBfgs {
                     self.at_x = Some((loss, g));
                     self.accepted = self.accepted.saturating_add(1);
                     self.restarted_at = Some(self.accepted);
+                    self.probe_scale = 1.0;
                 } else if finite && loss < f {
                     let rho = if pred > 0.0 { (f - loss) / pred } else { 0.0 };
                     if rho > 0.75 && step > 0.8 * self.radius {
@@ -419,14 +476,26 @@ impl TrustRegionBfgs {
                     self.x = self.trial.clone();
                     self.at_x = Some((loss, g));
                     self.accepted = self.accepted.saturating_add(1);
+                    self.probe_scale = 1.0;
                 } else if let Some(pat) = self.pattern.as_mut() {
-                    // The probe failed: the next one, then half the length.
+                    // The probe failed: the next one; after the round, the separable
+                    // quadratic's minimum; then half the length.
+                    if pat.next < pat.order.len() {
+                        pat.losses.push(if finite { loss } else { f64::INFINITY });
+                    }
                     pat.next += 1;
-                    if pat.next >= pat.order.len() {
+                    let quadratic_next = pat.next == pat.order.len()
+                        && pat.separable_step(n, f).iter().any(|&p| p != 0.0);
+                    if pat.next >= pat.order.len() && !quadratic_next {
                         pat.next = 0;
                         pat.h *= 0.5;
+                        pat.losses.clear();
                     }
                     if pat.h < self.settings.min_radius {
+                        // Nothing lower down to the smallest probe: the next search from
+                        // this point probes twice as far (up to the largest radius).
+                        self.probe_scale = (2.0 * self.probe_scale)
+                            .min(self.settings.max_radius / self.settings.initial_radius);
                         self.pattern = None;
                         self.restart(&gx);
                     }
@@ -438,7 +507,8 @@ impl TrustRegionBfgs {
                     // if the last restart was from this same point, its trials would repeat
                     // exactly: probe the coordinates instead.
                     if self.restarted_at == Some(self.accepted) {
-                        self.pattern = Some(Pattern::new(&gx, self.settings.initial_radius));
+                        let h = self.settings.initial_radius * self.probe_scale;
+                        self.pattern = Some(Pattern::new(&gx, h));
                         self.restarted_at = None;
                     } else {
                         self.restart(&gx);
@@ -473,6 +543,17 @@ impl TrustRegionBfgs {
             return self.x.clone();
         };
         if let Some(p) = &self.pattern {
+            if p.next >= p.order.len() {
+                let f0 = self.at_x.as_ref().map_or(0.0, |(f, _)| *f);
+                let step = p.separable_step(self.x.len(), f0);
+                return self
+                    .x
+                    .iter()
+                    .zip(&step)
+                    .zip(&self.log_bounds)
+                    .map(|((x, p), (lo, hi))| (x + p).clamp(*lo, *hi))
+                    .collect();
+            }
             let (i, sign) = p.order[p.next];
             let mut t = self.x.clone();
             let (lo, hi) = self.log_bounds[i];
@@ -613,6 +694,21 @@ mod tests {
             serde_json::from_str(&serde_json::to_string(&o).unwrap()).unwrap();
         assert_eq!(back, o);
         back.validate(2).unwrap();
+    }
+
+    /// The separable quadratic through the probes has its minimum where the parabolas do.
+    #[test]
+    fn separable_step_is_the_parabolas_minimum() {
+        let f = |x: [f64; 2]| 3.0 * (x[0] - 0.03).powi(2) + 0.5 * (x[1] + 0.05).powi(2);
+        let mut p = Pattern::new(&[1.0, -1.0], 0.1);
+        for &(i, sign) in &p.order.clone() {
+            let mut x = [0.0; 2];
+            x[i] = sign * 0.1;
+            p.losses.push(f(x));
+        }
+        let step = p.separable_step(2, f([0.0; 2]));
+        assert!((step[0] - 0.03).abs() < 1e-12, "{step:?}");
+        assert!((step[1] + 0.05).abs() < 1e-12, "{step:?}");
     }
 
     #[test]

@@ -142,21 +142,22 @@ fn softmax_into(lp: &[f64], out: &mut [f64]) {
     }
 }
 
-/// View `v`'s log likelihood of each class for one Gaussian, `a sum_o q_o log C[c][o]`.
+/// View `v`'s log likelihood of each class for one Gaussian, `a sum_o q_o log C[c][o]`, from
+/// the view's `log C` (`cv`).
 #[inline]
 fn view_log_lik(a: f64, q: &[u8], cv: &[f64], s: usize, out: &mut [f64]) {
     for (c, l) in out.iter_mut().enumerate() {
         let ll: f64 = q
             .iter()
             .zip(&cv[c * s..(c + 1) * s])
-            .map(|(&qo, &co)| qo as f64 * co.ln())
+            .map(|(&qo, &lc)| qo as f64 * lc)
             .sum::<f64>()
             / 255.0;
         *l = a * ll;
     }
 }
 
-/// Confusion matrices (`nv x s x s`, rows normalised).
+/// The logs of the confusion matrices (`nv x s x s`, rows normalised before the log).
 fn m_step(
     votes: &[u8],
     n: usize,
@@ -221,7 +222,7 @@ fn m_step(
                 };
             }
             let t: f64 = row.iter().sum();
-            row.iter_mut().for_each(|x| *x /= t);
+            row.iter_mut().for_each(|x| *x = (*x / t).ln());
         }
         c
     };

@@ -18,6 +18,12 @@
 //! pixel of any view sees (all `W = 0`) is labelled -1 with confidence 0 ("unobserved"; the
 //! KNN pass in [`mod@crate::smooth`] gives it its neighbours' label).
 //!
+//! By default ([`ViewVote::Confusion`]) the views are not simply added: each view keeps its
+//! own class distribution per Gaussian, gets a confusion matrix estimated against the other
+//! views' verdict, and the label is the argmax of the posterior in which every view's
+//! observation counts by the likelihood ratio its matrix gives it ([`crate::confusion`]); the
+//! plain sum above is the EM's starting point and [`ViewVote::Sum`]'s result.
+//!
 //! Cost per view: projection (colour is not needed, so SH is skipped), the depth sort and
 //! tile binning of the renderer, then the forward compositing of every pixel, each composited
 //! Gaussian adding to `M + 1` (probabilities) or 1 (labels) accumulators. Tile rows are
