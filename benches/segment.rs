@@ -13,7 +13,9 @@
 //!   (centres uniform in a unit ball, scales log-uniform in [0.003, 0.03], opacities
 //!   sigmoid(U[-2, 4]): many translucent Gaussians per pixel, the expensive case), seen from
 //!   distance 3 around it; masks split the ball's disc into three sectors, as labels or as
-//!   three soft probability maps.
+//!   three soft probability maps. `lift/volume/labels-summed`: the labels with the summed
+//!   votes (`ViewVote::Sum`) instead of the default per-view confusion matrices, for the
+//!   cost of the EM.
 //! * `smooth/surfaces`, `smooth/volume`: the KNN pass (k 16) on the lifted labels.
 //!
 //! Each case prints the peak host memory of one call beyond its inputs (counting allocator).
@@ -21,7 +23,7 @@
 //! source would decode it).
 
 use criterion::{BenchmarkId, Criterion};
-use r4d_segment::lift::{lift, LiftConfig};
+use r4d_segment::lift::{lift, LiftConfig, ViewVote};
 use r4d_segment::smooth::{smooth_gaussians, SmoothConfig};
 use r4d_segment::synthetic::{self, Rng};
 use r4d_segment::{InMemoryMasks, Mask, MaskData};
@@ -148,6 +150,10 @@ fn main() {
     let surf_masks = scene.masks(&surf_cams);
     let vol = ball(n);
     let vol_cams = ball_cameras(views, w, h);
+    let sum = LiftConfig {
+        vote: ViewVote::Sum,
+        ..cfg
+    };
     let cases = [
         (
             "surfaces",
@@ -155,6 +161,7 @@ fn main() {
             &scene.gaussians,
             &surf_cams,
             surf_masks,
+            cfg,
         ),
         (
             "volume",
@@ -162,6 +169,15 @@ fn main() {
             &vol,
             &vol_cams,
             ball_masks(&vol_cams, false),
+            cfg,
+        ),
+        (
+            "volume",
+            "labels-summed",
+            &vol,
+            &vol_cams,
+            ball_masks(&vol_cams, false),
+            sum,
         ),
         (
             "volume",
@@ -169,10 +185,11 @@ fn main() {
             &vol,
             &vol_cams,
             ball_masks(&vol_cams, true),
+            cfg,
         ),
     ];
     let mut lifted = Vec::new();
-    for (scene_name, kind, g, cams, mut masks) in cases {
+    for (scene_name, kind, g, cams, mut masks, cfg) in cases {
         let base = reset_peak();
         let t = std::time::Instant::now();
         let l = lift(g, cams, &mut masks, &cfg).unwrap();
