@@ -43,7 +43,7 @@ pub struct SegmentArgs {
     min_cluster: Option<usize>,
     /// Rounds of label propagation over the KNN graph (1: one plain vote; more fill larger
     /// holes in the lift but let big parts creep into thin ones).
-    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=100))]
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u32).range(1..=100))]
     rounds: u32,
     /// A Gaussian with mixed evidence seen with less than this compositing weight (pixel
     /// equivalents, over all views) gets proportionally less confidence, so that the KNN pass

@@ -15,9 +15,11 @@
 //! the fit keeps exploring around the best point instead of re-evaluating one trial. A second
 //! such restart from the same point would repeat the first one's trials exactly (measured:
 //! the full-size plasticine demo spent 28 of its 40 iterations in an 8-trial cycle), so it
-//! probes the coordinates instead (`x +- h e_i`, largest gradient first, `h` halving after
-//! each round): on a loss whose kinks make the local gradient point uphill at every step the
-//! model can take, a probe still finds a lower point when there is one nearby.
+//! searches by finite differences instead (the coordinates `x +- h e_i`, then pairs of them,
+//! then the minimum of the quadratic model through those probes; `h` halving after each
+//! round): on a loss whose kinks make the local gradient point uphill at every step the model
+//! can take, a probe still finds a lower point when there is one nearby, and a pair probe
+//! finds a valley along a diagonal (two parameters that trade off).
 
 use crate::Error;
 use serde::{Deserialize, Serialize};
@@ -77,25 +79,38 @@ pub struct TrustRegionBfgs {
     pub settings: TrustRegion,
 }
 
-/// A coordinate (pattern) search around `x`: trials `x + sign h e_i` in `order`; when every
-/// probe of a round fails, one more trial at the minimum of the separable quadratic through
-/// the probes (per coordinate, the parabola through `f(x - h e_i)`, `f(x)`, `f(x + h e_i)`:
-/// a finite-difference step at scale `h`, which moves several coordinates at once), then
-/// `h / 2`. Used where the gradient has failed at every radius twice: on a loss whose kinks
-/// make the local gradient point uphill at every finite step, probing each coordinate both
-/// ways still finds a lower point when there is one nearby.
+/// A finite-difference search around `x` at scale `h`, used where the gradient has failed at
+/// every radius twice (a loss whose kinks make the local gradient point uphill at every
+/// finite step). A round tries, in order, and stops at the first trial that lowers the loss:
+///
+/// 1. the coordinate probes `x +- h e_i` (largest `|g_i|` first, downhill side first);
+/// 2. with at most [`MAX_PAIR_PARAMS`] parameters, the pair probes
+///    `x + s_i t_i e_i + s_j t_j e_j`, `s` each coordinate's better side, the lengths `t`
+///    scaled so both coordinates' probes rose alike (`h` for the softer one): a valley along
+///    a diagonal (two parameters that trade off) is lower there although every coordinate
+///    probe is higher;
+/// 3. the minimum of the quadratic model through the probes (gradient and Hessian by finite
+///    differences at scale `h`: diagonal from the coordinate probes, off-diagonal from the
+///    pair probes, zero without them), damped to positive definite, at most `2 h` long;
+///
+/// then `h / 2` and a new round.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 struct Pattern {
-    /// `(coordinate, sign)` in the order they are tried.
+    /// `(coordinate, sign)` of the coordinate probes in the order they are tried.
     order: Vec<(usize, f64)>,
-    /// The next entry of `order` (`order.len()`: the separable-quadratic trial).
+    /// The next trial of the round: `< order.len()` a coordinate probe, then the pair probes,
+    /// then the model's minimum.
     next: usize,
     /// The probe length (log units).
     h: f64,
-    /// The losses of this round's probes, in `order` (non-finite: `+inf`).
+    /// The losses of this round's probes, in order (non-finite: `+inf`).
     #[serde(default)]
     losses: Vec<f64>,
 }
+
+/// Largest number of free parameters for which the finite-difference search probes pairs
+/// (`n (n - 1) / 2` trials per round: 28 at 8).
+pub const MAX_PAIR_PARAMS: usize = 8;
 
 impl Pattern {
     /// Coordinates by decreasing `|g_i|`, each first downhill by its gradient, then uphill.
@@ -117,9 +132,30 @@ impl Pattern {
         }
     }
 
-    /// The minimum of the separable quadratic through this round's probes and `f0 = f(x)`
-    /// (zero where a coordinate's probes give no upward parabola), within `h` per coordinate.
-    fn separable_step(&self, n: usize, f0: f64) -> Vec<f64> {
+    /// Number of coordinates.
+    fn n(&self) -> usize {
+        self.order.len() / 2
+    }
+
+    /// The pairs probed after the coordinates, `(i, j)` with `i < j`.
+    fn pairs(&self) -> Vec<(usize, usize)> {
+        let n = self.n();
+        if n > MAX_PAIR_PARAMS {
+            return Vec::new();
+        }
+        (0..n)
+            .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+            .collect()
+    }
+
+    /// Trials in a round (the model's minimum last).
+    fn round_len(&self) -> usize {
+        self.order.len() + self.pairs().len() + 1
+    }
+
+    /// `f(x + h e_i)` and `f(x - h e_i)` per coordinate (`+inf` where not probed).
+    fn coordinate_losses(&self) -> (Vec<f64>, Vec<f64>) {
+        let n = self.n();
         let mut plus = vec![f64::INFINITY; n];
         let mut minus = vec![f64::INFINITY; n];
         for (&(i, sign), &l) in self.order.iter().zip(&self.losses) {
@@ -129,17 +165,113 @@ impl Pattern {
                 minus[i] = l;
             }
         }
-        let h = self.h;
-        (0..n)
-            .map(|i| {
-                let (fp, fm) = (plus[i], minus[i]);
-                let curv = (fp + fm - 2.0 * f0) / (h * h);
-                if !(fp.is_finite() && fm.is_finite() && curv > 0.0) {
-                    return 0.0;
-                }
-                (-(fp - fm) / (2.0 * h) / curv).clamp(-h, h)
-            })
+        (plus, minus)
+    }
+
+    /// Each coordinate's better side (+1 or -1).
+    fn sides(&self) -> Vec<f64> {
+        let (plus, minus) = self.coordinate_losses();
+        plus.iter()
+            .zip(&minus)
+            .map(|(p, m)| if p <= m { 1.0 } else { -1.0 })
             .collect()
+    }
+
+    /// The step lengths of pair `(i, j)`'s probe: `h` for the coordinate whose better-side
+    /// probe rose less, shorter for the other, `h sqrt(r_min / r)` with `r` the rises, so
+    /// both contribute alike to a quadratic loss (the probe runs along the diagonal of the
+    /// coordinates scaled by their curvature: a narrow valley between a stiff parameter and
+    /// a soft one is found there).
+    fn pair_lengths(&self, i: usize, j: usize, f0: f64) -> (f64, f64) {
+        let (plus, minus) = self.coordinate_losses();
+        let rise = |k: usize| (plus[k].min(minus[k]) - f0).max(0.0);
+        let (ri, rj) = (rise(i), rise(j));
+        let r = ri.min(rj);
+        let len = |rk: f64| {
+            if rk > 0.0 && r.is_finite() && rk.is_finite() {
+                self.h * (r / rk).sqrt()
+            } else {
+                self.h
+            }
+        };
+        (len(ri), len(rj))
+    }
+
+    /// The offset (log units) of trial `k` of the round from `x`; `f0 = f(x)`.
+    fn offset(&self, k: usize, f0: f64) -> Vec<f64> {
+        let n = self.n();
+        let mut d = vec![0.0; n];
+        if k < self.order.len() {
+            let (i, sign) = self.order[k];
+            d[i] = sign * self.h;
+        } else if let Some(&(i, j)) = self.pairs().get(k - self.order.len()) {
+            let s = self.sides();
+            let (ti, tj) = self.pair_lengths(i, j, f0);
+            d[i] = s[i] * ti;
+            d[j] = s[j] * tj;
+        } else {
+            d = self.model_step(f0);
+        }
+        d
+    }
+
+    /// The minimum of the finite-difference quadratic model (see the type's docs).
+    fn model_step(&self, f0: f64) -> Vec<f64> {
+        let n = self.n();
+        let h = self.h;
+        let (plus, minus) = self.coordinate_losses();
+        let ok = |v: f64| v.is_finite();
+        let mut g = vec![0.0; n];
+        let mut hm = vec![0.0; n * n];
+        for i in 0..n {
+            if ok(plus[i]) && ok(minus[i]) {
+                g[i] = (plus[i] - minus[i]) / (2.0 * h);
+                hm[i * n + i] = (plus[i] + minus[i] - 2.0 * f0) / (h * h);
+            }
+        }
+        let s = self.sides();
+        for (k, &(i, j)) in self.pairs().iter().enumerate() {
+            let Some(&fij) = self.losses.get(self.order.len() + k) else {
+                break;
+            };
+            // The 1-D parabolas at the pair's step lengths.
+            let (ti, tj) = self.pair_lengths(i, j, f0);
+            let along = |k: usize, t: f64| f0 + g[k] * s[k] * t + 0.5 * hm[k * n + k] * t * t;
+            let (fi, fj) = (along(i, ti), along(j, tj));
+            if ok(fij) && ok(fi) && ok(fj) && ok(plus[i] + minus[i] + plus[j] + minus[j]) {
+                let hij = (fij - fi - fj + f0) / (ti * tj * s[i] * s[j]);
+                hm[i * n + j] = hij;
+                hm[j * n + i] = hij;
+            }
+        }
+        // Damped to positive definite: H + lambda I, lambda from 0 up.
+        let scale = (0..n)
+            .map(|i| hm[i * n + i].abs())
+            .fold(0.0, f64::max)
+            .max(1e-12);
+        let neg: Vec<f64> = g.iter().map(|v| -v).collect();
+        let mut lambda = 0.0;
+        let mut step = vec![0.0; n];
+        for _ in 0..40 {
+            let mut b = hm.clone();
+            for i in 0..n {
+                b[i * n + i] += lambda;
+            }
+            if let Some(p) = solve_spd(&b, &neg) {
+                step = p;
+                break;
+            }
+            lambda = if lambda == 0.0 {
+                1e-6 * scale
+            } else {
+                4.0 * lambda
+            };
+        }
+        let len = norm(&step);
+        if len > 2.0 * h {
+            step.iter_mut().for_each(|v| *v *= 2.0 * h / len);
+        }
+        step
     }
 }
 
@@ -313,8 +445,9 @@ impl TrustRegionBfgs {
             );
         }
         if let Some(p) = &self.pattern {
-            let ok = p.next <= p.order.len()
-                && p.losses.len() <= p.order.len()
+            let ok = p.order.len() == 2 * n
+                && p.next < p.round_len()
+                && p.losses.len() < p.round_len()
                 && p.order
                     .iter()
                     .all(|&(i, sg)| i < n && (sg == 1.0 || sg == -1.0))
@@ -478,15 +611,14 @@ impl TrustRegionBfgs {
                     self.accepted = self.accepted.saturating_add(1);
                     self.probe_scale = 1.0;
                 } else if let Some(pat) = self.pattern.as_mut() {
-                    // The probe failed: the next one; after the round, the separable
-                    // quadratic's minimum; then half the length.
-                    if pat.next < pat.order.len() {
+                    // The trial failed: the next one of the round, then half the length.
+                    if pat.next < pat.round_len() - 1 {
                         pat.losses.push(if finite { loss } else { f64::INFINITY });
                     }
                     pat.next += 1;
-                    let quadratic_next = pat.next == pat.order.len()
-                        && pat.separable_step(n, f).iter().any(|&p| p != 0.0);
-                    if pat.next >= pat.order.len() && !quadratic_next {
+                    let model_next = pat.next == pat.round_len() - 1
+                        && pat.model_step(f).iter().any(|&p| p != 0.0);
+                    if pat.next >= pat.round_len() - 1 && !model_next {
                         pat.next = 0;
                         pat.h *= 0.5;
                         pat.losses.clear();
@@ -537,28 +669,20 @@ impl TrustRegionBfgs {
     }
 
     /// The dogleg step from `x` inside the radius, projected onto the bounds (or the next
-    /// coordinate probe).
+    /// finite-difference search's trial).
     fn next_trial(&self) -> Vec<f64> {
         let Some((_, g)) = &self.at_x else {
             return self.x.clone();
         };
         if let Some(p) = &self.pattern {
-            if p.next >= p.order.len() {
-                let f0 = self.at_x.as_ref().map_or(0.0, |(f, _)| *f);
-                let step = p.separable_step(self.x.len(), f0);
-                return self
-                    .x
-                    .iter()
-                    .zip(&step)
-                    .zip(&self.log_bounds)
-                    .map(|((x, p), (lo, hi))| (x + p).clamp(*lo, *hi))
-                    .collect();
-            }
-            let (i, sign) = p.order[p.next];
-            let mut t = self.x.clone();
-            let (lo, hi) = self.log_bounds[i];
-            t[i] = (t[i] + sign * p.h).clamp(lo, hi);
-            return t;
+            let f0 = self.at_x.as_ref().map_or(0.0, |(f, _)| *f);
+            return self
+                .x
+                .iter()
+                .zip(&p.offset(p.next, f0))
+                .zip(&self.log_bounds)
+                .map(|((x, d), (lo, hi))| (x + d).clamp(*lo, *hi))
+                .collect();
         }
         // Directions that point out of the box at an active bound are dropped.
         let g: Vec<f64> = g
@@ -696,19 +820,24 @@ mod tests {
         back.validate(2).unwrap();
     }
 
-    /// The separable quadratic through the probes has its minimum where the parabolas do.
+    /// On a quadratic, the finite-difference model through the coordinate and pair probes is
+    /// exact: its step lands on the minimum, including a diagonal valley's.
     #[test]
-    fn separable_step_is_the_parabolas_minimum() {
-        let f = |x: [f64; 2]| 3.0 * (x[0] - 0.03).powi(2) + 0.5 * (x[1] + 0.05).powi(2);
+    fn the_probes_model_finds_a_diagonal_valleys_minimum() {
+        let target = [0.03, -0.05];
+        let f = |x: &[f64]| {
+            let (u, v) = (x[0] - target[0], x[1] - target[1]);
+            // Narrow along (2, 1), the coordinates unequally curved.
+            40.0 * (u - 2.0 * v).powi(2) + 0.5 * (u + v).powi(2)
+        };
         let mut p = Pattern::new(&[1.0, -1.0], 0.1);
-        for &(i, sign) in &p.order.clone() {
-            let mut x = [0.0; 2];
-            x[i] = sign * 0.1;
-            p.losses.push(f(x));
+        for k in 0..p.round_len() - 1 {
+            let d = p.offset(k, f(&[0.0, 0.0]));
+            p.losses.push(f(&d));
         }
-        let step = p.separable_step(2, f([0.0; 2]));
-        assert!((step[0] - 0.03).abs() < 1e-12, "{step:?}");
-        assert!((step[1] + 0.05).abs() < 1e-12, "{step:?}");
+        let step = p.model_step(f(&[0.0, 0.0]));
+        assert!((step[0] - target[0]).abs() < 1e-9, "{step:?}");
+        assert!((step[1] - target[1]).abs() < 1e-9, "{step:?}");
     }
 
     #[test]
