@@ -65,7 +65,7 @@ fn observation(votes: &[u8], n: usize, s: usize, v: usize, g: usize) -> Option<(
     (r[s] > 0).then(|| (r[s] as f64 / 255.0, &r[..s]))
 }
 
-/// The per-view votes [`crate::lift`] keeps.
+/// The per-view votes [`crate::lift()`] keeps.
 #[derive(Clone, Copy, Debug)]
 pub struct VoteTable<'a> {
     /// `views x N x (M + 2)` bytes: `M + 1` class shares out of 255, then the view's
@@ -82,7 +82,7 @@ pub struct VoteTable<'a> {
 }
 
 /// Runs the EM on the per-view vote table (`views x N x (M + 2)` bytes: `M + 1` class shares
-/// out of 255 and the view's strength out of 255, as [`crate::lift`] keeps it) from the summed
+/// out of 255 and the view's strength out of 255, as [`crate::lift()`] keeps it) from the summed
 /// evidence `init` (`N x (M + 1)`, any non-negative weights; rows of zeros are unobserved) of
 /// which view `v` contributed `totals[v N + g]` to Gaussian `g` (spread as its shares), and
 /// writes the posterior class probabilities into `out` (rows of zeros stay zeros). Each
