@@ -64,13 +64,14 @@ pub struct TrustRegionBfgs {
     #[serde(default)]
     restarts: u64,
     /// `accepted` at the last model restart: a second restart with no acceptance in between
-    /// would repeat the first one's trials exactly, so it searches the coordinates instead.
+    /// would repeat the first one's trials exactly, so it searches by finite differences
+    /// instead ([`Pattern`]).
     #[serde(default)]
     restarted_at: Option<u64>,
-    /// The coordinate search in progress, if any.
+    /// The finite-difference search in progress, if any.
     #[serde(default)]
     pattern: Option<Pattern>,
-    /// Length of the next coordinate search's first probes, in units of the first radius:
+    /// Length of the next finite-difference search's first probes, in units of the first radius:
     /// doubles each time a search from the same point finds nothing, 1 after an accepted
     /// trial.
     #[serde(default = "one")]
@@ -277,6 +278,13 @@ impl Pattern {
 
 fn one() -> f64 {
     1.0
+}
+
+/// `c I`, row-major `n x n`.
+fn scaled_identity(n: usize, c: f64) -> Vec<f64> {
+    (0..n * n)
+        .map(|k| if k % (n + 1) == 0 { c } else { 0.0 })
+        .collect()
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -548,10 +556,7 @@ impl TrustRegionBfgs {
                 if finite {
                     self.x = self.trial.clone();
                     if self.b.len() != n * n {
-                        let c = gnorm.max(1e-12) / self.radius;
-                        self.b = (0..n * n)
-                            .map(|k| if k % (n + 1) == 0 { c } else { 0.0 })
-                            .collect();
+                        self.b = scaled_identity(n, gnorm.max(1e-12) / self.radius);
                     }
                     self.at_x = Some((loss, g));
                     self.accepted = self.accepted.saturating_add(1);
@@ -658,11 +663,8 @@ impl TrustRegionBfgs {
 
     /// Restarts the model at `x` (gradient `g` there): a scaled identity and the first radius.
     fn restart(&mut self, g: &[f64]) {
-        let n = self.x.len();
         let c = norm(g).max(1e-12) / self.settings.initial_radius;
-        self.b = (0..n * n)
-            .map(|k| if k % (n + 1) == 0 { c } else { 0.0 })
-            .collect();
+        self.b = scaled_identity(self.x.len(), c);
         self.radius = self.settings.initial_radius;
         self.restarts = self.restarts.saturating_add(1);
         self.restarted_at = Some(self.accepted);

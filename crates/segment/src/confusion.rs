@@ -67,7 +67,7 @@ fn observation(votes: &[u8], n: usize, s: usize, v: usize, g: usize) -> Option<(
 
 /// The per-view votes [`crate::lift()`] keeps.
 #[derive(Clone, Copy, Debug)]
-pub struct VoteTable<'a> {
+pub(crate) struct VoteTable<'a> {
     /// `views x N x (M + 2)` bytes: `M + 1` class shares out of 255, then the view's
     /// strength out of 255 (0: the view does not see the Gaussian).
     pub votes: &'a [u8],
@@ -88,7 +88,7 @@ pub struct VoteTable<'a> {
 /// writes the posterior class probabilities into `out` (rows of zeros stay zeros). Each
 /// view's matrix is estimated against the *other* views' verdict (leave-one-out), so a view's
 /// own mistakes do not make it look honest.
-pub fn combine(table: &VoteTable, init: &[f64], cfg: &ConfusionConfig, out: &mut [f64]) {
+pub(crate) fn combine(table: &VoteTable, init: &[f64], cfg: &ConfusionConfig, out: &mut [f64]) {
     let VoteTable {
         votes,
         totals,

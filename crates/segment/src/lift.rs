@@ -180,10 +180,11 @@ pub struct Lifted {
     pub visibility: Vec<f32>,
     /// Number of views that see each Gaussian ([`LiftConfig::seen_weight`]).
     pub views: Vec<u16>,
-    /// Per view ([`ViewVote::Sum`] and [`ViewVote::Confusion`]; 0 otherwise), over the Gaussians it sees fully and is
-    /// sure about (90% of its own votes on one class), the share of its votes on which it
-    /// disagrees with the other views combined (leave-one-out): a view that labels a part as
-    /// another, or misses it, stands out.
+    /// Per view ([`ViewVote::Sum`] and [`ViewVote::Confusion`], against the summed votes; 0
+    /// otherwise), over the Gaussians it sees fully and is sure about (90% of its own votes
+    /// on one class), the share of its votes on which it disagrees with the other views
+    /// combined (leave-one-out): a view that labels a part as another, or misses it, stands
+    /// out.
     pub view_disagreement: Vec<f32>,
 }
 
