@@ -89,13 +89,7 @@ fn fitted_slots(dir: &Path, problem: &VideoProblem) -> Result<(Vec<PartParams>, 
                 r.material
             );
         }
-        let mut q = *base;
-        q.youngs_modulus_pa = r.e;
-        q.poisson_ratio = r.nu;
-        q.density_kg_m3 = r.density;
-        q.yield_stress_pa = r.yield_stress;
-        q.plastic_viscosity_pa_s = r.plastic_viscosity;
-        q.friction_angle_deg = r.friction_angle;
+        let q = r.apply_to(base);
         q.validate(&format!("{} entry {i}", path.display()))?;
         slots.push(q);
     }

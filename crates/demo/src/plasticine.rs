@@ -142,7 +142,11 @@ num_dt = {n}
         start,
         free,
         bounds,
+        // E and nu: plastic flow caps the shear stress, so the video pins the bulk modulus
+        // better than the shear modulus and the fits end along a valley of roughly constant
+        // bulk modulus (docs/fitting.md).
         pairs: vec![
+            (0, ParamKind::YoungsModulus, ParamKind::PoissonRatio),
             (0, ParamKind::YoungsModulus, ParamKind::YieldStress),
             (0, ParamKind::YoungsModulus, ParamKind::Density),
             (0, ParamKind::PoissonRatio, ParamKind::YieldStress),

@@ -340,6 +340,12 @@ pub struct PartRecord {
     pub plastic_viscosity: f64,
     /// Friction angle (degrees).
     pub friction_angle: f64,
+    /// Hardening coefficient `xi` (a metal with `hardening`; absent otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hardening: Option<f64>,
+    /// Softening rate (Pa per unit plastic strain; plasticine; absent otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub softening: Option<f64>,
 }
 
 impl PartRecord {
@@ -354,13 +360,72 @@ impl PartRecord {
             yield_stress: p.yield_stress_pa,
             plastic_viscosity: p.plastic_viscosity_pa_s,
             friction_angle: p.friction_angle_deg,
+            hardening: crate::space::reads(p, crate::ParamKind::Hardening).then_some(p.xi),
+            softening: crate::space::reads(p, crate::ParamKind::Softening).then_some(p.softening),
         }
+    }
+
+    /// `base` with this record's parameters (material and everything the record does not
+    /// hold kept from `base`; hardening and softening only where the record has them).
+    pub fn apply_to(&self, base: &PartParams) -> PartParams {
+        let mut q = *base;
+        q.youngs_modulus_pa = self.e;
+        q.poisson_ratio = self.nu;
+        q.density_kg_m3 = self.density;
+        q.yield_stress_pa = self.yield_stress;
+        q.plastic_viscosity_pa_s = self.plastic_viscosity;
+        q.friction_angle_deg = self.friction_angle;
+        if let Some(h) = self.hardening {
+            q.xi = h;
+        }
+        if let Some(v) = self.softening {
+            q.softening = v;
+        }
+        q
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Softening and hardening are recorded for the materials that read them only, and a
+    /// record without them (an older run folder) still reads.
+    #[test]
+    fn part_records_carry_softening_and_hardening_where_read() {
+        use r4d_mpm::Material;
+        let plasticine = PartParams {
+            material: Material::Plasticine,
+            softening: 5e3,
+            ..Default::default()
+        };
+        let r = PartRecord::of(0, &plasticine);
+        assert_eq!((r.softening, r.hardening), (Some(5e3), None));
+        let metal = PartParams {
+            material: Material::Metal,
+            hardening: true,
+            xi: 0.3,
+            ..Default::default()
+        };
+        assert_eq!(PartRecord::of(1, &metal).hardening, Some(0.3));
+        let jelly = PartRecord::of(2, &PartParams::default());
+        let text = serde_json::to_string(&jelly).unwrap();
+        assert!(
+            !text.contains("softening") && !text.contains("hardening"),
+            "{text}"
+        );
+        let back: PartRecord = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, jelly);
+        let text = serde_json::to_string(&r).unwrap();
+        assert!(text.contains("\"softening\":5000.0"), "{text}");
+        // Applied back onto a part (`r4d eval`): the fitted softening replaces the config's.
+        let start = PartParams {
+            softening: 1.5e4,
+            ..plasticine
+        };
+        assert_eq!(r.apply_to(&start), plasticine);
+        assert_eq!(back.apply_to(&PartParams::default()), PartParams::default());
+    }
 
     #[test]
     fn state_round_trips_and_refuses_damage_and_old_formats() {
