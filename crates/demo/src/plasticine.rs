@@ -117,8 +117,8 @@ num_dt = {n}
     };
     fit.init.candidates = 64;
     fit.multi_start = 4;
-    // Full size: 16 iterations per start (8 left the best start at loss 1.028 with yield
-    // stress -6.7%, softening -13%; 16 reach 0.997 with -4.3% and -7.4%: docs/fitting.md).
+    // Full size: 16 iterations per start (8 left the fit at loss 1.028 with yield stress
+    // -6.7%, softening -13%; with 16 it ends at 1.004 with -4.3% and -5.7%: docs/fitting.md).
     fit.multi_start_iters = match size {
         Size::Full => 16,
         Size::Small => 8,

@@ -351,6 +351,8 @@ pub struct PartRecord {
 impl PartRecord {
     /// The record of a part.
     pub fn of(id: usize, p: &PartParams) -> Self {
+        use crate::space::{get, reads};
+        let read = |k| reads(p, k).then(|| get(p, k));
         PartRecord {
             id,
             material: format!("{:?}", p.material).to_lowercase(),
@@ -360,26 +362,30 @@ impl PartRecord {
             yield_stress: p.yield_stress_pa,
             plastic_viscosity: p.plastic_viscosity_pa_s,
             friction_angle: p.friction_angle_deg,
-            hardening: crate::space::reads(p, crate::ParamKind::Hardening).then_some(p.xi),
-            softening: crate::space::reads(p, crate::ParamKind::Softening).then_some(p.softening),
+            hardening: read(crate::ParamKind::Hardening),
+            softening: read(crate::ParamKind::Softening),
         }
     }
 
     /// `base` with this record's parameters (material and everything the record does not
     /// hold kept from `base`; hardening and softening only where the record has them).
     pub fn apply_to(&self, base: &PartParams) -> PartParams {
+        use crate::ParamKind as K;
         let mut q = *base;
-        q.youngs_modulus_pa = self.e;
-        q.poisson_ratio = self.nu;
-        q.density_kg_m3 = self.density;
-        q.yield_stress_pa = self.yield_stress;
-        q.plastic_viscosity_pa_s = self.plastic_viscosity;
-        q.friction_angle_deg = self.friction_angle;
-        if let Some(h) = self.hardening {
-            q.xi = h;
-        }
-        if let Some(v) = self.softening {
-            q.softening = v;
+        let held = [
+            (K::YoungsModulus, Some(self.e)),
+            (K::PoissonRatio, Some(self.nu)),
+            (K::Density, Some(self.density)),
+            (K::YieldStress, Some(self.yield_stress)),
+            (K::PlasticViscosity, Some(self.plastic_viscosity)),
+            (K::FrictionAngle, Some(self.friction_angle)),
+            (K::Hardening, self.hardening),
+            (K::Softening, self.softening),
+        ];
+        for (k, v) in held {
+            if let Some(v) = v {
+                crate::space::set(&mut q, k, v);
+            }
         }
         q
     }
