@@ -16,7 +16,8 @@
 //!   three soft probability maps. `lift/volume/labels-summed`: the labels with the summed
 //!   votes (`ViewVote::Sum`) instead of the default per-view confusion matrices, for the
 //!   cost of the EM.
-//! * `smooth/surfaces`, `smooth/volume`: the KNN pass (k 16) on the lifted labels.
+//! * `smooth/surfaces`, `smooth/volume`: the KNN pass (k 16, with the region prior) on the
+//!   lift's outcome; `smooth-no-regions/...`: the same without the region prior.
 //!
 //! Each case prints the peak host memory of one call beyond its inputs (counting allocator).
 //! The masks are handed over in memory (each view's mask is copied once per call, as a file
@@ -24,7 +25,7 @@
 
 use criterion::{BenchmarkId, Criterion};
 use r4d_segment::lift::{lift, LiftConfig, ViewVote};
-use r4d_segment::smooth::{smooth_gaussians, SmoothConfig};
+use r4d_segment::smooth::{smooth_lifted, SmoothConfig};
 use r4d_segment::synthetic::{self, Rng};
 use r4d_segment::{InMemoryMasks, Mask, MaskData};
 use r4d_splat::{Camera, Gaussians};
@@ -217,23 +218,29 @@ fn main() {
             lifted.push((scene_name, g, l));
         }
     }
+    let no_regions = SmoothConfig {
+        region_tau: 0.0,
+        ..smooth_cfg
+    };
     for (scene_name, g, l) in lifted {
-        let base = reset_peak();
-        let t = std::time::Instant::now();
-        smooth_gaussians(g, &l.labels, &l.confidence, 3, &smooth_cfg).unwrap();
-        println!(
-            "smooth/{scene_name} {}: first call {:.2} s, peak host memory {:.1} MiB",
-            g.len(),
-            t.elapsed().as_secs_f64(),
-            mib(peak_since(base))
-        );
-        if once {
-            continue;
+        for (case, sc) in [("smooth", &smooth_cfg), ("smooth-no-regions", &no_regions)] {
+            let base = reset_peak();
+            let t = std::time::Instant::now();
+            smooth_lifted(g, &l, cfg.temperature, sc).unwrap();
+            println!(
+                "{case}/{scene_name} {}: first call {:.2} s, peak host memory {:.1} MiB",
+                g.len(),
+                t.elapsed().as_secs_f64(),
+                mib(peak_since(base))
+            );
+            if once {
+                continue;
+            }
+            group.bench_function(
+                BenchmarkId::new(format!("{case}/{scene_name}"), g.len()),
+                |b| b.iter(|| smooth_lifted(g, &l, cfg.temperature, sc).unwrap()),
+            );
         }
-        group.bench_function(
-            BenchmarkId::new(format!("smooth/{scene_name}"), g.len()),
-            |b| b.iter(|| smooth_gaussians(g, &l.labels, &l.confidence, 3, &smooth_cfg).unwrap()),
-        );
     }
     group.finish();
     c.final_summary();

@@ -159,6 +159,19 @@ fn segment_bad_masks_name_the_file() {
         "{err}"
     );
     assert!(!d.join("parts.json").exists());
+    // Region prior settings out of range: named before any work.
+    for (flag, v) in [
+        ("--region-tau", "-1"),
+        ("--region-power", "NaN"),
+        ("--region-power", "100"),
+    ] {
+        let mut a = args(&d, "parts.json");
+        a.push(format!("{flag}={v}"));
+        let o = run(&a);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success());
+        assert!(err.contains(flag), "{flag} {v}: {err}");
+    }
     // --out must be the JSON file.
     let o = run(&args(&d, "parts.ply"));
     assert!(!o.status.success());

@@ -5,11 +5,11 @@
 //! (compositing weight >= 0.05 pixel-equivalents), after the KNN pass.
 //!
 //! The targets (>= 99.5% with clean masks; >= 97% and no part below 93% with
-//! corrupted ones) are reached with clean masks, not with corrupted ones; these tests hold
-//! the measured state: with clean masks >= 99% on every seed (>= 99.5% on average) and every
-//! stage (label propagation, then the visibility-aware lift) helps on every seed; with
-//! corrupted masks the defaults beat the pipeline as it was on every seed and the classic
-//! lift on average.
+//! corrupted ones) are reached with clean masks on every seed and with corrupted ones on
+//! four of five seeds (seed 1: 96.9%, the pot's inner wall 90.4%); these tests hold the
+//! measured state: every stage (label propagation, the visibility-aware lift, the region
+//! prior) keeps or improves every seed, and the region prior costs little where parts share
+//! a smooth surface.
 
 use r4d_segment::mask::MaskData;
 use r4d_segment::synthetic::plant::{self, corrupt_parts, mislabel_part, per_part, PlantScene};
@@ -42,28 +42,41 @@ fn corrupted(masks: &InMemoryMasks, seed: u64) -> InMemoryMasks {
 }
 
 /// Per part (floor first) accuracy over seen Gaussians, and the accuracy over all seen part
-/// Gaussians.
+/// Gaussians, with the default KNN pass (`regions`: with the smooth-surface region prior).
 fn score(
     scene: &PlantScene,
     cams: &[Camera],
     masks: &InMemoryMasks,
     lift: LiftConfig,
+    regions: bool,
 ) -> (Vec<f64>, f64) {
     let cfg = SegmentConfig {
         lift,
-        smooth: Some(SmoothConfig::default()),
+        smooth: Some(if regions {
+            SmoothConfig::default()
+        } else {
+            no_regions()
+        }),
     };
     score_with(scene, cams, masks, cfg)
 }
 
-/// The lift and the KNN pass as they were before visibility-aware lifting and label
-/// propagation (one vote round).
+/// The default KNN pass without the region prior.
+fn no_regions() -> SmoothConfig {
+    SmoothConfig {
+        region_tau: 0.0,
+        ..Default::default()
+    }
+}
+
+/// The lift and the KNN pass as they were before visibility-aware lifting, label
+/// propagation and the region prior (one vote round).
 fn before() -> SegmentConfig {
     SegmentConfig {
         lift: LiftConfig::classic(),
         smooth: Some(SmoothConfig {
             rounds: 1,
-            ..Default::default()
+            ..no_regions()
         }),
     }
 }
@@ -101,12 +114,15 @@ fn clean_masks_per_part_and_every_stage_helps() {
     for seed in 0..3 {
         let (scene, cams, masks) = setup(seed);
         let old = score_with(&scene, &cams, &masks, before());
-        let classic = score(&scene, &cams, &masks, LiftConfig::classic());
-        let new = score(&scene, &cams, &masks, LiftConfig::default());
+        let classic = score(&scene, &cams, &masks, LiftConfig::classic(), false);
+        let lift = score(&scene, &cams, &masks, LiftConfig::default(), false);
+        let new = score(&scene, &cams, &masks, LiftConfig::default(), true);
         println!("seed {seed} clean: {}", row("before", &old));
         println!("seed {seed} clean: {}", row("classic", &classic));
+        println!("seed {seed} clean: {}", row("lift", &lift));
         println!("seed {seed} clean: {}", row("default", &new));
-        // Propagation helps the classic lift; the visibility-aware lift helps further.
+        // Propagation helps the classic lift; the visibility-aware lift helps further; the
+        // region prior keeps it.
         assert!(
             classic.1 > old.1 + 0.05,
             "seed {seed}: {} vs {}",
@@ -114,15 +130,21 @@ fn clean_masks_per_part_and_every_stage_helps() {
             old.1
         );
         assert!(
-            new.1 >= classic.1,
+            lift.1 >= classic.1,
+            "seed {seed}: {} vs {}",
+            lift.1,
+            classic.1
+        );
+        assert!(
+            new.1 >= lift.1 - 0.001,
             "seed {seed}: {} vs {}",
             new.1,
-            classic.1
+            lift.1
         );
         assert!(new.1 >= 0.995, "seed {seed}: {}", new.1);
         sum += new.1;
         // pot, soil, stem, leaves, petals
-        for (k, floor) in [0.999, 0.999, 0.97, 0.995, 0.95].into_iter().enumerate() {
+        for (k, floor) in [0.999, 0.999, 0.98, 0.995, 0.95].into_iter().enumerate() {
             assert!(
                 new.0[k + 1] >= floor,
                 "seed {seed}, {}: {}",
@@ -133,18 +155,18 @@ fn clean_masks_per_part_and_every_stage_helps() {
         // The floor (static) stays right.
         assert!(new.0[0] >= 0.999, "seed {seed}, floor: {}", new.0[0]);
     }
-    assert!(sum / 3.0 >= 0.995, "mean {}", sum / 3.0);
+    assert!(sum / 3.0 >= 0.998, "mean {}", sum / 3.0);
 }
 
 #[test]
 fn corrupted_masks_per_part_table() {
-    let (mut sum_classic, mut sum_summed, mut sum_new) = (0.0, 0.0, 0.0);
     let seeds = 5;
+    let mut sums = [0.0; 4];
+    let worst = |p: &[f64]| p[1..].iter().copied().fold(1.0, f64::min);
     for seed in 0..seeds {
         let (scene, cams, masks) = setup(seed);
         let bad = corrupted(&masks, seed);
         let old = score_with(&scene, &cams, &bad, before());
-        let classic = score(&scene, &cams, &bad, LiftConfig::classic());
         let summed = score(
             &scene,
             &cams,
@@ -153,55 +175,115 @@ fn corrupted_masks_per_part_table() {
                 vote: ViewVote::Sum,
                 ..Default::default()
             },
+            false,
         );
-        let new = score(&scene, &cams, &bad, LiftConfig::default());
+        let lift = score(&scene, &cams, &bad, LiftConfig::default(), false);
+        let new = score(&scene, &cams, &bad, LiftConfig::default(), true);
         println!("seed {seed} corrupted: {}", row("before", &old));
-        println!("seed {seed} corrupted: {}", row("classic", &classic));
         println!("seed {seed} corrupted: {}", row("sum", &summed));
+        println!("seed {seed} corrupted: {}", row("confusion", &lift));
         println!("seed {seed} corrupted: {}", row("default", &new));
-        sum_classic += classic.1;
-        sum_summed += summed.1;
-        sum_new += new.1;
-        assert!(new.1 >= 0.9, "seed {seed}: {}", new.1);
+        for (s, x) in sums.iter_mut().zip([&old, &summed, &lift, &new]) {
+            *s += x.1;
+        }
         assert!(new.1 > old.1 + 0.02, "seed {seed}: {} vs {}", new.1, old.1);
-        // The per-view confusion matrices keep or improve the worst part on every seed and
-        // the total on average; a seed's total may drop a little
-        // (seed 4: 94.5% against 97.0%, its stem 69.5% against 50.5%)
+        // The region prior keeps or improves every seed's total and its worst part.
+        assert!(new.1 >= lift.1, "seed {seed}: {} vs {}", new.1, lift.1);
         assert!(
-            new.1 > summed.1 - 0.03,
-            "seed {seed}: {} vs {}",
-            new.1,
-            summed.1
-        );
-        let worst = |p: &[f64]| p[1..].iter().copied().fold(1.0, f64::min);
-        assert!(
-            worst(&new.0) >= worst(&summed.0),
+            worst(&new.0) >= worst(&lift.0),
             "seed {seed}: worst part {} vs {}",
             worst(&new.0),
-            worst(&summed.0)
+            worst(&lift.0)
         );
+        // The measured state (the target is 97% and no part under 93%): every seed
+        // at least 96.5% and every part 90% (seed 1: 96.9%, the pot's inner wall 90.4%).
+        assert!(new.1 >= 0.965, "seed {seed}: {}", new.1);
+        assert!(worst(&new.0) >= 0.90, "seed {seed}: {:?}", new.0);
         // The static floor survives the corruption.
         assert!(new.0[0] >= 0.97, "seed {seed}, floor: {}", new.0[0]);
     }
     let n = seeds as f64;
     println!(
-        "mean over {seeds} seeds: classic {:.4}, sum {:.4}, default (confusion) {:.4}",
-        sum_classic / n,
-        sum_summed / n,
-        sum_new / n
+        "mean over {seeds} seeds: before {:.4}, sum {:.4}, confusion {:.4}, default (confusion + regions) {:.4}",
+        sums[0] / n,
+        sums[1] / n,
+        sums[2] / n,
+        sums[3] / n
     );
-    assert!(
-        sum_new >= sum_summed + 0.005 * n,
-        "mean {} vs {}",
-        sum_new / n,
-        sum_summed / n
-    );
-    assert!(
-        sum_new >= sum_classic + 0.06 * n,
-        "mean {} vs {}",
-        sum_new / n,
-        sum_classic / n
-    );
+    assert!(sums[3] / n >= 0.99, "mean {}", sums[3] / n);
+    assert!(sums[2] >= sums[1] + 0.005 * n, "{sums:?}");
+}
+
+/// Parts that share a smooth surface, where the region prior has no crease to stop at: the
+/// three-part scene with its floor split at `x = -0.3` into a part and static (one plane,
+/// two labels), and into two parts. With clean and corrupted masks the region prior costs
+/// these splits at most a little (measured: the part-or-static split never, the two-part
+/// split up to 1.7 points of the smaller part).
+#[test]
+fn parts_on_one_smooth_surface_keep_their_boundary() {
+    use r4d_segment::synthetic::{self, corrupt, Solid};
+    for (two, seed) in [(false, 0u64), (false, 1), (true, 0), (true, 1)] {
+        let mut scene = synthetic::three_parts(20_000, seed + 1);
+        scene.solids.push((
+            Solid::Box {
+                min: [-1.0, -1.0, -0.01],
+                max: [-0.3, 1.0, 0.0005],
+            },
+            3,
+        ));
+        scene.class_names.push("left".into());
+        if two {
+            scene.solids.push((
+                Solid::Box {
+                    min: [-0.3, -1.0, -0.01],
+                    max: [1.0, 1.0, 0.0005],
+                },
+                4,
+            ));
+            scene.class_names.push("right".into());
+        }
+        for (t, p) in scene.truth.iter_mut().zip(&scene.gaussians.means) {
+            if *t == -1 && p[0] < -0.3 {
+                *t = 3;
+            } else if *t == -1 && two {
+                *t = 4;
+            }
+        }
+        let np = scene.class_names.len();
+        let cams = synthetic::ring_cameras(8, 160, 120);
+        let clean = scene.masks(&cams);
+        let mut bad = clean.clone();
+        for (v, m) in bad.masks.iter_mut().enumerate() {
+            let (w, h) = (m.width, m.height);
+            if let MaskData::Labels(l) = &mut m.data {
+                corrupt(l, w, h, np as u16 + 1, 3, 0.05, 100 * seed + v as u64);
+            }
+        }
+        for (name, masks) in [("clean", &clean), ("corrupted", &bad)] {
+            let run = |smooth: SmoothConfig| {
+                let cfg = SegmentConfig {
+                    lift: LiftConfig::default(),
+                    smooth: Some(smooth),
+                };
+                let out = segment(&scene.gaussians, &cams, &mut masks.clone(), &cfg).unwrap();
+                let seen = |i: usize| out.lifted.visibility[i] >= 0.05;
+                per_part(&out.labels.labels, &scene.truth, np, seen)
+                    .iter()
+                    .map(|(r, t)| (*t > 0).then(|| *r as f64 / *t as f64))
+                    .collect::<Vec<_>>()
+            };
+            let (off, on) = (run(no_regions()), run(SmoothConfig::default()));
+            println!("split (two parts: {two}) seed {seed} {name}: static, box, ball, post, left[, right]: without regions {off:.3?}, with {on:.3?}");
+            for (k, (a, b)) in off.iter().zip(&on).enumerate() {
+                if let (Some(a), Some(b)) = (a, b) {
+                    assert!(
+                        *b >= a - 0.025,
+                        "two {two} seed {seed} {name} class {k}: {b} vs {a}"
+                    );
+                }
+            }
+        }
+    }
 }
 
 /// The per-view disagreement diagnostic (leave-one-out) points at a view that labelled a
@@ -232,7 +314,7 @@ fn disagreement_points_at_the_mislabelled_view() {
     for seed in 0..2 {
         let (scene, cams, masks) = setup(seed);
         let bad = corrupted(&masks, seed);
-        let plain = score(&scene, &cams, &bad, LiftConfig::default());
+        let plain = score(&scene, &cams, &bad, LiftConfig::default(), true);
         let checked = score(
             &scene,
             &cams,
@@ -241,6 +323,7 @@ fn disagreement_points_at_the_mislabelled_view() {
                 view_consistency_iters: 1,
                 ..Default::default()
             },
+            true,
         );
         println!("seed {seed} corrupted: {}", row("checked", &checked));
         assert!(

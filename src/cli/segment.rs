@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use r4d_backend_cpu::splat::CpuSplat;
 use r4d_segment::label_map::label_map;
 use r4d_segment::lift::{lift_with_progress, LiftConfig};
-use r4d_segment::smooth::{smooth_gaussians, SmoothConfig};
+use r4d_segment::smooth::{smooth_lifted, SmoothConfig};
 use r4d_segment::{part_colour, MaskDir, MaskSource, Par, PartLabels};
 use r4d_splat::{load_cameras, Gaussians, RenderSettings, Renderer, SplatRenderer};
 use std::path::{Path, PathBuf};
@@ -55,6 +55,17 @@ pub struct SegmentArgs {
     /// of the views that show it; where all views agree nothing changes).
     #[arg(long, default_value_t = 0.25)]
     background_weight: f32,
+    /// Merge threshold of the smooth-surface regions (graph segmentation of the KNN graph
+    /// that ends at creases) whose summed evidence is a prior on which part their Gaussians
+    /// are: a thin part most views' masks erase keeps its label where its whole surface
+    /// says so (0: off; larger: bigger regions).
+    #[arg(long, default_value_t = 30.0)]
+    region_tau: f32,
+    /// Exponent of the region prior: a Gaussian's evidence for a part is scaled by the
+    /// region's evidence for it relative to the region's strongest part, to this power (0:
+    /// off).
+    #[arg(long, default_value_t = 4.0)]
+    region_power: f32,
     /// Do not scale a view's votes by the share of the Gaussian's drawn footprint that is
     /// the Gaussian itself (edge-on Gaussians then vote with their whole blurred line).
     #[arg(long)]
@@ -86,6 +97,12 @@ const Y0: f32 = 0.282_094_8;
 pub fn run(a: SegmentArgs) -> Result<()> {
     if a.k == 0 {
         bail!("--k 0: use --k 1 for no smoothing");
+    }
+    if !(a.region_tau.is_finite() && (0.0..=1e6).contains(&a.region_tau)) {
+        bail!("--region-tau {}: must lie in [0, 1e6]", a.region_tau);
+    }
+    if !(a.region_power.is_finite() && (0.0..=64.0).contains(&a.region_power)) {
+        bail!("--region-power {}: must lie in [0, 64]", a.region_power);
     }
     if a.out
         .extension()
@@ -145,9 +162,11 @@ pub fn run(a: SegmentArgs) -> Result<()> {
             k: a.k,
             min_cluster: a.min_cluster.unwrap_or(a.k),
             rounds: a.rounds,
+            region_tau: a.region_tau,
+            region_power: a.region_power,
             ..Default::default()
         };
-        smooth_gaussians(&g, &lifted.labels, &lifted.confidence, m, &cfg)?
+        smooth_lifted(&g, &lifted, lift_cfg.temperature, &cfg)?
     } else {
         (lifted.labels.clone(), lifted.confidence.clone())
     };

@@ -13,7 +13,9 @@
 //!    [`r4d_splat::weights`]) times the mask value; normalised, softmax over classes at a
 //!    temperature, argmax label and its confidence; background (-1, static) for Gaussians
 //!    that fall in no moving-part mask.
-//! 3. [`mod@smooth`]: KNN in 3D (kd-tree): confidence-weighted label propagation over the
+//! 3. [`mod@regions`]: smooth-surface regions of the Gaussians (graph segmentation that ends
+//!    at creases); each region's summed evidence is a prior on which part its Gaussians are.
+//!    [`mod@smooth`]: KNN in 3D (kd-tree): confidence-weighted label propagation over the
 //!    graph of the `k` nearest Gaussians (neighbours across a crease count less), labels for
 //!    unobserved regions, suppression of isolated clusters.
 //! 4. [`labels`]: the part labels file (`{"num_parts", "class_names", "labels",
@@ -43,6 +45,7 @@ pub mod label_map;
 pub mod labels;
 pub mod lift;
 pub mod mask;
+pub mod regions;
 pub mod smooth;
 pub mod synthetic;
 
@@ -50,7 +53,7 @@ pub use error::{Error, Result};
 pub use labels::{part_colour, PartLabels};
 pub use lift::{lift, LiftConfig, Lifted, ViewVote};
 pub use mask::{InMemoryMasks, Mask, MaskData, MaskDir, MaskSource};
-pub use smooth::{smooth, smooth_gaussians, SmoothConfig};
+pub use smooth::{smooth, smooth_gaussians, smooth_lifted, SmoothConfig};
 
 use r4d_splat::{Camera, Gaussians};
 
@@ -93,7 +96,7 @@ pub fn segment<S: MaskSource + ?Sized>(
     let names = masks.class_names().to_vec();
     let lifted = lift(g, cameras, masks, &cfg.lift)?;
     let (labels, confidence) = match &cfg.smooth {
-        Some(s) => smooth_gaussians(g, &lifted.labels, &lifted.confidence, names.len(), s)?,
+        Some(s) => smooth::smooth_lifted(g, &lifted, cfg.lift.temperature, s)?,
         None => (lifted.labels.clone(), lifted.confidence.clone()),
     };
     Ok(Segmentation {

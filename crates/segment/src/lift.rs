@@ -186,6 +186,12 @@ pub struct Lifted {
     /// combined (leave-one-out): a view that labels a part as another, or misses it, stands
     /// out.
     pub view_disagreement: Vec<f32>,
+    /// [`ViewVote::Confusion`]: the summed votes the EM started from (what
+    /// [`ViewVote::Sum`] gives as `class_weights`), `N x (M + 1)`; empty for the other votes.
+    pub summed_weights: Vec<f64>,
+    /// The factor each Gaussian's confidence was scaled by for weak visibility
+    /// ([`LiftConfig::full_visibility`]; 1 where it was not), for classifying again.
+    pub confidence_scale: Vec<f32>,
 }
 
 impl Lifted {
@@ -619,15 +625,19 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
         .or(summed.as_deref())
         .unwrap_or(&class_weights);
     let (labels, mut confidence) = classify(&class_weights, m, cfg.temperature);
+    let mut confidence_scale = vec![1f32; n];
     if cfg.full_visibility > 0.0 {
-        for (g, (c, &v)) in confidence.iter_mut().zip(&visibility).enumerate() {
+        for (g, (k, &v)) in confidence_scale.iter_mut().zip(&visibility).enumerate() {
             let row = &sums[g * s..(g + 1) * s];
             let tot: f64 = row.iter().sum();
             let top = row.iter().copied().fold(0.0, f64::max);
             // Seen weakly but consistently: keeps its confidence.
             if tot > 0.0 && top / tot < PURE_SHARE {
-                *c *= (v / cfg.full_visibility).min(1.0);
+                *k = (v / cfg.full_visibility).min(1.0);
             }
+        }
+        for (c, &k) in confidence.iter_mut().zip(&confidence_scale) {
+            *c *= k;
         }
     }
     let view_disagreement = if cfg.vote != ViewVote::Confidence {
@@ -643,6 +653,8 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
         visibility,
         views,
         view_disagreement,
+        confidence_scale,
+        summed_weights: summed.unwrap_or_default(),
     })
 }
 
