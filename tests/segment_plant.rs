@@ -218,7 +218,7 @@ fn corrupted_masks_per_part_table() {
 /// three-part scene with its floor split at `x = -0.3` into a part and static (one plane,
 /// two labels), and into two parts. With clean and corrupted masks the region prior costs
 /// these splits at most a little (measured: the part-or-static split never, the two-part
-/// split up to 1.7 points of the smaller part).
+/// split up to 1.6 points of the smaller part).
 #[test]
 fn parts_on_one_smooth_surface_keep_their_boundary() {
     use r4d_segment::synthetic::{self, corrupt, Solid};
