@@ -115,10 +115,56 @@ pub fn region_prior(
     out
 }
 
+/// What a region sums for its prior: with the per-view confusion matrices, the mean of a
+/// Gaussian's posterior and its share of the summed votes (times its total weight); `None`:
+/// the class weights themselves. The two estimates fail in different places: the confusion
+/// posterior restores a thin part that most views erase (the potted plant's stem: its
+/// region's summed votes favour the soil, seed 2), the summed votes keep a surface that a
+/// view with a clean record covers with a neighbour's dilated mask (the pot's inner wall,
+/// seed 1); their mean is right on both (`tests/segment_plant.rs`).
+pub(crate) fn region_evidence(lifted: &crate::Lifted) -> Option<Vec<f64>> {
+    let s = lifted.num_parts + 1;
+    if lifted.summed_weights.len() != lifted.class_weights.len() {
+        return None;
+    }
+    let mut out = vec![0f64; lifted.class_weights.len()];
+    for ((o, a), b) in out
+        .chunks_exact_mut(s)
+        .zip(lifted.class_weights.chunks_exact(s))
+        .zip(lifted.summed_weights.chunks_exact(s))
+    {
+        let (ta, tb): (f64, f64) = (a.iter().sum(), b.iter().sum());
+        if ta > 0.0 && tb > 0.0 && ta.is_finite() && tb.is_finite() {
+            for c in 0..s {
+                o[c] = 0.5 * ta * (a[c] / ta + b[c] / tb);
+            }
+        }
+    }
+    Some(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::smooth::knn;
+
+    /// The evidence a region sums: the mean of the posterior's and the summed votes' shares,
+    /// times the posterior's total; the class weights alone without summed votes.
+    #[test]
+    fn evidence_mixes_the_two_estimates() {
+        let mut l = crate::Lifted {
+            num_parts: 1,
+            class_weights: vec![0.0, 4.0, 3.0, 1.0],
+            summed_weights: vec![1.0, 1.0, 0.0, 0.0],
+            ..Default::default()
+        };
+        let e = region_evidence(&l).unwrap();
+        // Gaussian 0: shares (0, 1) and (0.5, 0.5) -> (0.25, 0.75) x 4; Gaussian 1: no
+        // summed votes -> nothing.
+        assert_eq!(e, vec![1.0, 3.0, 0.0, 0.0]);
+        l.summed_weights.clear();
+        assert!(region_evidence(&l).is_none());
+    }
 
     /// Two flat sheets meeting at a right angle (an L): two regions, split at the crease;
     /// round Gaussians on one sheet do not join it.

@@ -244,7 +244,7 @@ pub fn smooth_lifted(
     }
     let (kk, nbrs) = knn(&g.means, cfg.k, cfg.par);
     let regions = crate::regions::surface_regions(&nbrs, kk, &o, cfg.normal_power, cfg.region_tau);
-    let evidence = region_evidence(lifted);
+    let evidence = crate::regions::region_evidence(lifted);
     let weights = crate::regions::region_prior(
         &lifted.class_weights,
         evidence.as_deref().unwrap_or(&lifted.class_weights),
@@ -266,34 +266,6 @@ pub fn smooth_lifted(
         cfg,
         (kk, &nbrs),
     ))
-}
-
-/// What a region sums for its prior: with the per-view confusion matrices, the mean of a
-/// Gaussian's posterior and its share of the summed votes (times its total weight); `None`:
-/// the class weights themselves. The two estimates fail in different places: the confusion
-/// posterior restores a thin part that most views erase (the potted plant's stem: its
-/// region's summed votes favour the soil, seed 2), the summed votes keep a surface that a
-/// view with a clean record covers with a neighbour's dilated mask (the pot's inner wall,
-/// seed 1); their mean is right on both (`tests/segment_plant.rs`).
-fn region_evidence(lifted: &crate::Lifted) -> Option<Vec<f64>> {
-    let s = lifted.num_parts + 1;
-    if lifted.summed_weights.len() != lifted.class_weights.len() {
-        return None;
-    }
-    let mut out = vec![0f64; lifted.class_weights.len()];
-    for ((o, a), b) in out
-        .chunks_exact_mut(s)
-        .zip(lifted.class_weights.chunks_exact(s))
-        .zip(lifted.summed_weights.chunks_exact(s))
-    {
-        let (ta, tb): (f64, f64) = (a.iter().sum(), b.iter().sum());
-        if ta > 0.0 && tb > 0.0 && ta.is_finite() && tb.is_finite() {
-            for c in 0..s {
-                o[c] = 0.5 * ta * (a[c] / ta + b[c] / tb);
-            }
-        }
-    }
-    Some(out)
 }
 
 /// The base colour (SH degree-0 term) of every Gaussian, RGB.
