@@ -24,20 +24,32 @@
 //!
 //! Cost: `12 k N` bytes of edges, one sort, a union-find pass.
 
+use crate::error::{Error, Result};
 use crate::smooth::Dsu;
 
 /// Region id (a member Gaussian's index) of every Gaussian. `nbrs` is the `N x kk` KNN list
 /// ([`crate::smooth::knn`]), `orient` the [`crate::smooth::orientations`], `power` the
-/// orientation exponent `p` and `tau` the merge threshold (module docs).
+/// orientation exponent `p` and `tau` the merge threshold (module docs). Lists that do not
+/// fit `N` points, or a neighbour index outside them, are an error.
 pub fn surface_regions(
     nbrs: &[u32],
     kk: usize,
     orient: &[[f32; 4]],
     power: f32,
     tau: f32,
-) -> Vec<u32> {
+) -> Result<Vec<u32>> {
     let n = orient.len();
-    debug_assert_eq!(nbrs.len(), n * kk);
+    if n.checked_mul(kk) != Some(nbrs.len()) {
+        return Err(Error::Input(format!(
+            "{} neighbour indices for {n} points x {kk} neighbours",
+            nbrs.len()
+        )));
+    }
+    if let Some(&j) = nbrs.iter().find(|&&j| j as usize >= n) {
+        return Err(Error::Input(format!(
+            "neighbour index {j} outside the {n} points"
+        )));
+    }
     let mut edges: Vec<(f32, u32, u32)> = Vec::with_capacity(n * kk / 2);
     for i in 0..n {
         for &j in &nbrs[i * kk..(i + 1) * kk] {
@@ -71,25 +83,37 @@ pub fn surface_regions(
             internal[r] = inner;
         }
     }
-    (0..n as u32).map(|i| dsu.find(i)).collect()
+    Ok((0..n as u32).map(|i| dsu.find(i)).collect())
 }
 
 /// The class evidence (`N x (M + 1)`, background first, as [`crate::Lifted::class_weights`])
 /// with every Gaussian's part entries scaled by its region's prior `(R_c / R_max)^beta`
 /// (module docs), `R` the region's sum of `evidence` (same layout; the class weights
 /// themselves, or another estimate of them); background entries and Gaussians without
-/// evidence are unchanged.
+/// evidence are unchanged. Lengths that do not fit `N` Gaussians of `M + 1` classes, or a
+/// region id outside them, are an error.
 pub fn region_prior(
     class_weights: &[f64],
     evidence: &[f64],
     regions: &[u32],
     num_parts: usize,
     beta: f32,
-) -> Vec<f64> {
-    let s = num_parts + 1;
+) -> Result<Vec<f64>> {
+    let s = num_parts.saturating_add(1);
     let n = regions.len();
-    debug_assert_eq!(class_weights.len(), n * s);
-    debug_assert_eq!(evidence.len(), n * s);
+    let want = n.checked_mul(s);
+    if want != Some(class_weights.len()) || want != Some(evidence.len()) {
+        return Err(Error::Input(format!(
+            "{} class weights and {} evidence entries for {n} Gaussians x {s} classes",
+            class_weights.len(),
+            evidence.len()
+        )));
+    }
+    if let Some(&r) = regions.iter().find(|&&r| r as usize >= n) {
+        return Err(Error::Input(format!(
+            "region id {r} outside the {n} Gaussians"
+        )));
+    }
     let mut sums = vec![0f64; n * s];
     for (i, &r) in regions.iter().enumerate() {
         let r = r as usize;
@@ -112,7 +136,7 @@ pub fn region_prior(
             out[i * s + c] *= (rs[c] / top).powf(beta);
         }
     }
-    out
+    Ok(out)
 }
 
 /// What a region sums for its prior: with the per-view confusion matrices, the mean of a
@@ -147,6 +171,20 @@ pub(crate) fn region_evidence(lifted: &crate::Lifted) -> Option<Vec<f64>> {
 mod tests {
     use super::*;
     use crate::smooth::knn;
+
+    /// Lists that do not fit are typed errors, not panics.
+    #[test]
+    fn mismatched_inputs_are_errors() {
+        let o = [[0.0, 0.0, 1.0, 1.0]; 3];
+        assert!(surface_regions(&[0, 1], 1, &o, 16.0, 1.0).is_err());
+        assert!(surface_regions(&[0, 1, 7], 1, &o, 16.0, 1.0).is_err());
+        assert!(surface_regions(&[0, 1, 2], 1, &o, 16.0, 1.0).is_ok());
+        let w = [1.0; 6];
+        assert!(region_prior(&w, &w[..4], &[0, 0, 0], 1, 4.0).is_err());
+        assert!(region_prior(&w, &w, &[0, 0, 9], 1, 4.0).is_err());
+        assert!(region_prior(&w, &w, &[0, 0], 1, 4.0).is_err());
+        assert!(region_prior(&w, &w, &[0, 0, 0], usize::MAX, 4.0).is_err());
+    }
 
     /// The evidence a region sums: the mean of the posterior's and the summed votes' shares,
     /// times the posterior's total; the class weights alone without summed votes.
@@ -183,7 +221,7 @@ mod tests {
             }
         }
         let (kk, nb) = knn(&pts, 8, crate::Par::Seq);
-        let reg = surface_regions(&nb, kk, &orient, 16.0, 30.0);
+        let reg = surface_regions(&nb, kk, &orient, 16.0, 30.0).unwrap();
         let floor = reg[0];
         let wall = reg[1];
         assert_ne!(floor, wall);
@@ -192,7 +230,7 @@ mod tests {
         }
         // Round Gaussians: each its own region.
         let round: Vec<[f32; 4]> = orient.iter().map(|o| [o[0], o[1], o[2], 0.0]).collect();
-        let reg = surface_regions(&nb, kk, &round, 16.0, 0.5);
+        let reg = surface_regions(&nb, kk, &round, 16.0, 0.5).unwrap();
         let mut ids = reg.clone();
         ids.sort_unstable();
         ids.dedup();
@@ -209,7 +247,7 @@ mod tests {
             0.1, 0.4, 0.5, // mixed, leaning b
             0.2, 0.0, 0.8, // b only
         ];
-        let out = region_prior(&w, &w, &[0, 0, 0], 2, 4.0);
+        let out = region_prior(&w, &w, &[0, 0, 0], 2, 4.0).unwrap();
         // R = [0.3, 9.4, 2.3]: a unchanged, b scaled by (2.3 / 9.4)^4.
         let f = (2.3f64 / 9.4).powi(4);
         let want = [0.0, 9.0, f, 0.1, 0.4, 0.5 * f, 0.2, 0.0, 0.8 * f];
@@ -220,7 +258,7 @@ mod tests {
         assert!(out[4] > out[5]);
         assert!(out[8] > out[7]);
         // Separate regions: nothing changes where each region has one part.
-        let out = region_prior(&w, &w, &[0, 1, 2], 2, 4.0);
+        let out = region_prior(&w, &w, &[0, 1, 2], 2, 4.0).unwrap();
         let (_, l0) = (0, crate::lift::classify(&out, 2, 0.1).0);
         assert_eq!(l0, crate::lift::classify(&w, 2, 0.1).0);
     }

@@ -226,7 +226,9 @@ pub fn smooth_lifted(
 ) -> Result<(Vec<i32>, Vec<f32>)> {
     let m = lifted.num_parts;
     let n = g.len();
-    if lifted.labels.len() != n || lifted.class_weights.len() != n * (m + 1) {
+    if lifted.labels.len() != n
+        || n.checked_mul(m.saturating_add(1)) != Some(lifted.class_weights.len())
+    {
         return Err(Error::Input(format!(
             "{n} Gaussians, a lift of {} labels and {} class weights ({} parts)",
             lifted.labels.len(),
@@ -239,17 +241,16 @@ pub fn smooth_lifted(
         return smooth_gaussians(g, &lifted.labels, &lifted.confidence, m, cfg);
     }
     check_config(cfg)?;
+    if !(temperature.is_finite() && temperature > 0.0) {
+        return Err(Error::Input(format!(
+            "temperature {temperature} (must be positive and finite)"
+        )));
+    }
+    check_points(&g.means)?;
     let o = orientations(g);
     let colours = (cfg.colour_sigma > 0.0).then(|| base_colours(g));
-    if let Some(i) = g
-        .means
-        .iter()
-        .position(|p| p.iter().any(|v| !v.is_finite()))
-    {
-        return Err(Error::Input(format!("point {i} is not finite")));
-    }
     let (kk, nbrs) = knn(&g.means, cfg.k, cfg.par);
-    let regions = crate::regions::surface_regions(&nbrs, kk, &o, cfg.normal_power, cfg.region_tau);
+    let regions = crate::regions::surface_regions(&nbrs, kk, &o, cfg.normal_power, cfg.region_tau)?;
     let evidence = crate::regions::region_evidence(lifted);
     let weights = crate::regions::region_prior(
         &lifted.class_weights,
@@ -257,7 +258,7 @@ pub fn smooth_lifted(
         &regions,
         m,
         cfg.region_power,
-    );
+    )?;
     let (labels, mut confidence) = crate::lift::classify(&weights, m, temperature);
     for (c, &k) in confidence.iter_mut().zip(&lifted.confidence_scale) {
         *c *= k;
@@ -309,6 +310,14 @@ pub fn smooth(
         num_parts,
         cfg,
     )
+}
+
+/// Every point finite, else the first that is not, named.
+fn check_points(points: &[[f32; 3]]) -> Result<()> {
+    match points.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
+        Some(i) => Err(Error::Input(format!("point {i} is not finite"))),
+        None => Ok(()),
+    }
 }
 
 fn check_config(cfg: &SmoothConfig) -> Result<()> {
@@ -380,9 +389,7 @@ pub fn smooth_features(
             )));
         }
     }
-    if let Some(i) = points.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
-        return Err(Error::Input(format!("point {i} is not finite")));
-    }
+    check_points(points)?;
     if let Some(i) = labels.iter().position(|&l| l < -1 || l >= num_parts as i32) {
         return Err(Error::Input(format!(
             "label {} of Gaussian {i} is outside -1 .. {num_parts}",
