@@ -327,6 +327,62 @@ fn fit_lowers_the_loss_and_resume_continues_exactly() {
     assert!((a - b).abs() <= 1e-6 * a, "E {a} vs resumed {b}");
 }
 
+/// The valley search after the iterations (`[valley]`): it lowers the loss from where the
+/// iterations stopped within its budget, records its rounds, and a fit killed after its first
+/// round resumes the search from the checkpoint to the same point.
+#[test]
+fn valley_search_lowers_the_loss_within_budget_and_resumes_exactly() {
+    let truth = [jelly(2e4, 800.0)];
+    let mut p = small_problem(&truth, 5);
+    p.config.parts = vec![jelly(5e4, 600.0)];
+    let mut cfg = fit_config(1);
+    cfg.valley.evals = 40;
+    let mut all = Collect::default();
+    let full = run_fit(&p, &cfg, None, &mut all).unwrap();
+    let v = full.valley.as_ref().expect("the valley search ran");
+    assert!(v.evals <= 40, "{} evaluations", v.evals);
+    assert!(!v.rounds.is_empty());
+    // The loss at the truth is not 0 (static patches' phase entries, see above).
+    let floor = Objective::new(&p, None, &cfg.loss, false)
+        .unwrap()
+        .value(&truth)
+        .unwrap()
+        .total;
+    let after_iters = all.losses[0];
+    let best = full.best_loss.unwrap();
+    assert!(
+        best - floor < 0.5 * (after_iters - floor),
+        "valley search: {after_iters} -> {best}, at the truth {floor} ({:?})",
+        v.rounds
+    );
+    let e0 = (5e4f64 / 600.0 / 25.0).ln().abs();
+    let ratio = |q: &PartParams| q.youngs_modulus_pa / q.density_kg_m3;
+    let e1 = (ratio(&full.parts[0]) / 25.0).ln().abs();
+    assert!(
+        e1 < 0.5 * e0,
+        "E/density {} (truth 25, start 83)",
+        ratio(&full.parts[0])
+    );
+    // Its rounds are checkpointed; killed after the first, the fit resumes there.
+    let ck = all
+        .states
+        .iter()
+        .find(|s| s.valley.as_ref().is_some_and(|v| v.rounds.len() == 1))
+        .expect("a checkpoint after the first round")
+        .clone();
+    let ck: FitState = serde_json::from_str(&serde_json::to_string(&ck).unwrap()).unwrap();
+    let mut rest = Collect::default();
+    let resumed = run_fit(&p, &cfg, Some(ck), &mut rest).unwrap();
+    assert!(rest.losses.is_empty(), "no iteration is repeated");
+    assert_eq!(resumed.best_loss, full.best_loss);
+    assert_eq!(resumed.valley.unwrap().rounds, v.rounds);
+    // A checkpoint of another valley budget is another fit.
+    let mut other = cfg.clone();
+    other.valley.evals = 41;
+    let e = run_fit(&p, &other, Some(all.states[0].clone()), &mut NoHooks).unwrap_err();
+    assert!(e.to_string().contains("fingerprint"), "{e}");
+}
+
 /// From a Latin hypercube start over E and density (two decades each) the fit recovers
 /// E/density of a small block within 10%.
 #[test]

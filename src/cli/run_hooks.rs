@@ -157,6 +157,46 @@ impl FitHooks for RunHooks {
         );
     }
 
+    fn on_valley(
+        &mut self,
+        r: &resonance4d::video_fit::ValleyRound,
+        names: &[String],
+        theta: &[f64],
+    ) {
+        // Each sharp direction by its components above 0.3 (`+0.83 yield_stress -0.55 softening`).
+        let sharp: Vec<String> = r
+            .sharp
+            .iter()
+            .map(|u| {
+                let terms: Vec<String> = u
+                    .iter()
+                    .zip(names)
+                    .filter(|(w, _)| w.abs() >= 0.3)
+                    .map(|(w, n)| format!("{w:+.2} {n}"))
+                    .collect();
+                terms.join(" ")
+            })
+            .collect();
+        let vals: Vec<String> = names
+            .iter()
+            .zip(theta)
+            .map(|(n, v)| format!("{n}={v:.4e}"))
+            .collect();
+        eprintln!(
+            "valley search: loss {:.5e} -> {:.5e} ({} evaluations, step {:.3}, re-centred: {}); {}",
+            r.loss_before,
+            r.loss_after,
+            r.evals,
+            r.step,
+            if sharp.is_empty() {
+                "none".to_string()
+            } else {
+                sharp.join("; ")
+            },
+            vals.join(" ")
+        );
+    }
+
     fn on_checkpoint(&mut self, s: &FitState) {
         let r = super::checkpoint::write(&self.dir.join("checkpoint.json"), s);
         self.keep(r);

@@ -313,6 +313,10 @@ pub struct DemoSummary {
     /// of the run folder), filled in like `final_loss`.
     #[serde(default)]
     pub metrics: Option<serde_json::Value>,
+    /// The valley search's rounds, when the scene runs one (`valley.evals > 0`; the
+    /// plasticine): loss before and after, parameters re-centred, evaluations.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub valley: Vec<r4d_optim::video::ValleyRound>,
     /// Wall time of the whole demo (s).
     pub wall_time_s: f64,
     /// Wall time per phase (s): reference, profiles, fit (initialisation included).
@@ -457,6 +461,11 @@ pub fn run_demo(
         identifiability: verdicts,
         final_loss: None,
         metrics: None,
+        valley: outcome
+            .valley
+            .as_ref()
+            .map(|v| v.rounds.clone())
+            .unwrap_or_default(),
         wall_time_s: t0.elapsed().as_secs_f64(),
         phase_times_s: times,
         options: opts.clone(),

@@ -59,6 +59,7 @@ pub mod record;
 pub mod space;
 pub mod trajectory;
 mod trust_bfgs;
+pub mod valley;
 pub mod video;
 
 pub use compute::{Compute, Precision, ReferenceCompute};
@@ -70,6 +71,7 @@ pub use init::{
 };
 pub use lhs::{latin_hypercube, log_space};
 pub use trust_bfgs::{TrustRegion, TrustRegionBfgs};
+pub use valley::{ValleyConfig, ValleySearch};
 
 /// Errors of this crate.
 #[derive(Debug, thiserror::Error)]

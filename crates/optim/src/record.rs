@@ -22,7 +22,7 @@
 //! ```
 
 use crate::space::ParamSpace;
-use crate::{FitError, InitOutcome, LogDomainOptimizer, TrustRegionBfgs};
+use crate::{FitError, InitOutcome, LogDomainOptimizer, TrustRegionBfgs, ValleySearch};
 pub use r4d_fsio::Fingerprint;
 use r4d_mpm::PartParams;
 use serde::{Deserialize, Serialize};
@@ -70,6 +70,9 @@ pub struct FitState {
     /// The short fits of a multi-start (`multi_start > 1`), in candidate-rank order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub starts: Vec<StartResult>,
+    /// The valley search after the iterations (`valley.evals > 0`), once begun.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub valley: Option<ValleySearch>,
     /// Checksum of the rest of the content (set by [`FitState::to_json`]).
     #[serde(default)]
     pub checksum: String,
@@ -88,6 +91,7 @@ impl FitState {
             best: None,
             trust: None,
             starts: Vec::new(),
+            valley: None,
             checksum: String::new(),
         }
     }
@@ -160,6 +164,10 @@ impl FitState {
         if let Some(o) = &self.trust {
             o.validate(n)
                 .map_err(|e| resume("the checkpoint's trust-region optimiser", e.to_string()))?;
+        }
+        if let Some(v) = &self.valley {
+            v.validate(n)
+                .map_err(|e| resume("the checkpoint's valley search", e))?;
         }
         let finite_positive = |t: &[f64]| t.iter().all(|v| v.is_finite() && *v > 0.0);
         if let Some((l, t)) = &self.best {

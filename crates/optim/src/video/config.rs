@@ -20,6 +20,9 @@
 //! multi_start_iters = 5   # iterations of each
 //! free = ["E", "density"] # free parameters of every part (default: by material)
 //!
+//! [valley]                # the valley search after the iterations (r4d_optim::valley)
+//! evals = 0               # loss evaluations it may spend (0: off)
+//!
 //! [loss]                  # the DMS loss (r4d_loss::DmsConfig); ablations:
 //! weights = { l1 = 0.0, spatial = 1.0, mag = 1.0, phase = 1.0 }
 //! [loss.spectral]         # omitted keys take r4d_loss's defaults
@@ -41,7 +44,7 @@
 use crate::compute::Precision;
 use crate::space::{check_free, default_free, Granularity};
 use crate::FitError;
-use crate::{AdamW, ParamKind};
+use crate::{AdamW, ParamKind, ValleyConfig};
 use r4d_loss::DmsConfig;
 use r4d_mpm::adjoint::checkpoint::Checkpointing;
 use r4d_mpm::PartParams;
@@ -166,6 +169,13 @@ pub struct FitConfig {
     /// The step: `adam` (AdamW, the paper's) or `trust_bfgs` (a trust-region quasi-Newton
     /// step, `r4d_optim::TrustRegionBfgs`, whose first radius is `lr`).
     pub optimizer: OptimizerKind,
+    /// The valley search after the iterations ([`crate::valley`]): a derivative-free walk
+    /// along the shallow parameters with the sharp ones re-centred at every point, for
+    /// losses whose minimum lies along a curved valley between V-shaped walls (the full-size
+    /// plasticine demo, `docs/fitting.md`). Off unless `valley.evals > 0`; part and object
+    /// fits only. Not part of the checkpoint's fingerprint while off.
+    #[serde(skip_serializing_if = "ValleyConfig::is_off")]
+    pub valley: ValleyConfig,
 }
 
 impl Default for FitConfig {
@@ -193,6 +203,7 @@ impl Default for FitConfig {
             multi_start: 1,
             multi_start_iters: 5,
             optimizer: OptimizerKind::Adam,
+            valley: ValleyConfig::default(),
         }
     }
 }
@@ -257,6 +268,10 @@ impl FitConfig {
                 "multi_start = {}: 1 (off) to 64 starts",
                 self.multi_start
             ));
+        }
+        self.valley.validate().map_err(FitError::Input)?;
+        if !self.valley.is_off() && self.granularity == Granularity::Particle {
+            return bad("valley.evals > 0: part and object fits only".into());
         }
         if self.multi_start > 1 {
             if !self.init.enabled {

@@ -7,10 +7,11 @@ use crate::descent::{self, keep_best, Rate, Stepper};
 use crate::record::{mix_json, Fingerprint, FlatProbe, Terms};
 pub use crate::record::{FitState, IterRecord, StartResult};
 use crate::space::{part_summary, Granularity, ParamSpace};
+use crate::valley::ValleyRound;
 use crate::FitError;
 use crate::{
     evaluate_candidate, Candidate, InitOutcome, Initializer, LatinHypercubeInit,
-    LogDomainOptimizer, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs,
+    LogDomainOptimizer, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs, ValleySearch,
 };
 use r4d_loss::bands::ReferenceVideo;
 use r4d_loss::{ssim::ms_ssim, MsSsimConfig, Video};
@@ -207,6 +208,9 @@ pub trait FitHooks {
     fn on_checkpoint(&mut self, _s: &FitState) {}
     /// A start of a multi-start finished.
     fn on_start(&mut self, _r: &StartResult) {}
+    /// A round of the valley search finished (`names`: the free parameters; `theta`: the
+    /// accepted point after it).
+    fn on_valley(&mut self, _r: &ValleyRound, _names: &[String], _theta: &[f64]) {}
     /// Measures heap peaks (the stage profile, [`IterRecord::peak_host_bytes`]); `None`:
     /// they are reported as 0.
     fn heap(&self) -> Option<std::sync::Arc<dyn crate::HeapProbe>> {
@@ -233,6 +237,8 @@ pub struct FitOutcome {
     pub best_loss: Option<f64>,
     /// The initialisation's result.
     pub init: Option<InitOutcome>,
+    /// The valley search, when it ran (`valley.evals > 0`).
+    pub valley: Option<ValleySearch>,
 }
 
 /// MS-SSIM of rendered videos against the problem's references (mean over views), with the
@@ -596,6 +602,9 @@ pub fn run_fit(
             state.trust = None;
         }
     }
+    if !cfg.valley.is_off() {
+        valley_search(&obj, &space, &base_slots, &opt, cfg, &mut state, hooks)?;
+    }
     let theta = match &state.best {
         Some((_, t)) => t.clone(),
         None => opt.theta(),
@@ -608,6 +617,61 @@ pub fn run_fit(
         init_parts,
         best_loss: state.best.as_ref().map(|b| b.0),
         init: state.init,
+        valley: state.valley,
         space,
     })
+}
+
+/// The valley search ([`crate::valley`]) from the lowest loss the iterations reached (the
+/// optimiser's point without iterations), checkpointed after every round; a resumed fit
+/// continues the search in the checkpoint. Its points are evaluated in parallel, loss only.
+fn valley_search(
+    obj: &Objective,
+    space: &ParamSpace,
+    base_slots: &[PartParams],
+    opt: &Stepper,
+    cfg: &FitConfig,
+    state: &mut FitState,
+    hooks: &mut dyn FitHooks,
+) -> Result<(), FitError> {
+    let names = space.names();
+    let mut search = match state.valley.take() {
+        Some(s) => s,
+        None => {
+            let (loss, theta) = match &state.best {
+                Some((l, t)) => (Some(*l), t.clone()),
+                None => (None, opt.theta()),
+            };
+            ValleySearch::new(&theta, loss, &space.bounds(), &cfg.valley)
+                .map_err(|e| FitError::Input(format!("the valley search's starting point: {e}")))?
+        }
+    };
+    let mut eval = |pts: &[Vec<f64>]| -> Vec<f64> {
+        pts.par_iter()
+            .map(|p| {
+                let theta: Vec<f64> = p.iter().map(|v| v.exp()).collect();
+                let mut slots = base_slots.to_vec();
+                space.apply(&mut slots, &theta);
+                // A point whose simulation fails is a wall, not an error of the fit.
+                obj.value(&slots).map_or(f64::INFINITY, |e| e.total)
+            })
+            .collect()
+    };
+    while !search.done && search.evals < cfg.valley.evals {
+        let budget = cfg.valley.evals - search.evals;
+        let Some(round) = search.round(&cfg.valley, budget, &mut eval) else {
+            break;
+        };
+        if let Some(l) = search.loss() {
+            keep_best(&mut state.best, l, &search.theta());
+        }
+        hooks.on_valley(&round, &names, &search.theta());
+        state.valley = Some(search.clone());
+        save(opt, state);
+        hooks.on_checkpoint(state);
+        state.optimizer = None;
+        state.trust = None;
+    }
+    state.valley = Some(search);
+    Ok(())
 }
