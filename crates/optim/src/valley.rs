@@ -17,9 +17,9 @@
 //! over the shallow directions `T`, with the sharp ones `S` re-centred at every point it
 //! looks at. One round:
 //!
-//! 1. probes `x +- h e_i` for every parameter and the four diagonal points `x +- h e_i +- h
-//!    e_j` of every pair (`h` = [`ValleyConfig::probe`]; `2 n^2` evaluations, 50 for five
-//!    parameters): the central differences estimate the gradient of `P` even across a
+//! 1. probes `x +- h e_i` for every parameter (`h` = [`ValleyConfig::probe`]) and, with
+//!    [`ValleyConfig::pairs`], the four diagonal points `x +- h e_i +- h e_j` of every pair
+//!    (`2 n^2` evaluations, 50 for five parameters, instead of `2 n`): the central differences estimate the gradient of `P` even across a
 //!    V-shaped wall (the wall's two sides cancel), the second differences a Hessian whose
 //!    off-diagonal entries come from the lower diagonal pair (the one along a valley, not
 //!    across its wall); its eigenvectors above the largest ratio between neighbouring
@@ -59,6 +59,18 @@ pub struct ValleyConfig {
     pub recentre: f64,
     /// Re-centring sweeps over the sharp parameters at every point of the walk.
     pub sweeps: usize,
+    /// Probe the pairs too (`2 n (n - 1)` more evaluations per round, 40 for five
+    /// parameters), so that a valley along a diagonal of two parameters is found (its sharp
+    /// direction is across the diagonal). Off by default: at the full-size plasticine's end
+    /// point they found no diagonal at the probe scale (the Hessian's eigenvectors were the
+    /// axes) and a round cost 142 evaluations instead of about 60 (`docs/fitting.md`).
+    pub pairs: bool,
+    /// Re-centre along the diagonals `(u +- v) / sqrt 2` of every pair of sharp directions
+    /// as well, in the last sweep (`s (s - 1)` more line searches of about three evaluations
+    /// each for `s` sharp directions): two sharp parameters that compensate each other (a
+    /// yield stress and a softening rate) have a valley along a diagonal that no step along
+    /// one of them enters. Default true (`docs/fitting.md`).
+    pub diagonals: bool,
 }
 
 impl Default for ValleyConfig {
@@ -70,6 +82,8 @@ impl Default for ValleyConfig {
             step: 0.05,
             recentre: 0.02,
             sweeps: 2,
+            pairs: false,
+            diagonals: true,
         }
     }
 }
@@ -173,7 +187,7 @@ impl ValleySearch {
         }
         for (i, (&t, &(lo, hi))) in theta.iter().zip(bounds).enumerate() {
             let ok = t.is_finite() && lo.is_finite() && hi.is_finite();
-            if !ok || !(lo > 0.0 && lo <= t && t <= hi) {
+            if !(ok && lo > 0.0 && lo <= t && t <= hi) {
                 return Err(format!(
                     "parameter {i}: {t} outside its bounds [{lo}, {hi}] or not positive"
                 ));
@@ -228,20 +242,25 @@ impl ValleySearch {
     }
 
     /// Evaluations of a round's probes.
-    fn probe_count(&self) -> usize {
+    fn probe_count(&self, pairs: bool) -> usize {
         let n = self.x.len();
-        2 * n
-            + if n <= MAX_PAIR_PARAMS {
-                2 * n * (n - 1)
-            } else {
-                0
-            }
+        let pair_probes = if Self::with_pairs(n, pairs) {
+            2 * n * (n - 1)
+        } else {
+            0
+        };
+        2 * n + pair_probes
     }
 
-    /// The probe points around `x` at scale `h`: `x +- h e_i` per parameter, then with at
-    /// most [`MAX_PAIR_PARAMS`] parameters the four diagonal points `x +- h e_i +- h e_j` of
-    /// every pair.
-    fn probes(&self, h: f64) -> Vec<Vec<f64>> {
+    /// Whether a round of `n` parameters probes the pairs.
+    fn with_pairs(n: usize, pairs: bool) -> bool {
+        pairs && n <= MAX_PAIR_PARAMS
+    }
+
+    /// The probe points around `x` at scale `h`: `x +- h e_i` per parameter, then with
+    /// `pairs` and at most [`MAX_PAIR_PARAMS`] parameters the four diagonal points `x +- h
+    /// e_i +- h e_j` of every pair.
+    fn probes(&self, h: f64, pairs: bool) -> Vec<Vec<f64>> {
         let n = self.x.len();
         let mut pts = Vec::new();
         let at = |moves: &[(usize, f64)]| {
@@ -255,7 +274,7 @@ impl ValleySearch {
             pts.push(at(&[(i, 1.0)]));
             pts.push(at(&[(i, -1.0)]));
         }
-        if n <= MAX_PAIR_PARAMS {
+        if Self::with_pairs(n, pairs) {
             for i in 0..n {
                 for j in i + 1..n {
                     for (a, b) in [(1.0, 1.0), (-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0)] {
@@ -304,7 +323,7 @@ impl ValleySearch {
                 g[i] = (f0 - fm) / hm;
             }
         }
-        if n <= MAX_PAIR_PARAMS {
+        if pts.len() > 2 * n {
             let mut k = 2 * n;
             for i in 0..n {
                 for j in i + 1..n {
@@ -357,7 +376,7 @@ impl ValleySearch {
         eval: &mut BatchLoss<'_>,
     ) -> Option<ValleyRound> {
         let n = self.x.len();
-        if self.done || budget < self.probe_count() + 2 {
+        if self.done || budget < self.probe_count(cfg.pairs) + 2 {
             self.done = true;
             return None;
         }
@@ -381,7 +400,7 @@ impl ValleySearch {
         };
         // 1. Probes: gradient and curvature.
         let h = cfg.probe;
-        let probes = self.probes(h);
+        let probes = self.probes(h, cfg.pairs);
         let fs = ev.batch(&probes);
         let mut best = (f0, self.x.clone());
         for (p, &f) in probes.iter().zip(&fs) {
@@ -580,10 +599,11 @@ impl Counter<'_, '_> {
     }
 }
 
-/// Re-centres the sharp parameters of `p` (see [`ValleyConfig::sweeps`]): per sweep and
-/// sharp parameter, the two neighbours at `+-delta` and the minimum of the V through the
-/// three points; where a neighbour is lower, steps on that way (at most four steps). Returns
-/// the lowest point's loss and the point.
+/// Re-centres the sharp directions of `p` (see [`ValleyConfig::sweeps`]): per sweep and
+/// sharp direction, the two neighbours at `+-delta` and the minimum of the V through the
+/// three points; where a neighbour is lower, steps on that way (at most four steps). With
+/// [`ValleyConfig::diagonals`] the last sweep also searches the diagonals `(u +- v) / sqrt 2`
+/// of every pair of sharp directions. Returns the lowest point's loss and the point.
 fn recentre(
     p: Vec<f64>,
     sharp: &[Vec<f64>],
@@ -591,69 +611,97 @@ fn recentre(
     ev: &mut Counter<'_, '_>,
     search: &ValleySearch,
 ) -> (f64, Vec<f64>) {
-    let mut best_p = p;
     if ev.left() == 0 {
-        return (f64::INFINITY, best_p);
+        return (f64::INFINITY, p);
     }
-    let mut best_f = ev.batch(std::slice::from_ref(&best_p))[0];
-    if !best_f.is_finite() {
-        return (best_f, best_p);
+    let f = ev.batch(std::slice::from_ref(&p))[0];
+    let mut best = (f, p);
+    if !f.is_finite() {
+        return best;
     }
-    for sweep in 0..cfg.sweeps {
-        let delta = cfg.recentre / f64::from(1u32 << sweep.min(30));
-        for u in sharp {
-            if ev.left() < 2 {
-                return (best_f, best_p);
-            }
-            let along = |from: &[f64], t: f64| {
-                let q: Vec<f64> = from.iter().zip(u).map(|(v, w)| v + t * w).collect();
-                search.clamp(q)
-            };
-            let side = |s: f64, from: &Vec<f64>| along(from, s * delta);
-            let (qp, qm) = (side(1.0, &best_p), side(-1.0, &best_p));
-            let fs = ev.batch(&[qp.clone(), qm.clone()]);
-            let (fp, fm) = (fs[0], fs[1]);
-            if fp < best_f || fm < best_f {
-                // Downhill: walk that way while it keeps falling.
-                let s = if fp < fm { 1.0 } else { -1.0 };
-                let (mut f, mut q) = if fp < fm { (fp, qp) } else { (fm, qm) };
-                for _ in 0..4 {
-                    if ev.left() == 0 {
-                        break;
-                    }
-                    let next = side(s, &q);
-                    if next == q {
-                        break;
-                    }
-                    let fnext = ev.batch(std::slice::from_ref(&next))[0];
-                    if fnext < f {
-                        (f, q) = (fnext, next);
-                    } else {
-                        break;
-                    }
-                }
-                (best_f, best_p) = (f, q);
-            } else if fp.is_finite() && fm.is_finite() && ev.left() > 0 {
-                // The minimum of the V through the three points.
-                let b = (fp.max(fm) - best_f) / delta;
-                if b > 0.0 {
-                    let m = if fm >= fp {
-                        (delta - (fp - best_f) / b) / 2.0
-                    } else {
-                        -(delta - (fm - best_f) / b) / 2.0
-                    };
-                    if m.abs() > delta / 8.0 {
-                        let q = along(&best_p, m);
-                        let fq = ev.batch(std::slice::from_ref(&q))[0];
-                        if fq < best_f {
-                            (best_f, best_p) = (fq, q);
-                        }
-                    }
+    let mut diagonals = Vec::new();
+    if cfg.diagonals {
+        for a in 0..sharp.len() {
+            for b in a + 1..sharp.len() {
+                for sign in [1.0, -1.0] {
+                    let d: Vec<f64> = sharp[a]
+                        .iter()
+                        .zip(&sharp[b])
+                        .map(|(x, y)| (x + sign * y) * std::f64::consts::FRAC_1_SQRT_2)
+                        .collect();
+                    diagonals.push(d);
                 }
             }
         }
     }
-    (best_f, best_p)
+    for sweep in 0..cfg.sweeps {
+        let delta = cfg.recentre / f64::from(1u32 << sweep.min(30));
+        let last = sweep + 1 == cfg.sweeps;
+        let extra = if last { &diagonals[..] } else { &[] };
+        for u in sharp.iter().chain(extra) {
+            if ev.left() < 2 {
+                return best;
+            }
+            line_search(u, delta, &mut best, ev, search);
+        }
+    }
+    best
+}
+
+/// One direction `u` of [`recentre`] from `best` (its loss and point), updated in place.
+fn line_search(
+    u: &[f64],
+    delta: f64,
+    best: &mut (f64, Vec<f64>),
+    ev: &mut Counter<'_, '_>,
+    search: &ValleySearch,
+) {
+    let along = |from: &[f64], t: f64| {
+        let q: Vec<f64> = from.iter().zip(u).map(|(v, w)| v + t * w).collect();
+        search.clamp(q)
+    };
+    let (qp, qm) = (along(&best.1, delta), along(&best.1, -delta));
+    let fs = ev.batch(&[qp.clone(), qm.clone()]);
+    let (fp, fm) = (fs[0], fs[1]);
+    let f0 = best.0;
+    if fp < f0 || fm < f0 {
+        // Downhill: walk that way while it keeps falling.
+        let s = if fp < fm { 1.0 } else { -1.0 };
+        let (mut f, mut q) = if fp < fm { (fp, qp) } else { (fm, qm) };
+        for _ in 0..4 {
+            if ev.left() == 0 {
+                break;
+            }
+            let next = along(&q, s * delta);
+            if next == q {
+                break;
+            }
+            let fnext = ev.batch(std::slice::from_ref(&next))[0];
+            if fnext < f {
+                (f, q) = (fnext, next);
+            } else {
+                break;
+            }
+        }
+        *best = (f, q);
+    } else if fp.is_finite() && fm.is_finite() && ev.left() > 0 {
+        // The minimum of the V through the three points.
+        let b = (fp.max(fm) - f0) / delta;
+        if b > 0.0 {
+            let m = if fm >= fp {
+                (delta - (fp - f0) / b) / 2.0
+            } else {
+                -(delta - (fm - f0) / b) / 2.0
+            };
+            if m.abs() > delta / 8.0 {
+                let q = along(&best.1, m);
+                let fq = ev.batch(std::slice::from_ref(&q))[0];
+                if fq < f0 {
+                    *best = (fq, q);
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -734,6 +782,7 @@ mod tests {
         };
         let cfg = ValleyConfig {
             evals: 600,
+            pairs: true,
             ..Default::default()
         };
         let x0 = [0.0, 0.0, 0.0];
