@@ -124,8 +124,8 @@ num_dt = {n}
         Size::Small => 8,
     };
     // Full size: the valley search after the iterations (150 loss evaluations, about 2.5
-    // minutes) takes the end point from loss 1.0040 to 0.9909 (E +50% -> +32%, yield stress
-    // -4.3% -> -2.4%, softening -5.7% -> -4.0%: docs/fitting.md).
+    // minutes) takes the end point from loss 1.0040 to 0.9944 (yield stress -4.3% -> -3.4%,
+    // softening -5.7% -> -4.9%; E stays at +50-53%: docs/fitting.md).
     if size == Size::Full {
         fit.valley.evals = 150;
     }

@@ -63,16 +63,16 @@ pub struct ValleyConfig {
     /// parameters), so that a valley along a diagonal of two parameters is found (its sharp
     /// direction is across the diagonal). Off by default: at the full-size plasticine's end
     /// point they found no diagonal at the probe scale (the Hessian's eigenvectors were the
-    /// axes) and a round cost 142 evaluations instead of about 60 (`docs/fitting.md`).
+    /// axes) and a round cost 142 evaluations instead of 101 (`docs/fitting.md`).
     pub pairs: bool,
     /// Re-centre along the diagonals `(u +- v) / sqrt 2` of every pair of sharp directions
     /// as well, in the last sweep (`s (s - 1)` more line searches of about three evaluations
     /// each for `s` sharp directions): two sharp parameters that compensate each other (a
     /// yield stress and a softening rate) have a valley along a diagonal that no step along
-    /// one of them enters. Off by default: on the full-size plasticine it reached a lower
-    /// loss (0.9875 after 300 evaluations, against 0.9909 after 150 and 0.9904 after 450
-    /// without), but a round costs about twice as many evaluations and `E` ended further off
-    /// (+40% against +32%; `docs/fitting.md`).
+    /// one of them enters. Off by default: on the full-size plasticine it reached the lowest
+    /// loss (0.9875 after 300 evaluations, against 0.9944 after 150 without) with the yield
+    /// stress and softening closest, but a round costs about twice as many evaluations and
+    /// `E` stayed far off (+40%; `docs/fitting.md`).
     pub diagonals: bool,
 }
 

@@ -435,4 +435,30 @@ mod tests {
         };
         assert!(bad_ck.validate().is_err());
     }
+
+    /// `[valley]`: parsed from TOML, refused naming its key, unknown keys refused, and
+    /// off unless `evals > 0` (then not part of the serialised settings, so a fit's
+    /// fingerprint does not change with it).
+    #[test]
+    fn valley_settings_parse_and_bad_ones_are_refused() {
+        let parse = |t: &str| toml::from_str::<FitConfig>(t);
+        let c = parse("[valley]\nevals = 150\nsweeps = 1\n").unwrap();
+        assert_eq!((c.valley.evals, c.valley.sweeps), (150, 1));
+        c.validate().unwrap();
+        assert!(parse("[valley]\nevals = 1\nsharpness = 2.0\n").is_err());
+        let e = parse("[valley]\nevals = 10\nprobe = -1.0\n")
+            .unwrap()
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("valley.probe"), "{e}");
+        let e = parse("granularity = \"particle\"\n[valley]\nevals = 10\n")
+            .unwrap()
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("valley"), "{e}");
+        let off = serde_json::to_string(&FitConfig::default()).unwrap();
+        assert!(!off.contains("valley"), "{off}");
+    }
 }
