@@ -19,8 +19,9 @@
 //!
 //! 1. probes `x +- h e_i` for every parameter (`h` = [`ValleyConfig::probe`]) and, with
 //!    [`ValleyConfig::pairs`], the four diagonal points `x +- h e_i +- h e_j` of every pair
-//!    (`2 n^2` evaluations, 50 for five parameters, instead of `2 n`): the central differences estimate the gradient of `P` even across a
-//!    V-shaped wall (the wall's two sides cancel), the second differences a Hessian whose
+//!    (`2 n^2` evaluations, 50 for five parameters, instead of `2 n`): the central
+//!    differences estimate the gradient of `P` even across a V-shaped wall (the wall's two
+//!    sides cancel), the second differences a Hessian (diagonal without pairs) whose
 //!    off-diagonal entries come from the lower diagonal pair (the one along a valley, not
 //!    across its wall); its eigenvectors above the largest ratio between neighbouring
 //!    eigenvalues, when that ratio is at least [`ValleyConfig::sharp_gap`], are the sharp
@@ -28,8 +29,9 @@
 //!    sharp direction across their valley and a shallow one along it; a shallow parameter's
 //!    probes climb the walls too, so its curvature is only smaller, not small);
 //! 2. walks along the steepest descent `d` within the shallow directions, the sharp ones
-//!    re-centred at every point (a search along each sharp direction,
-//!    [`ValleyConfig::sweeps`] sweeps of three evaluations and a V-shaped fit through them),
+//!    re-centred at every point (a search along each sharp direction, sharpest first,
+//!    [`ValleyConfig::sweeps`] sweeps of three evaluations and a V-shaped fit through them;
+//!    with [`ValleyConfig::diagonals`] also along the diagonals of pairs of them),
 //!    doubling the step while the loss falls and halving it when the first step rises; the
 //!    re-centring's correction per unit step at the first accepted point predicts it at the
 //!    next;
