@@ -17,7 +17,8 @@
 //!   votes (`ViewVote::Sum`) instead of the default per-view confusion matrices, for the
 //!   cost of the EM.
 //! * `smooth/surfaces`, `smooth/volume`: the KNN pass (k 16, with the region prior) on the
-//!   lift's outcome; `smooth-no-regions/...`: the same without the region prior.
+//!   lift's outcome; `smooth-no-appearance/...`: without the prior's appearance term;
+//!   `smooth-no-regions/...`: without the region prior.
 //!
 //! Each case prints the peak host memory of one call beyond its inputs (counting allocator).
 //! The masks are handed over in memory (each view's mask is copied once per call, as a file
@@ -222,8 +223,16 @@ fn main() {
         region_tau: 0.0,
         ..smooth_cfg
     };
+    let no_appearance = SmoothConfig {
+        appearance: 0.0,
+        ..smooth_cfg
+    };
     for (scene_name, g, l) in lifted {
-        for (case, sc) in [("smooth", &smooth_cfg), ("smooth-no-regions", &no_regions)] {
+        for (case, sc) in [
+            ("smooth", &smooth_cfg),
+            ("smooth-no-appearance", &no_appearance),
+            ("smooth-no-regions", &no_regions),
+        ] {
             let base = reset_peak();
             let t = std::time::Instant::now();
             smooth_lifted(g, &l, cfg.temperature, sc).unwrap();

@@ -159,11 +159,14 @@ fn segment_bad_masks_name_the_file() {
         "{err}"
     );
     assert!(!d.join("parts.json").exists());
-    // Region prior settings out of range: named before any work.
+    // Region prior and appearance settings out of range: named before any work.
     for (flag, v) in [
         ("--region-tau", "-1"),
         ("--region-power", "NaN"),
         ("--region-power", "100"),
+        ("--appearance", "1.5"),
+        ("--appearance", "-0.1"),
+        ("--appearance", "inf"),
     ] {
         let mut a = args(&d, "parts.json");
         a.push(format!("{flag}={v}"));

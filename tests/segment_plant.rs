@@ -5,11 +5,9 @@
 //! (compositing weight >= 0.05 pixel-equivalents), after the KNN pass.
 //!
 //! The targets (>= 99.5% with clean masks; >= 97% and no part below 93% with
-//! corrupted ones) are reached with clean masks on every seed and with corrupted ones on
-//! four of five seeds (seed 1: 96.9%, the pot's inner wall 90.4%); these tests hold the
-//! measured state: every stage (label propagation, the visibility-aware lift, the region
-//! prior) keeps or improves every seed, and the region prior costs little where parts share
-//! a smooth surface.
+//! corrupted ones) are reached on every seed tested here; every stage (label propagation,
+//! the visibility-aware lift, the region prior, its appearance term) keeps or improves every
+//! seed, and the region prior costs little where parts share a smooth surface.
 
 use r4d_segment::mask::MaskData;
 use r4d_segment::synthetic::plant::{self, corrupt_parts, mislabel_part, per_part, PlantScene};
@@ -195,10 +193,9 @@ fn corrupted_masks_per_part_table() {
             worst(&new.0),
             worst(&lift.0)
         );
-        // The measured state (the target is 97% and no part under 93%): every seed
-        // at least 96.5% and every part 90% (seed 1: 96.9%, the pot's inner wall 90.4%).
-        assert!(new.1 >= 0.965, "seed {seed}: {}", new.1);
-        assert!(worst(&new.0) >= 0.90, "seed {seed}: {:?}", new.0);
+        // The target: 97%, and no part under 93%.
+        assert!(new.1 >= 0.97, "seed {seed}: {}", new.1);
+        assert!(worst(&new.0) >= 0.93, "seed {seed}: {:?}", new.0);
         // The static floor survives the corruption.
         assert!(new.0[0] >= 0.97, "seed {seed}, floor: {}", new.0[0]);
     }
@@ -210,8 +207,45 @@ fn corrupted_masks_per_part_table() {
         sums[2] / n,
         sums[3] / n
     );
-    assert!(sums[3] / n >= 0.99, "mean {}", sums[3] / n);
+    assert!(sums[3] / n >= 0.995, "mean {}", sums[3] / n);
     assert!(sums[2] >= sums[1] + 0.005 * n, "{sums:?}");
+}
+
+/// The appearance term of the region prior on the seeds where the region prior alone misses
+/// the target (corrupted masks): the pot's inner wall, which most views' dilated soil
+/// masks cover (seeds 1, 9), a leaf that most views erode into the soil behind it (seed 12),
+/// a leaf given to the soil on another (seed 14). Without it each misses (a part under 93% or
+/// the total under 97%); with it each reaches the target, and no part loses more than half a
+/// point.
+#[test]
+fn appearance_reaches_the_target_where_regions_alone_miss() {
+    let worst = |p: &[f64]| p[1..].iter().copied().fold(1.0, f64::min);
+    for seed in [1u64, 9, 12, 14] {
+        let (scene, cams, masks) = setup(seed);
+        let bad = corrupted(&masks, seed);
+        let run = |appearance: f32| {
+            let cfg = SegmentConfig {
+                lift: LiftConfig::default(),
+                smooth: Some(SmoothConfig {
+                    appearance,
+                    ..Default::default()
+                }),
+            };
+            score_with(&scene, &cams, &bad, cfg)
+        };
+        let (off, on) = (run(0.0), run(SmoothConfig::default().appearance));
+        println!("seed {seed} corrupted: {}", row("no app.", &off));
+        println!("seed {seed} corrupted: {}", row("default", &on));
+        assert!(
+            off.1 < 0.97 || worst(&off.0) < 0.93,
+            "seed {seed} met the target without appearance: {off:?}"
+        );
+        assert!(on.1 >= 0.97, "seed {seed}: {}", on.1);
+        assert!(worst(&on.0) >= 0.93, "seed {seed}: {:?}", on.0);
+        for (k, (a, b)) in off.0.iter().zip(&on.0).enumerate() {
+            assert!(*b >= a - 0.005, "seed {seed} class {k}: {b} vs {a}");
+        }
+    }
 }
 
 /// Parts that share a smooth surface, where the region prior has no crease to stop at: the

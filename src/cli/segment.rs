@@ -66,6 +66,12 @@ pub struct SegmentArgs {
     /// off).
     #[arg(long, default_value_t = 4.0)]
     region_power: f32,
+    /// Strength, in [0, 1], of the appearance term of the region prior: a region's evidence
+    /// for a part is scaled by 1 - S + S x (how well its Gaussians' base colours fit that
+    /// part's robust colour model), so colour can overturn at most a 1 / (1 - S) lead of
+    /// the masks (parts of one colour, or colours no part has, change nothing; 0: off).
+    #[arg(long, default_value_t = 0.8)]
+    appearance: f32,
     /// Do not scale a view's votes by the share of the Gaussian's drawn footprint that is
     /// the Gaussian itself (edge-on Gaussians then vote with their whole blurred line).
     #[arg(long)]
@@ -103,6 +109,9 @@ pub fn run(a: SegmentArgs) -> Result<()> {
     }
     if !(a.region_power.is_finite() && (0.0..=64.0).contains(&a.region_power)) {
         bail!("--region-power {}: must lie in [0, 64]", a.region_power);
+    }
+    if !(a.appearance.is_finite() && (0.0..=1.0).contains(&a.appearance)) {
+        bail!("--appearance {}: must lie in [0, 1]", a.appearance);
     }
     if a.out
         .extension()
@@ -164,6 +173,7 @@ pub fn run(a: SegmentArgs) -> Result<()> {
             rounds: a.rounds,
             region_tau: a.region_tau,
             region_power: a.region_power,
+            appearance: a.appearance,
             ..Default::default()
         };
         smooth_lifted(&g, &lifted, lift_cfg.temperature, &cfg)?
