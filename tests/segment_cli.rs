@@ -164,6 +164,8 @@ fn segment_bad_masks_name_the_file() {
         ("--region-tau", "-1"),
         ("--region-power", "NaN"),
         ("--region-power", "100"),
+        ("--region-static-power", "-2"),
+        ("--region-static-power", "65"),
         ("--appearance", "1.5"),
         ("--appearance", "-0.1"),
         ("--appearance", "inf"),

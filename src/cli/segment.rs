@@ -66,6 +66,13 @@ pub struct SegmentArgs {
     /// off).
     #[arg(long, default_value_t = 4.0)]
     region_power: f32,
+    /// Exponent of the region prior on the static scene, one-sided: where a region's
+    /// strongest part outweighs the static scene in it, its Gaussians' static evidence is
+    /// scaled by their ratio to this power (a part's rim that eroded masks give to the
+    /// background keeps its part); regions the static scene dominates are left alone (0:
+    /// off).
+    #[arg(long, default_value_t = 2.0)]
+    region_static_power: f32,
     /// Strength, in [0, 1], of the appearance term of the region prior: a region's evidence
     /// for a part is scaled by 1 - S + S x (how well its Gaussians' base colours fit that
     /// part's robust colour model), so colour can overturn at most a 1 / (1 - S) lead of
@@ -109,6 +116,12 @@ pub fn run(a: SegmentArgs) -> Result<()> {
     }
     if !(a.region_power.is_finite() && (0.0..=64.0).contains(&a.region_power)) {
         bail!("--region-power {}: must lie in [0, 64]", a.region_power);
+    }
+    if !(a.region_static_power.is_finite() && (0.0..=64.0).contains(&a.region_static_power)) {
+        bail!(
+            "--region-static-power {}: must lie in [0, 64]",
+            a.region_static_power
+        );
     }
     if !(a.appearance.is_finite() && (0.0..=1.0).contains(&a.appearance)) {
         bail!("--appearance {}: must lie in [0, 1]", a.appearance);
@@ -173,6 +186,7 @@ pub fn run(a: SegmentArgs) -> Result<()> {
             rounds: a.rounds,
             region_tau: a.region_tau,
             region_power: a.region_power,
+            region_static_power: a.region_static_power,
             appearance: a.appearance,
             ..Default::default()
         };

@@ -22,6 +22,12 @@
 //! (almost) nothing is not moved to it, so two parts on one smooth surface keep most of
 //! their boundary too (measured in `tests/segment_plant.rs`).
 //!
+//! **Static.** The background entry is scaled too, but only one way and only where the
+//! region's strongest part outweighs the static scene in it: by `(R_0 / R_max)^q`. A part's
+//! surface whose rim most views' eroded masks give to the static scene (a petal's edge) keeps
+//! it, while a region the static scene dominates (a wall with a part painted on it, a floor
+//! split into a part and static) is left alone, so that boundary is the Gaussians' own.
+//!
 //! **Appearance.** Where the masks' evidence over a whole region is nearly even, or wrong
 //! (the pot's inner wall, which most views' dilated soil masks cover; a thin leaf that most
 //! views erode into the soil behind it), the colours still tell: the region's summed
@@ -97,7 +103,9 @@ pub fn surface_regions(
 /// The class evidence (`N x (M + 1)`, background first, as [`crate::Lifted::class_weights`])
 /// with every Gaussian's part entries scaled by its region's prior `(R_c / R_max)^beta`
 /// (module docs), `R` the region's sum of `evidence` (same layout; the class weights
-/// themselves, or another estimate of them); background entries and Gaussians without
+/// themselves, or another estimate of them), and its background entry by
+/// `(R_0 / R_max)^static_power` where the region's strongest part outweighs the background
+/// (`R_0 < R_max`; elsewhere, and with `static_power` 0, it is unchanged); Gaussians without
 /// evidence are unchanged. Lengths that do not fit `N` Gaussians of `M + 1` classes, or a
 /// region id outside them, are an error.
 pub fn region_prior(
@@ -106,6 +114,7 @@ pub fn region_prior(
     regions: &[u32],
     num_parts: usize,
     beta: f32,
+    static_power: f32,
 ) -> Result<Vec<f64>> {
     let s = num_parts.saturating_add(1);
     let n = regions.len();
@@ -133,6 +142,7 @@ pub fn region_prior(
         }
     }
     let beta = beta as f64;
+    let static_power = static_power as f64;
     let mut out = class_weights.to_vec();
     for (i, &r) in regions.iter().enumerate() {
         let rs = &sums[r as usize * s..(r as usize + 1) * s];
@@ -142,6 +152,9 @@ pub fn region_prior(
         }
         for c in 1..s {
             out[i * s + c] *= (rs[c] / top).powf(beta);
+        }
+        if static_power > 0.0 && rs[0] < top {
+            out[i * s] *= (rs[0].max(0.0) / top).powf(static_power);
         }
     }
     Ok(out)
@@ -474,10 +487,10 @@ mod tests {
         assert!(surface_regions(&[0, 1, 7], 1, &o, 16.0, 1.0).is_err());
         assert!(surface_regions(&[0, 1, 2], 1, &o, 16.0, 1.0).is_ok());
         let w = [1.0; 6];
-        assert!(region_prior(&w, &w[..4], &[0, 0, 0], 1, 4.0).is_err());
-        assert!(region_prior(&w, &w, &[0, 0, 9], 1, 4.0).is_err());
-        assert!(region_prior(&w, &w, &[0, 0], 1, 4.0).is_err());
-        assert!(region_prior(&w, &w, &[0, 0, 0], usize::MAX, 4.0).is_err());
+        assert!(region_prior(&w, &w[..4], &[0, 0, 0], 1, 4.0, 0.0).is_err());
+        assert!(region_prior(&w, &w, &[0, 0, 9], 1, 4.0, 0.0).is_err());
+        assert!(region_prior(&w, &w, &[0, 0], 1, 4.0, 0.0).is_err());
+        assert!(region_prior(&w, &w, &[0, 0, 0], usize::MAX, 4.0, 0.0).is_err());
     }
 
     /// The evidence a region sums: the mean of the posterior's and the summed votes' shares,
@@ -496,6 +509,34 @@ mod tests {
         assert_eq!(e, vec![1.0, 3.0, 0.0, 0.0]);
         l.summed_weights.clear();
         assert!(region_evidence(&l).is_none());
+    }
+
+    /// The static prior: where a part outweighs the static scene in a region, its
+    /// Gaussians' background evidence is scaled down; where the static scene dominates,
+    /// nothing changes (a part painted on a static wall keeps its boundary).
+    #[test]
+    fn static_prior_is_one_sided() {
+        // Region 0 (a petal): mostly petal evidence, a rim Gaussian leaning static.
+        // Region 1 (a wall): mostly static, a painted part Gaussian.
+        let w = vec![
+            0.1, 0.9, // petal
+            0.1, 0.9, // petal
+            0.6, 0.4, // the rim: static by its own evidence
+            0.9, 0.1, // wall
+            0.9, 0.1, // wall
+            0.2, 0.8, // painted part
+        ];
+        let regions = [0, 0, 0, 3, 3, 3];
+        let out = region_prior(&w, &w, &regions, 1, 4.0, 2.0).unwrap();
+        // Region 0: R = (0.8, 2.2): background scaled by (0.8 / 2.2)^2.
+        let f = (0.8f64 / 2.2).powi(2);
+        assert!((out[4] - 0.6 * f).abs() < 1e-12 && out[5] == 0.4);
+        assert!(out[5] > out[4], "the rim joins the petal: {out:?}");
+        // Region 1: the static scene dominates: untouched, the painted part stays a part.
+        assert_eq!(&out[6..], &w[6..]);
+        // Power 0: the background entry is never touched.
+        let off = region_prior(&w, &w, &regions, 1, 4.0, 0.0).unwrap();
+        assert_eq!(off[4], 0.6);
     }
 
     /// Deterministic colours scattered around `c` by up to +-0.03 per channel.
@@ -657,7 +698,7 @@ mod tests {
             0.1, 0.4, 0.5, // mixed, leaning b
             0.2, 0.0, 0.8, // b only
         ];
-        let out = region_prior(&w, &w, &[0, 0, 0], 2, 4.0).unwrap();
+        let out = region_prior(&w, &w, &[0, 0, 0], 2, 4.0, 0.0).unwrap();
         // R = [0.3, 9.4, 2.3]: a unchanged, b scaled by (2.3 / 9.4)^4.
         let f = (2.3f64 / 9.4).powi(4);
         let want = [0.0, 9.0, f, 0.1, 0.4, 0.5 * f, 0.2, 0.0, 0.8 * f];
@@ -668,7 +709,7 @@ mod tests {
         assert!(out[4] > out[5]);
         assert!(out[8] > out[7]);
         // Separate regions: nothing changes where each region has one part.
-        let out = region_prior(&w, &w, &[0, 1, 2], 2, 4.0).unwrap();
+        let out = region_prior(&w, &w, &[0, 1, 2], 2, 4.0, 0.0).unwrap();
         let (_, l0) = (0, crate::lift::classify(&out, 2, 0.1).0);
         assert_eq!(l0, crate::lift::classify(&w, 2, 0.1).0);
     }
