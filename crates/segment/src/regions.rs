@@ -100,6 +100,17 @@ pub fn surface_regions(
     Ok((0..n as u32).map(|i| dsu.find(i)).collect())
 }
 
+/// Every region id names one of the `regions.len()` Gaussians, else the first that does not.
+fn check_region_ids(regions: &[u32]) -> Result<()> {
+    let n = regions.len();
+    match regions.iter().find(|&&r| r as usize >= n) {
+        Some(&r) => Err(Error::Input(format!(
+            "region id {r} outside the {n} Gaussians"
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// The class evidence (`N x (M + 1)`, background first, as [`crate::Lifted::class_weights`])
 /// with every Gaussian's part entries scaled by its region's prior `(R_c / R_max)^beta`
 /// (module docs), `R` the region's sum of `evidence` (same layout; the class weights
@@ -126,11 +137,7 @@ pub fn region_prior(
             evidence.len()
         )));
     }
-    if let Some(&r) = regions.iter().find(|&&r| r as usize >= n) {
-        return Err(Error::Input(format!(
-            "region id {r} outside the {n} Gaussians"
-        )));
-    }
+    check_region_ids(regions)?;
     let mut sums = vec![0f64; n * s];
     for (i, &r) in regions.iter().enumerate() {
         let r = r as usize;
@@ -192,11 +199,7 @@ pub fn appearance_weighted(
             colours.len()
         )));
     }
-    if let Some(&r) = regions.iter().find(|&&r| r as usize >= n) {
-        return Err(Error::Input(format!(
-            "region id {r} outside the {n} Gaussians"
-        )));
-    }
+    check_region_ids(regions)?;
     if !(strength.is_finite() && (0.0..=1.0).contains(&strength)) {
         return Err(Error::Input(format!(
             "appearance strength {strength} (must lie in [0, 1])"

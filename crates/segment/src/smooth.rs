@@ -102,8 +102,9 @@ pub struct SmoothConfig {
     /// masks, 30 seeds: the target (97%, no part under 93%) missed on six seeds
     /// without it (the pot's inner wall under dilated soil masks, leaves eroded into the
     /// soil, a stem), on one with it (a petal given to the static scene, which the term
-    /// leaves alone and [`SmoothConfig::region_static_power`] keeps); on seeds 0-19, 0.5 left seed 9's inner wall at 88% and 0.95 met the
-    /// target on the same seeds as 0.8; clean masks 100% on every seed either way.
+    /// leaves alone and [`SmoothConfig::region_static_power`] keeps); on seeds 0-19, 0.5
+    /// left seed 9's inner wall at 88% and 0.95 met the target on the same seeds as 0.8;
+    /// clean masks 100% on every seed either way.
     pub appearance: f32,
 }
 
@@ -270,14 +271,15 @@ pub fn smooth_lifted(
     }
     check_points(&g.means)?;
     let o = orientations(g);
-    let colours = (cfg.colour_sigma > 0.0).then(|| base_colours(g));
+    let base = (cfg.colour_sigma > 0.0 || cfg.appearance > 0.0).then(|| base_colours(g));
+    let colours = base.as_deref().filter(|_| cfg.colour_sigma > 0.0);
     let (kk, nbrs) = knn(&g.means, cfg.k, cfg.par);
     let regions = crate::regions::surface_regions(&nbrs, kk, &o, cfg.normal_power, cfg.region_tau)?;
     let mut evidence = crate::regions::region_evidence(lifted);
-    if cfg.appearance > 0.0 {
+    if let (Some(base), true) = (base.as_deref(), cfg.appearance > 0.0) {
         let e = crate::regions::appearance_weighted(
             evidence.as_deref().unwrap_or(&lifted.class_weights),
-            &base_colours(g),
+            base,
             &regions,
             m,
             cfg.appearance,
@@ -299,7 +301,7 @@ pub fn smooth_lifted(
     Ok(propagate(
         &g.means,
         Some(&o),
-        colours.as_deref(),
+        colours,
         &labels,
         &confidence,
         m,
