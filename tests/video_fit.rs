@@ -386,6 +386,56 @@ fn valley_search_lowers_the_loss_within_budget_and_resumes_exactly() {
     assert!(e.to_string().contains("fingerprint"), "{e}");
 }
 
+/// Gradient sampling after the iterations (`[gradient_sampling]`): its iterations never
+/// raise the loss, the fit returns the lowest point, and a fit killed after its first
+/// iteration resumes from the checkpoint to the same rounds; another setting is another fit.
+#[test]
+fn gradient_sampling_descends_records_its_rounds_and_resumes_exactly() {
+    let truth = [jelly(2e4, 800.0)];
+    let mut p = small_problem(&truth, 5);
+    p.config.parts = vec![jelly(5e4, 600.0)];
+    let mut cfg = fit_config(1);
+    cfg.gradient_sampling.iters = 3;
+    let mut all = Collect::default();
+    let full = run_fit(&p, &cfg, None, &mut all).unwrap();
+    let s = full.sampling.as_ref().expect("gradient sampling ran");
+    assert_eq!(s.rounds.len(), 3, "{:?}", s.rounds);
+    assert!(
+        s.rounds.iter().all(|r| r.loss_after <= r.loss_before),
+        "{:?}",
+        s.rounds
+    );
+    assert!(
+        s.rounds.iter().any(|r| r.step > 0.0),
+        "no step accepted: {:?}",
+        s.rounds
+    );
+    let after_iters = all.losses[0];
+    let best = full.best_loss.unwrap();
+    assert!(
+        best < after_iters,
+        "{after_iters} -> {best}: {:?}",
+        s.rounds
+    );
+    assert_eq!(best, s.loss);
+    let ck = all
+        .states
+        .iter()
+        .find(|st| st.sampling.as_ref().is_some_and(|v| v.rounds.len() == 1))
+        .expect("a checkpoint after the first iteration")
+        .clone();
+    let ck: FitState = serde_json::from_str(&serde_json::to_string(&ck).unwrap()).unwrap();
+    let mut rest = Collect::default();
+    let resumed = run_fit(&p, &cfg, Some(ck), &mut rest).unwrap();
+    assert!(rest.losses.is_empty(), "no iteration is repeated");
+    assert_eq!(resumed.best_loss, full.best_loss);
+    assert_eq!(resumed.sampling.unwrap().rounds, s.rounds);
+    let mut other = cfg.clone();
+    other.gradient_sampling.radius = 0.004;
+    let e = run_fit(&p, &other, Some(all.states[0].clone()), &mut NoHooks).unwrap_err();
+    assert!(e.to_string().contains("fingerprint"), "{e}");
+}
+
 /// From a Latin hypercube start over E and density (two decades each) the fit recovers
 /// E/density of a small block within 10%.
 #[test]

@@ -197,6 +197,30 @@ impl FitHooks for RunHooks {
         );
     }
 
+    fn on_sampling(
+        &mut self,
+        r: &resonance4d::video_fit::SamplingRound,
+        names: &[String],
+        theta: &[f64],
+    ) {
+        let vals: Vec<String> = names
+            .iter()
+            .zip(theta)
+            .map(|(n, v)| format!("{n}={v:.4e}"))
+            .collect();
+        eprintln!(
+            "gradient sampling: loss {:.5e} -> {:.5e} (step {:.4}, radius {:.4}, min-norm gradient {:.3e}; {} gradients, {} evaluations); {}",
+            r.loss_before,
+            r.loss_after,
+            r.step,
+            r.radius,
+            r.min_norm,
+            r.gradients,
+            r.evals,
+            vals.join(" ")
+        );
+    }
+
     fn on_checkpoint(&mut self, s: &FitState) {
         let r = super::checkpoint::write(&self.dir.join("checkpoint.json"), s);
         self.keep(r);

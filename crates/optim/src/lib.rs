@@ -56,6 +56,7 @@ mod heap;
 mod init;
 mod lhs;
 pub mod record;
+pub mod sampling;
 pub mod space;
 pub mod trajectory;
 mod trust_bfgs;
@@ -70,6 +71,7 @@ pub use init::{
     SearchSpace,
 };
 pub use lhs::{latin_hypercube, log_space};
+pub use sampling::{GradientSampling, SamplingConfig};
 pub use trust_bfgs::{TrustRegion, TrustRegionBfgs};
 pub use valley::{ValleyConfig, ValleySearch};
 

@@ -22,7 +22,9 @@
 //! ```
 
 use crate::space::ParamSpace;
-use crate::{FitError, InitOutcome, LogDomainOptimizer, TrustRegionBfgs, ValleySearch};
+use crate::{
+    FitError, GradientSampling, InitOutcome, LogDomainOptimizer, TrustRegionBfgs, ValleySearch,
+};
 pub use r4d_fsio::Fingerprint;
 use r4d_mpm::PartParams;
 use serde::{Deserialize, Serialize};
@@ -73,6 +75,10 @@ pub struct FitState {
     /// The valley search after the iterations (`valley.evals > 0`), once begun.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub valley: Option<ValleySearch>,
+    /// Gradient sampling after the valley search (`gradient_sampling.iters > 0`), once
+    /// begun.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampling: Option<GradientSampling>,
     /// Checksum of the rest of the content (set by [`FitState::to_json`]).
     #[serde(default)]
     pub checksum: String,
@@ -92,6 +98,7 @@ impl FitState {
             trust: None,
             starts: Vec::new(),
             valley: None,
+            sampling: None,
             checksum: String::new(),
         }
     }

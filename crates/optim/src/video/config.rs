@@ -23,6 +23,11 @@
 //! [valley]                # the valley search after the iterations (r4d_optim::valley)
 //! evals = 0               # loss evaluations it may spend (0: off)
 //!
+//! [gradient_sampling]     # after the valley search (r4d_optim::sampling)
+//! iters = 0               # iterations (0: off)
+//! radius = 0.003          # of the sampled gradients, log units
+//! samples = 3             # gradients sampled per iteration besides the point's
+//!
 //! [loss]                  # the DMS loss (r4d_loss::DmsConfig); ablations:
 //! weights = { l1 = 0.0, spatial = 1.0, mag = 1.0, phase = 1.0 }
 //! [loss.spectral]         # omitted keys take r4d_loss's defaults
@@ -44,7 +49,7 @@
 use crate::compute::Precision;
 use crate::space::{check_free, default_free, Granularity};
 use crate::FitError;
-use crate::{AdamW, ParamKind, ValleyConfig};
+use crate::{AdamW, ParamKind, SamplingConfig, ValleyConfig};
 use r4d_loss::DmsConfig;
 use r4d_mpm::adjoint::checkpoint::Checkpointing;
 use r4d_mpm::PartParams;
@@ -176,6 +181,13 @@ pub struct FitConfig {
     /// fits only. Not part of the checkpoint's fingerprint while off.
     #[serde(skip_serializing_if = "ValleyConfig::is_off")]
     pub valley: ValleyConfig,
+    /// Gradient sampling after the valley search ([`crate::sampling`]): steps against the
+    /// minimum-norm element of exact gradients sampled around the point, which follows a
+    /// narrow V-shaped trench that runs diagonally to the parameters. Off unless
+    /// `gradient_sampling.iters > 0`; part and object fits only. Not part of the
+    /// checkpoint's fingerprint while off.
+    #[serde(skip_serializing_if = "SamplingConfig::is_off")]
+    pub gradient_sampling: SamplingConfig,
 }
 
 impl Default for FitConfig {
@@ -204,6 +216,7 @@ impl Default for FitConfig {
             multi_start_iters: 5,
             optimizer: OptimizerKind::Adam,
             valley: ValleyConfig::default(),
+            gradient_sampling: SamplingConfig::default(),
         }
     }
 }
@@ -272,6 +285,10 @@ impl FitConfig {
         self.valley.validate().map_err(FitError::Input)?;
         if !self.valley.is_off() && self.granularity == Granularity::Particle {
             return bad("valley.evals > 0: part and object fits only".into());
+        }
+        self.gradient_sampling.validate().map_err(FitError::Input)?;
+        if !self.gradient_sampling.is_off() && self.granularity == Granularity::Particle {
+            return bad("gradient_sampling.iters > 0: part and object fits only".into());
         }
         if self.multi_start > 1 {
             if !self.init.enabled {
@@ -434,6 +451,33 @@ mod tests {
             ..Default::default()
         };
         assert!(bad_ck.validate().is_err());
+    }
+
+    /// `[gradient_sampling]`: parsed from TOML, refused naming its key, unknown keys
+    /// refused, particle fits refused.
+    #[test]
+    fn gradient_sampling_settings_parse_and_bad_ones_are_refused() {
+        let parse = |t: &str| toml::from_str::<FitConfig>(t);
+        let c = parse("[gradient_sampling]\niters = 12\nradius = 0.01\n").unwrap();
+        assert_eq!(
+            (c.gradient_sampling.iters, c.gradient_sampling.radius),
+            (12, 0.01)
+        );
+        assert!(parse("[gradient_sampling]\niters = 1\nwidth = 2.0\n").is_err());
+        let e = parse("[gradient_sampling]\niters = 2\nsamples = 0\n")
+            .unwrap()
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("gradient_sampling.samples"), "{e}");
+        let e = parse("granularity = \"particle\"\n[gradient_sampling]\niters = 2\n")
+            .unwrap()
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("gradient_sampling"), "{e}");
+        let off = serde_json::to_string(&FitConfig::default()).unwrap();
+        assert!(!off.contains("gradient_sampling"), "{off}");
     }
 
     /// `[valley]`: parsed from TOML, refused naming its key, unknown keys refused, and

@@ -6,11 +6,12 @@ use super::problem::{Evaluation, Objective, VideoProblem};
 use crate::descent::{self, keep_best, Rate, Stepper};
 use crate::record::{mix_json, Fingerprint, FlatProbe, Terms};
 pub use crate::record::{FitState, IterRecord, StartResult};
+use crate::sampling::{Graded, SamplingRound};
 use crate::space::{part_summary, Granularity, ParamSpace};
 use crate::valley::ValleyRound;
 use crate::FitError;
 use crate::{
-    evaluate_candidate, Candidate, InitOutcome, Initializer, LatinHypercubeInit,
+    evaluate_candidate, Candidate, GradientSampling, InitOutcome, Initializer, LatinHypercubeInit,
     LogDomainOptimizer, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs, ValleySearch,
 };
 use r4d_loss::bands::ReferenceVideo;
@@ -211,6 +212,8 @@ pub trait FitHooks {
     /// A round of the valley search finished (`names`: the free parameters; `theta`: the
     /// accepted point after it).
     fn on_valley(&mut self, _r: &ValleyRound, _names: &[String], _theta: &[f64]) {}
+    /// An iteration of gradient sampling finished (`theta`: the point after it).
+    fn on_sampling(&mut self, _r: &SamplingRound, _names: &[String], _theta: &[f64]) {}
     /// Measures heap peaks (the stage profile, [`IterRecord::peak_host_bytes`]); `None`:
     /// they are reported as 0.
     fn heap(&self) -> Option<std::sync::Arc<dyn crate::HeapProbe>> {
@@ -239,6 +242,8 @@ pub struct FitOutcome {
     pub init: Option<InitOutcome>,
     /// The valley search, when it ran (`valley.evals > 0`).
     pub valley: Option<ValleySearch>,
+    /// Gradient sampling, when it ran (`gradient_sampling.iters > 0`).
+    pub sampling: Option<GradientSampling>,
 }
 
 /// MS-SSIM of rendered videos against the problem's references (mean over views), with the
@@ -605,6 +610,9 @@ pub fn run_fit(
     if !cfg.valley.is_off() {
         valley_search(&obj, &space, &base_slots, &opt, cfg, &mut state, hooks)?;
     }
+    if !cfg.gradient_sampling.is_off() {
+        gradient_sampling(&obj, &space, &base_slots, &opt, cfg, &mut state, hooks)?;
+    }
     let theta = match &state.best {
         Some((_, t)) => t.clone(),
         None => opt.theta(),
@@ -618,6 +626,7 @@ pub fn run_fit(
         best_loss: state.best.as_ref().map(|b| b.0),
         init: state.init,
         valley: state.valley,
+        sampling: state.sampling,
         space,
     })
 }
@@ -673,5 +682,69 @@ fn valley_search(
         state.trust = None;
     }
     state.valley = Some(search);
+    Ok(())
+}
+
+/// Gradient sampling ([`crate::sampling`]) from the lowest loss reached so far (the
+/// iterations' and the valley search's), checkpointed after every iteration; a resumed fit
+/// continues it. The sampled gradients and the line search's points run in parallel.
+fn gradient_sampling(
+    obj: &Objective,
+    space: &ParamSpace,
+    base_slots: &[PartParams],
+    opt: &Stepper,
+    cfg: &FitConfig,
+    state: &mut FitState,
+    hooks: &mut dyn FitHooks,
+) -> Result<(), FitError> {
+    let names = space.names();
+    let slots_at = |p: &[f64]| {
+        let theta: Vec<f64> = p.iter().map(|v| v.exp()).collect();
+        let mut slots = base_slots.to_vec();
+        space.apply(&mut slots, &theta);
+        (theta, slots)
+    };
+    let mut search = match state.sampling.take() {
+        Some(s) => s,
+        None => {
+            let (loss, theta) = match &state.best {
+                Some((l, t)) => (*l, t.clone()),
+                None => {
+                    let theta = opt.theta();
+                    let (_, slots) = slots_at(&theta.iter().map(|v| v.ln()).collect::<Vec<_>>());
+                    (obj.value(&slots)?.total, theta)
+                }
+            };
+            GradientSampling::new(&theta, loss, &space.bounds(), &cfg.gradient_sampling)
+                .map_err(|e| FitError::Input(format!("gradient sampling's starting point: {e}")))?
+        }
+    };
+    // A point whose simulation fails is a wall, not an error of the fit.
+    let mut grads = |pts: &[Vec<f64>]| -> Vec<Graded> {
+        pts.par_iter()
+            .map(|p| {
+                let (theta, slots) = slots_at(p);
+                let (ev, g) = obj.value_and_grad(&slots).ok()?;
+                let g = space.gather(&g);
+                // d L / d ln(theta) = theta d L / d theta.
+                Some((ev.total, g.iter().zip(&theta).map(|(a, b)| a * b).collect()))
+            })
+            .collect()
+    };
+    let mut losses = |pts: &[Vec<f64>]| -> Vec<f64> {
+        pts.par_iter()
+            .map(|p| obj.value(&slots_at(p).1).map_or(f64::INFINITY, |e| e.total))
+            .collect()
+    };
+    while let Some(round) = search.round(&cfg.gradient_sampling, &mut grads, &mut losses) {
+        keep_best(&mut state.best, search.loss, &search.theta());
+        hooks.on_sampling(&round, &names, &search.theta());
+        state.sampling = Some(search.clone());
+        save(opt, state);
+        hooks.on_checkpoint(state);
+        state.optimizer = None;
+        state.trust = None;
+    }
+    state.sampling = Some(search);
     Ok(())
 }
