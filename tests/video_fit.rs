@@ -436,6 +436,77 @@ fn gradient_sampling_descends_records_its_rounds_and_resumes_exactly() {
     assert!(e.to_string().contains("fingerprint"), "{e}");
 }
 
+/// Restarts along constant bulk modulus (`[shear_restarts]`): each restart keeps the
+/// starting point's bulk modulus at a shear modulus `factor^k` times its own, the sequence
+/// follows the profile, the fit returns the lowest point seen, a fit killed inside a
+/// restart resumes to the same restarts, and a fit without `nu` free is refused naming it.
+#[test]
+fn shear_restarts_keep_the_bulk_modulus_follow_the_profile_and_resume_exactly() {
+    use resonance4d::video_fit::ShearRestarts;
+    let truth = [jelly(2e4, 800.0)];
+    let mut p = small_problem(&truth, 5);
+    p.config.parts = vec![jelly(3e4, 700.0)];
+    let mut cfg = fit_config(1);
+    cfg.free = Some(vec!["E".into(), "nu".into(), "density".into()]);
+    cfg.shear_restarts.points = 2;
+    cfg.shear_restarts.inner_iters = 2;
+    let mut all = Collect::default();
+    let full = run_fit(&p, &cfg, None, &mut all).unwrap();
+    let r: &ShearRestarts = full.restarts.as_ref().expect("the restarts ran");
+    assert_eq!(r.done.len(), 2, "{:?}", r.done);
+    let bulk = |e: f64, nu: f64| e / (3.0 * (1.0 - 2.0 * nu));
+    let shear = |e: f64, nu: f64| e / (2.0 * (1.0 + nu));
+    let (e0, nu0) = (r.origin[0], r.origin[1]);
+    for x in &r.done {
+        assert!(
+            (bulk(x.e, x.nu) / bulk(e0, nu0) - 1.0).abs() < 1e-9,
+            "{x:?}"
+        );
+        let g = shear(x.e, x.nu) / shear(e0, nu0);
+        assert!(
+            (g / 0.8f64.powi(x.k) - 1.0).abs() < 1e-9,
+            "k {} ratio {g}",
+            x.k
+        );
+        assert_eq!((x.theta[0], x.theta[1]), (x.e, x.nu));
+        assert!(x.loss <= x.inner.as_ref().unwrap().rounds[0].loss_before);
+    }
+    // The second restart's k follows the first one's profile value.
+    let first = &r.done[0];
+    assert_eq!(first.k, 1);
+    let expected = if first.loss < r.origin_loss { 2 } else { -1 };
+    assert_eq!(r.done[1].k, expected, "{:?}", r.done);
+    let best = full.best_loss.unwrap();
+    let lowest = r.done.iter().map(|x| x.loss).fold(r.origin_loss, f64::min);
+    assert!(best <= lowest, "{best} vs {lowest}");
+    // Killed inside the second restart, the fit resumes to the same restarts.
+    let ck = all
+        .states
+        .iter()
+        .find(|st| {
+            st.restarts
+                .as_ref()
+                .is_some_and(|x| x.done.len() == 1 && x.current.is_some())
+        })
+        .expect("a checkpoint inside the second restart")
+        .clone();
+    let ck: FitState = serde_json::from_str(&serde_json::to_string(&ck).unwrap()).unwrap();
+    let mut rest = Collect::default();
+    let resumed = run_fit(&p, &cfg, Some(ck), &mut rest).unwrap();
+    assert!(rest.losses.is_empty(), "no iteration is repeated");
+    assert_eq!(resumed.restarts.as_ref().unwrap().done, r.done);
+    assert_eq!(resumed.best_loss, full.best_loss);
+    let mut no_nu = cfg.clone();
+    no_nu.free = Some(vec!["E".into(), "density".into()]);
+    let mut before = Collect::default();
+    let e = run_fit(&p, &no_nu, None, &mut before).unwrap_err();
+    assert!(
+        e.to_string().contains("shear_restarts") && e.to_string().contains("nu"),
+        "{e}"
+    );
+    assert!(before.losses.is_empty(), "refused before the iterations");
+}
+
 /// From a Latin hypercube start over E and density (two decades each) the fit recovers
 /// E/density of a small block within 10%.
 #[test]

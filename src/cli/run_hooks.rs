@@ -221,6 +221,22 @@ impl FitHooks for RunHooks {
         );
     }
 
+    fn on_restart(&mut self, r: &resonance4d::video_fit::Restart, names: &[String]) {
+        let vals: Vec<String> = names
+            .iter()
+            .zip(&r.theta)
+            .map(|(n, v)| format!("{n}={v:.4e}"))
+            .collect();
+        eprintln!(
+            "shear restart {:+}: E {:.4e}, nu {:.4} -> loss {:.5e}; {}",
+            r.k,
+            r.e,
+            r.nu,
+            r.loss,
+            vals.join(" ")
+        );
+    }
+
     fn on_checkpoint(&mut self, s: &FitState) {
         let r = super::checkpoint::write(&self.dir.join("checkpoint.json"), s);
         self.keep(r);

@@ -317,6 +317,10 @@ pub struct DemoSummary {
     /// plasticine): loss before and after, parameters re-centred, evaluations.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub valley: Vec<r4d_optim::video::ValleyRound>,
+    /// The restarts along constant bulk modulus, when the scene runs them
+    /// (`shear_restarts.points > 0`; the full plasticine), in the order they ran.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub restarts: Vec<RestartRow>,
     /// Wall time of the whole demo (s).
     pub wall_time_s: f64,
     /// Wall time per phase (s): reference, profiles, fit (initialisation included).
@@ -466,6 +470,21 @@ pub fn run_demo(
             .as_ref()
             .map(|v| v.rounds.clone())
             .unwrap_or_default(),
+        restarts: outcome
+            .restarts
+            .as_ref()
+            .map(|r| {
+                r.done
+                    .iter()
+                    .map(|x| RestartRow {
+                        k: x.k,
+                        e: x.e,
+                        nu: x.nu,
+                        loss: x.loss,
+                    })
+                    .collect()
+            })
+            .unwrap_or_default(),
         wall_time_s: t0.elapsed().as_secs_f64(),
         phase_times_s: times,
         options: opts.clone(),
@@ -500,6 +519,20 @@ fn bounds_around(t: &PartParams, kinds: &[(ParamKind, f64)]) -> BTreeMap<String,
             (k.name().to_string(), b)
         })
         .collect()
+}
+
+/// One restart along constant bulk modulus in `summary.json`: the power `k` of the shear
+/// modulus factor it started at, its `E` and `nu`, and the loss its inner search ended at.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RestartRow {
+    /// Power of `shear_restarts.factor`.
+    pub k: i32,
+    /// Young's modulus of the restart (Pa).
+    pub e: f64,
+    /// Poisson's ratio of the restart.
+    pub nu: f64,
+    /// Loss after the inner search (the profile's value).
+    pub loss: f64,
 }
 
 /// Force per particle (N) that gives acceleration `a` (m/s^2) to a particle of density `rho`

@@ -56,6 +56,7 @@ mod heap;
 mod init;
 mod lhs;
 pub mod record;
+pub mod restarts;
 pub mod sampling;
 pub mod space;
 pub mod trajectory;
@@ -71,6 +72,7 @@ pub use init::{
     SearchSpace,
 };
 pub use lhs::{latin_hypercube, log_space};
+pub use restarts::{Restart, RestartsConfig, ShearRestarts};
 pub use sampling::{GradientSampling, SamplingConfig};
 pub use trust_bfgs::{TrustRegion, TrustRegionBfgs};
 pub use valley::{ValleyConfig, ValleySearch};

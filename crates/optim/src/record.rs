@@ -23,7 +23,8 @@
 
 use crate::space::ParamSpace;
 use crate::{
-    FitError, GradientSampling, InitOutcome, LogDomainOptimizer, TrustRegionBfgs, ValleySearch,
+    FitError, GradientSampling, InitOutcome, LogDomainOptimizer, ShearRestarts, TrustRegionBfgs,
+    ValleySearch,
 };
 pub use r4d_fsio::Fingerprint;
 use r4d_mpm::PartParams;
@@ -79,6 +80,9 @@ pub struct FitState {
     /// begun.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sampling: Option<GradientSampling>,
+    /// Restarts along constant bulk modulus (`shear_restarts.points > 0`), once begun.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub restarts: Option<ShearRestarts>,
     /// Checksum of the rest of the content (set by [`FitState::to_json`]).
     #[serde(default)]
     pub checksum: String,
@@ -99,6 +103,7 @@ impl FitState {
             starts: Vec::new(),
             valley: None,
             sampling: None,
+            restarts: None,
             checksum: String::new(),
         }
     }

@@ -28,6 +28,12 @@
 //! radius = 0.003          # of the sampled gradients, log units
 //! samples = 3             # gradients sampled per iteration besides the point's
 //!
+//! [shear_restarts]        # after the valley search (r4d_optim::restarts)
+//! points = 0              # restarts along constant bulk modulus (0: off)
+//! factor = 0.8            # shear-modulus ratio between neighbouring restarts
+//! part = 0                # whose E and nu move
+//! inner_iters = 6         # gradient-sampling iterations over the rest at each restart
+//!
 //! [loss]                  # the DMS loss (r4d_loss::DmsConfig); ablations:
 //! weights = { l1 = 0.0, spatial = 1.0, mag = 1.0, phase = 1.0 }
 //! [loss.spectral]         # omitted keys take r4d_loss's defaults
@@ -49,7 +55,7 @@
 use crate::compute::Precision;
 use crate::space::{check_free, default_free, Granularity};
 use crate::FitError;
-use crate::{AdamW, ParamKind, SamplingConfig, ValleyConfig};
+use crate::{AdamW, ParamKind, RestartsConfig, SamplingConfig, ValleyConfig};
 use r4d_loss::DmsConfig;
 use r4d_mpm::adjoint::checkpoint::Checkpointing;
 use r4d_mpm::PartParams;
@@ -188,6 +194,13 @@ pub struct FitConfig {
     /// checkpoint's fingerprint while off.
     #[serde(skip_serializing_if = "SamplingConfig::is_off")]
     pub gradient_sampling: SamplingConfig,
+    /// Restarts along constant bulk modulus after the valley search ([`crate::restarts`]):
+    /// a profile of the loss over a part's shear modulus, each restart's other free
+    /// parameters re-fitted by gradient sampling (its `radius`, `samples`, `step` and `seed`
+    /// from `[gradient_sampling]`). Off unless `shear_restarts.points > 0`; part and object
+    /// fits only. Not part of the checkpoint's fingerprint while off.
+    #[serde(skip_serializing_if = "RestartsConfig::is_off")]
+    pub shear_restarts: RestartsConfig,
 }
 
 impl Default for FitConfig {
@@ -217,6 +230,7 @@ impl Default for FitConfig {
             optimizer: OptimizerKind::Adam,
             valley: ValleyConfig::default(),
             gradient_sampling: SamplingConfig::default(),
+            shear_restarts: RestartsConfig::default(),
         }
     }
 }
@@ -289,6 +303,10 @@ impl FitConfig {
         self.gradient_sampling.validate().map_err(FitError::Input)?;
         if !self.gradient_sampling.is_off() && self.granularity == Granularity::Particle {
             return bad("gradient_sampling.iters > 0: part and object fits only".into());
+        }
+        self.shear_restarts.validate().map_err(FitError::Input)?;
+        if !self.shear_restarts.is_off() && self.granularity == Granularity::Particle {
+            return bad("shear_restarts.points > 0: part and object fits only".into());
         }
         if self.multi_start > 1 {
             if !self.init.enabled {

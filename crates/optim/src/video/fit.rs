@@ -6,7 +6,8 @@ use super::problem::{Evaluation, Objective, VideoProblem};
 use crate::descent::{self, keep_best, Rate, Stepper};
 use crate::record::{mix_json, Fingerprint, FlatProbe, Terms};
 pub use crate::record::{FitState, IterRecord, StartResult};
-use crate::sampling::{Graded, SamplingRound};
+use crate::restarts::{e_nu_from_k_g, k_g_from_e_nu, Restart, ShearRestarts};
+use crate::sampling::{Graded, SamplingConfig, SamplingRound};
 use crate::space::{part_summary, Granularity, ParamSpace};
 use crate::valley::ValleyRound;
 use crate::FitError;
@@ -214,6 +215,9 @@ pub trait FitHooks {
     fn on_valley(&mut self, _r: &ValleyRound, _names: &[String], _theta: &[f64]) {}
     /// An iteration of gradient sampling finished (`theta`: the point after it).
     fn on_sampling(&mut self, _r: &SamplingRound, _names: &[String], _theta: &[f64]) {}
+    /// A restart along constant bulk modulus finished (`names`: the free parameters, the
+    /// order of [`Restart::theta`]).
+    fn on_restart(&mut self, _r: &Restart, _names: &[String]) {}
     /// Measures heap peaks (the stage profile, [`IterRecord::peak_host_bytes`]); `None`:
     /// they are reported as 0.
     fn heap(&self) -> Option<std::sync::Arc<dyn crate::HeapProbe>> {
@@ -244,6 +248,8 @@ pub struct FitOutcome {
     pub valley: Option<ValleySearch>,
     /// Gradient sampling, when it ran (`gradient_sampling.iters > 0`).
     pub sampling: Option<GradientSampling>,
+    /// The restarts along constant bulk modulus, when they ran (`shear_restarts.points > 0`).
+    pub restarts: Option<ShearRestarts>,
 }
 
 /// MS-SSIM of rendered videos against the problem's references (mean over views), with the
@@ -468,6 +474,10 @@ pub fn run_fit(
     let slot_parts = obj.slot_parts();
     let free = cfg.free_kinds(&problem.config.parts)?;
     let space = ParamSpace::new(cfg.granularity, &free, &slot_parts, |p, k| cfg.bounds(p, k));
+    if !cfg.shear_restarts.is_off() {
+        // Refused before any simulation runs.
+        restart_entries(&space, cfg)?;
+    }
     if space.is_empty() {
         return Err(FitError::Input("no free parameter to fit".into()));
     }
@@ -610,6 +620,9 @@ pub fn run_fit(
     if !cfg.valley.is_off() {
         valley_search(&obj, &space, &base_slots, &opt, cfg, &mut state, hooks)?;
     }
+    if !cfg.shear_restarts.is_off() {
+        shear_restarts(&obj, &space, &base_slots, &opt, cfg, &mut state, hooks)?;
+    }
     if !cfg.gradient_sampling.is_off() {
         gradient_sampling(&obj, &space, &base_slots, &opt, cfg, &mut state, hooks)?;
     }
@@ -627,6 +640,7 @@ pub fn run_fit(
         init: state.init,
         valley: state.valley,
         sampling: state.sampling,
+        restarts: state.restarts,
         space,
     })
 }
@@ -707,14 +721,7 @@ fn gradient_sampling(
     let mut search = match state.sampling.take() {
         Some(s) => s,
         None => {
-            let (loss, theta) = match &state.best {
-                Some((l, t)) => (*l, t.clone()),
-                None => {
-                    let theta = opt.theta();
-                    let (_, slots) = slots_at(&theta.iter().map(|v| v.ln()).collect::<Vec<_>>());
-                    (obj.value(&slots)?.total, theta)
-                }
-            };
+            let (loss, theta) = best_or_evaluate(obj, space, base_slots, opt, state)?;
             GradientSampling::new(&theta, loss, &space.bounds(), &cfg.gradient_sampling)
                 .map_err(|e| FitError::Input(format!("gradient sampling's starting point: {e}")))?
         }
@@ -746,5 +753,192 @@ fn gradient_sampling(
         state.trust = None;
     }
     state.sampling = Some(search);
+    Ok(())
+}
+
+/// The lowest point so far (every free parameter) and its loss; without one, the
+/// optimiser's point, evaluated.
+fn best_or_evaluate(
+    obj: &Objective,
+    space: &ParamSpace,
+    base_slots: &[PartParams],
+    opt: &Stepper,
+    state: &FitState,
+) -> Result<(f64, Vec<f64>), FitError> {
+    Ok(match &state.best {
+        Some((l, t)) => (*l, t.clone()),
+        None => {
+            let theta = opt.theta();
+            let mut slots = base_slots.to_vec();
+            space.apply(&mut slots, &theta);
+            (obj.value(&slots)?.total, theta)
+        }
+    })
+}
+
+/// The entries of `shear_restarts.part`'s `E` and `nu` and the other free parameters;
+/// refused, naming what is free, unless both are free and something else is.
+fn restart_entries(
+    space: &ParamSpace,
+    cfg: &FitConfig,
+) -> Result<(usize, usize, Vec<usize>), FitError> {
+    let part = cfg.shear_restarts.part as usize;
+    let find = |kind: ParamKind| {
+        space
+            .entries
+            .iter()
+            .position(|e| e.kind == kind && e.slot.is_none_or(|s| s == part))
+    };
+    let (Some(ie), Some(inu)) = (
+        find(ParamKind::YoungsModulus),
+        find(ParamKind::PoissonRatio),
+    ) else {
+        return Err(FitError::Input(format!(
+            "shear_restarts: part {part}'s E and nu must both be free (free: {})",
+            space.names().join(", ")
+        )));
+    };
+    let others: Vec<usize> = (0..space.len()).filter(|&i| i != ie && i != inu).collect();
+    if others.is_empty() {
+        return Err(FitError::Input(
+            "shear_restarts: needs a free parameter besides E and nu to re-fit at each restart"
+                .into(),
+        ));
+    }
+    Ok((ie, inu, others))
+}
+
+/// Restarts along constant bulk modulus ([`crate::restarts`]) from the lowest point so far:
+/// at each, `E` and `nu` of `shear_restarts.part` fixed, gradient sampling over the other
+/// free parameters; checkpointed after every inner iteration, resumed where it stopped.
+fn shear_restarts(
+    obj: &Objective,
+    space: &ParamSpace,
+    base_slots: &[PartParams],
+    opt: &Stepper,
+    cfg: &FitConfig,
+    state: &mut FitState,
+    hooks: &mut dyn FitHooks,
+) -> Result<(), FitError> {
+    let rc = &cfg.shear_restarts;
+    let names = space.names();
+    let (ie, inu, others) = restart_entries(space, cfg)?;
+    let bounds = space.bounds();
+    let sub_bounds: Vec<(f64, f64)> = others.iter().map(|&i| bounds[i]).collect();
+    let sub_names: Vec<String> = others.iter().map(|&i| names[i].clone()).collect();
+    let inner = SamplingConfig {
+        iters: rc.inner_iters,
+        ..cfg.gradient_sampling
+    };
+    let mut st = match state.restarts.take() {
+        Some(s) => s,
+        None => {
+            let (loss, theta) = best_or_evaluate(obj, space, base_slots, opt, state)?;
+            ShearRestarts::new(theta, loss)
+        }
+    };
+    let origin = st.origin.clone();
+    let (k0, g0) = k_g_from_e_nu(origin[ie], origin[inu]);
+    let e_nu = |k: i32| {
+        let (e, nu) = e_nu_from_k_g(k0, g0 * rc.factor.powi(k));
+        (
+            e.clamp(bounds[ie].0, bounds[ie].1),
+            nu.clamp(bounds[inu].0, bounds[inu].1),
+        )
+    };
+    // Every free parameter from the restart's E and nu and the others' logs.
+    let full = |(e, nu): (f64, f64), sub_log: &[f64]| {
+        let mut t = origin.clone();
+        t[ie] = e;
+        t[inu] = nu;
+        for (&i, v) in others.iter().zip(sub_log) {
+            t[i] = v.exp();
+        }
+        t
+    };
+    let slots_of = |theta: &[f64]| {
+        let mut slots = base_slots.to_vec();
+        space.apply(&mut slots, theta);
+        slots
+    };
+    loop {
+        let (k, mut gs) = match st.current.take() {
+            Some(c) => c,
+            None => {
+                let Some(k) = st.next_k(rc) else { break };
+                let sub_log: Vec<f64> = others.iter().map(|&i| origin[i].ln()).collect();
+                let theta = full(e_nu(k), &sub_log);
+                let loss = obj
+                    .value(&slots_of(&theta))
+                    .map_or(f64::INFINITY, |e| e.total);
+                if !loss.is_finite() {
+                    // A restart whose simulation fails is a wall of the profile.
+                    let (e, nu) = e_nu(k);
+                    let r = Restart {
+                        k,
+                        e,
+                        nu,
+                        loss,
+                        theta,
+                        inner: None,
+                    };
+                    hooks.on_restart(&r, &names);
+                    st.done.push(r);
+                    continue;
+                }
+                let sub: Vec<f64> = others.iter().map(|&i| theta[i]).collect();
+                let gs = GradientSampling::new(&sub, loss, &sub_bounds, &inner).map_err(|e| {
+                    FitError::Input(format!("shear restart {k}'s starting point: {e}"))
+                })?;
+                (k, gs)
+            }
+        };
+        let at = e_nu(k);
+        let mut grads = |pts: &[Vec<f64>]| -> Vec<Graded> {
+            pts.par_iter()
+                .map(|p| {
+                    let theta = full(at, p);
+                    let (ev, g) = obj.value_and_grad(&slots_of(&theta)).ok()?;
+                    let g = space.gather(&g);
+                    Some((ev.total, others.iter().map(|&i| g[i] * theta[i]).collect()))
+                })
+                .collect()
+        };
+        let mut losses = |pts: &[Vec<f64>]| -> Vec<f64> {
+            pts.par_iter()
+                .map(|p| {
+                    obj.value(&slots_of(&full(at, p)))
+                        .map_or(f64::INFINITY, |e| e.total)
+                })
+                .collect()
+        };
+        while let Some(round) = gs.round(&inner, &mut grads, &mut losses) {
+            hooks.on_sampling(&round, &sub_names, &gs.theta());
+            st.current = Some((k, gs.clone()));
+            state.restarts = Some(st.clone());
+            save(opt, state);
+            hooks.on_checkpoint(state);
+            state.optimizer = None;
+            state.trust = None;
+        }
+        let r = Restart {
+            k,
+            e: at.0,
+            nu: at.1,
+            loss: gs.loss,
+            theta: full(at, &gs.x),
+            inner: Some(gs),
+        };
+        hooks.on_restart(&r, &names);
+        keep_best(&mut state.best, r.loss, &r.theta);
+        st.done.push(r);
+        st.current = None;
+        state.restarts = Some(st.clone());
+        save(opt, state);
+        hooks.on_checkpoint(state);
+        state.optimizer = None;
+        state.trust = None;
+    }
+    state.restarts = Some(st);
     Ok(())
 }

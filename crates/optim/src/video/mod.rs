@@ -16,6 +16,7 @@ pub mod config;
 pub mod fit;
 pub mod problem;
 
+pub use crate::restarts::{Restart, RestartsConfig, ShearRestarts};
 pub use crate::sampling::{GradientSampling, SamplingConfig, SamplingRound};
 pub use crate::space::{Granularity, ParamSpace};
 pub use crate::valley::{ValleyConfig, ValleyRound, ValleySearch};
