@@ -99,11 +99,7 @@ impl FitHooks for RunHooks {
             o.top_k.len()
         )];
         for c in o.top_candidates() {
-            let vals: Vec<String> = names
-                .iter()
-                .zip(&c.theta)
-                .map(|(n, v)| format!("{n}={v:.4e}"))
-                .collect();
+            let vals = named_values(names, &c.theta);
             lines.push(format!(
                 "  #{:<3} MS-SSIM {:.4}  {}",
                 c.index,
@@ -177,11 +173,7 @@ impl FitHooks for RunHooks {
                 terms.join(" ")
             })
             .collect();
-        let vals: Vec<String> = names
-            .iter()
-            .zip(theta)
-            .map(|(n, v)| format!("{n}={v:.4e}"))
-            .collect();
+        let vals = named_values(names, theta);
         eprintln!(
             "valley search: loss {:.5e} -> {:.5e} ({} evaluations, step {:.3}, re-centred: {}); {}",
             r.loss_before,
@@ -203,11 +195,7 @@ impl FitHooks for RunHooks {
         names: &[String],
         theta: &[f64],
     ) {
-        let vals: Vec<String> = names
-            .iter()
-            .zip(theta)
-            .map(|(n, v)| format!("{n}={v:.4e}"))
-            .collect();
+        let vals = named_values(names, theta);
         eprintln!(
             "gradient sampling: loss {:.5e} -> {:.5e} (step {:.4}, radius {:.4}, min-norm gradient {:.3e}; {} gradients, {} evaluations); {}",
             r.loss_before,
@@ -222,11 +210,7 @@ impl FitHooks for RunHooks {
     }
 
     fn on_restart(&mut self, r: &resonance4d::video_fit::Restart, names: &[String]) {
-        let vals: Vec<String> = names
-            .iter()
-            .zip(&r.theta)
-            .map(|(n, v)| format!("{n}={v:.4e}"))
-            .collect();
+        let vals = named_values(names, &r.theta);
         eprintln!(
             "shear restart {:+}: E {:.4e}, nu {:.4} -> loss {:.5e}; {}",
             r.k,
@@ -370,4 +354,13 @@ pub fn param_table(
         let _ = writeln!(s, "{p:<6} {q:<18} {i:>12.4e} {f:>12.4e}  {note}");
     }
     s
+}
+
+/// `name=value` of every free parameter (`part0.E=2.0000e5`), for the progress lines.
+fn named_values(names: &[String], theta: &[f64]) -> Vec<String> {
+    names
+        .iter()
+        .zip(theta)
+        .map(|(n, v)| format!("{n}={v:.4e}"))
+        .collect()
 }

@@ -107,6 +107,31 @@ fn save(opt: &Stepper, state: &mut FitState) {
     }
 }
 
+/// Persists the state after a round of a stage that follows the iterations (the valley
+/// search, the restarts, gradient sampling): the optimiser goes into the checkpoint for it
+/// and out again, as after an iteration.
+fn checkpoint_stage(opt: &Stepper, state: &mut FitState, hooks: &mut dyn FitHooks) {
+    save(opt, state);
+    hooks.on_checkpoint(state);
+    state.optimizer = None;
+    state.trust = None;
+}
+
+/// Loss and log-unit gradient (`theta dL/dtheta`) of every free parameter at `theta`; `None`
+/// where the simulation fails (a wall to the searches, not an error of the fit).
+fn loss_and_log_grad(
+    obj: &Objective,
+    space: &ParamSpace,
+    base_slots: &[PartParams],
+    theta: &[f64],
+) -> Graded {
+    let mut slots = base_slots.to_vec();
+    space.apply(&mut slots, theta);
+    let (ev, g) = obj.value_and_grad(&slots).ok()?;
+    let g = space.gather(&g);
+    Some((ev.total, g.iter().zip(theta).map(|(a, b)| a * b).collect()))
+}
+
 /// The loss terms of an evaluation, summed over its views.
 pub fn terms_of(ev: &Evaluation) -> Terms {
     let mean = |f: &dyn Fn(&r4d_loss::DmsTerms) -> Option<f64>| {
@@ -690,10 +715,7 @@ fn valley_search(
         }
         hooks.on_valley(&round, &names, &search.theta());
         state.valley = Some(search.clone());
-        save(opt, state);
-        hooks.on_checkpoint(state);
-        state.optimizer = None;
-        state.trust = None;
+        checkpoint_stage(opt, state, hooks);
     }
     state.valley = Some(search);
     Ok(())
@@ -726,16 +748,9 @@ fn gradient_sampling(
                 .map_err(|e| FitError::Input(format!("gradient sampling's starting point: {e}")))?
         }
     };
-    // A point whose simulation fails is a wall, not an error of the fit.
     let mut grads = |pts: &[Vec<f64>]| -> Vec<Graded> {
         pts.par_iter()
-            .map(|p| {
-                let (theta, slots) = slots_at(p);
-                let (ev, g) = obj.value_and_grad(&slots).ok()?;
-                let g = space.gather(&g);
-                // d L / d ln(theta) = theta d L / d theta.
-                Some((ev.total, g.iter().zip(&theta).map(|(a, b)| a * b).collect()))
-            })
+            .map(|p| loss_and_log_grad(obj, space, base_slots, &slots_at(p).0))
             .collect()
     };
     let mut losses = |pts: &[Vec<f64>]| -> Vec<f64> {
@@ -747,10 +762,7 @@ fn gradient_sampling(
         keep_best(&mut state.best, search.loss, &search.theta());
         hooks.on_sampling(&round, &names, &search.theta());
         state.sampling = Some(search.clone());
-        save(opt, state);
-        hooks.on_checkpoint(state);
-        state.optimizer = None;
-        state.trust = None;
+        checkpoint_stage(opt, state, hooks);
     }
     state.sampling = Some(search);
     Ok(())
@@ -897,10 +909,8 @@ fn shear_restarts(
         let mut grads = |pts: &[Vec<f64>]| -> Vec<Graded> {
             pts.par_iter()
                 .map(|p| {
-                    let theta = full(at, p);
-                    let (ev, g) = obj.value_and_grad(&slots_of(&theta)).ok()?;
-                    let g = space.gather(&g);
-                    Some((ev.total, others.iter().map(|&i| g[i] * theta[i]).collect()))
+                    let (loss, g) = loss_and_log_grad(obj, space, base_slots, &full(at, p))?;
+                    Some((loss, others.iter().map(|&i| g[i]).collect()))
                 })
                 .collect()
         };
@@ -916,10 +926,7 @@ fn shear_restarts(
             hooks.on_sampling(&round, &sub_names, &gs.theta());
             st.current = Some((k, gs.clone()));
             state.restarts = Some(st.clone());
-            save(opt, state);
-            hooks.on_checkpoint(state);
-            state.optimizer = None;
-            state.trust = None;
+            checkpoint_stage(opt, state, hooks);
         }
         let r = Restart {
             k,
@@ -934,10 +941,7 @@ fn shear_restarts(
         st.done.push(r);
         st.current = None;
         state.restarts = Some(st.clone());
-        save(opt, state);
-        hooks.on_checkpoint(state);
-        state.optimizer = None;
-        state.trust = None;
+        checkpoint_stage(opt, state, hooks);
     }
     state.restarts = Some(st);
     Ok(())
