@@ -22,11 +22,11 @@ use r4d_mpm::kernels::{
     blocks_per_axis, Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts,
     BLOCK, HEALTH_OUT_OF_DOMAIN,
 };
-use r4d_mpm::math::Real;
+use r4d_mpm::math::{svd3_many, Mat3, Real, Svd3};
 use r4d_mpm::params::MAT_CONSTS;
 use r4d_mpm::transfer::{
     damped_affine, g2p_finish, gather, grid_node_update, in_domain, k, out_of_domain_coordinate,
-    particle_bcs, particle_stress, record, scatter, stencil,
+    particle_bcs, particle_stress_svd, record, scatter, stencil,
 };
 use r4d_mpm::PartConsts;
 use rayon::prelude::*;
@@ -39,6 +39,10 @@ pub mod slabs;
 pub mod splat;
 
 pub use slabs::SLAB;
+
+/// Particles per work item of the particle stress stage: their SVDs are computed side by side
+/// ([`r4d_mpm::math::svd3_many`]).
+const STRESS_CHUNK: usize = 64;
 
 /// Parallelism of the CPU backend.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -189,21 +193,41 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
             // 2. Particle stage: return mapping + stress; key = stencil base cell.
             let (keys, rest) = g.scratch.split_at_mut(np);
             let (order, starts) = rest.split_at_mut(np);
+            // In chunks whose SVDs are computed side by side (bitwise `svd3` of each F).
             let (x, cm, vol0, part) = (&p.x, &p.c, &p.vol0, &p.part);
-            p.f.par_iter_mut()
-                .zip(p.plastic.par_iter_mut())
-                .zip(p.stress.par_iter_mut())
-                .zip(keys.par_iter_mut())
+            p.f.par_chunks_mut(STRESS_CHUNK)
+                .zip(p.plastic.par_chunks_mut(STRESS_CHUNK))
+                .zip(p.stress.par_chunks_mut(STRESS_CHUNK))
+                .zip(keys.par_chunks_mut(STRESS_CHUNK))
                 .enumerate()
-                .for_each(|(i, (((f, pl), s), key))| {
-                    let slot = part[i] as usize;
-                    *s = particle_stress(f, pl, &cm[i], vol0[i], &parts[slot], &mats[slot], c);
-                    *key = if in_domain(x[i], inv_dx, n) {
-                        let b = stencil(x[i], inv_dx).base;
-                        ((b[0] as usize * n + b[1] as usize) * n + b[2] as usize) as u32
-                    } else {
-                        u32::MAX
-                    };
+                .for_each(|(ci, (((f, pl), s), key))| {
+                    let len = f.len();
+                    let mut fm = [Mat3::<T>::default(); STRESS_CHUNK];
+                    for (m, fi) in fm.iter_mut().zip(f.iter()) {
+                        *m = Mat3::from_array(*fi);
+                    }
+                    let mut svd = [Svd3::<T>::default(); STRESS_CHUNK];
+                    svd3_many(&fm[..len], &mut svd[..len]);
+                    for j in 0..len {
+                        let i = ci * STRESS_CHUNK + j;
+                        let slot = part[i] as usize;
+                        s[j] = particle_stress_svd(
+                            &mut f[j],
+                            &svd[j],
+                            &mut pl[j],
+                            &cm[i],
+                            vol0[i],
+                            &parts[slot],
+                            &mats[slot],
+                            c,
+                        );
+                        key[j] = if in_domain(x[i], inv_dx, n) {
+                            let b = stencil(x[i], inv_dx).base;
+                            ((b[0] as usize * n + b[1] as usize) * n + b[2] as usize) as u32
+                        } else {
+                            u32::MAX
+                        };
+                    }
                 });
 
             // 3. Mark the active blocks; sort the particles by slab.

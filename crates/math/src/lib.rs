@@ -26,10 +26,10 @@ pub mod real;
 pub mod svd;
 pub mod vec3;
 
-pub use eigen::sym_eigen;
+pub use eigen::{sym_eigen, sym_eigen_lanes};
 pub use m3::M3;
 pub use mat3::Mat3;
 pub use polar::{polar_rotation, polar_rotation_vjp};
 pub use real::Real;
-pub use svd::{svd3, Svd3};
+pub use svd::{svd3, svd3_batch, svd3_lanes, svd3_many, Svd3, SVD_BATCH};
 pub use vec3::{add, cross, dot, norm, scale, sub, Vec3};

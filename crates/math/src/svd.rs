@@ -1,14 +1,15 @@
 //! The singular value decomposition of a 3x3 matrix with PhysGaussian's sign conventions.
 
+use crate::eigen::sym_eigen_lanes;
 use crate::vec3::{cross, dot, norm, scale, sub};
-use crate::{sym_eigen, Mat3, Real, Vec3};
+use crate::{sym_eigen, Mat3, Real, Vec3, M3};
 
 /// Singular value decomposition `F = U diag(sigma) V^T` of a 3x3 matrix.
 ///
 /// Conventions (those of McAdams et al. 2011, which PhysGaussian's Warp `svd3` follows):
 /// `U` and `V` are proper rotations (det = +1), `sigma[0] >= sigma[1] >= |sigma[2]|`, and
 /// `sigma[2]` carries the sign of `det F` (it is negative for an inverted element).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Svd3<T> {
     /// Left rotation.
     pub u: Mat3<T>,
@@ -34,10 +35,66 @@ impl<T: Real> Svd3<T> {
 /// Computes the SVD of `f`: [`sym_eigen`] of `F^T F` for `V`, then a Gram-Schmidt QR of `F V`
 /// for `U` (robust when `F` is rank-deficient: `U` stays a rotation).
 ///
-/// The Jacobi iteration's stopping rule is [`sym_eigen`]'s.
+/// The Jacobi iteration's stopping rule is [`sym_eigen`]'s. [`svd3_lanes`] computes several at
+/// once with bitwise the same results.
+#[inline]
 pub fn svd3<T: Real>(f: Mat3<T>) -> Svd3<T> {
     let (_, v) = sym_eigen((f.transpose() * f).0);
-    let vm = Mat3(v);
+    from_right_vectors(f, Mat3(v))
+}
+
+/// [`svd3`] of `L` matrices side by side (lane `l` of the result is bitwise `svd3(f[l])`):
+/// the Jacobi iterations of the lanes run together ([`sym_eigen_lanes`]), which is several
+/// times faster per matrix than one at a time.
+#[inline(always)]
+pub fn svd3_lanes<T: Real, const L: usize>(f: &[Mat3<T>; L]) -> [Svd3<T>; L] {
+    let ata: [M3<T>; L] = std::array::from_fn(|l| (f[l].transpose() * f[l]).0);
+    let (_, v) = sym_eigen_lanes(&ata);
+    std::array::from_fn(|l| from_right_vectors(f[l], Mat3(v[l])))
+}
+
+/// Number of matrices [`svd3_batch`] decomposes at once.
+pub const SVD_BATCH: usize = 8;
+
+/// [`svd3_lanes`] of [`SVD_BATCH`] matrices, compiled for the widest vector instructions the
+/// processor has (AVX2 on x86-64 when present, detected at run time): bitwise the results of
+/// [`svd3`] for each matrix, about three times faster per matrix than one at a time.
+#[inline]
+pub fn svd3_batch<T: Real>(f: &[Mat3<T>; SVD_BATCH]) -> [Svd3<T>; SVD_BATCH] {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor supports AVX2 (checked just above).
+        return unsafe { svd3_batch_avx2(f) };
+    }
+    svd3_lanes(f)
+}
+
+/// [`svd3_lanes`] compiled with AVX2 enabled (same arithmetic: no fused operations).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn svd3_batch_avx2<T: Real>(f: &[Mat3<T>; SVD_BATCH]) -> [Svd3<T>; SVD_BATCH] {
+    svd3_lanes(f)
+}
+
+/// The SVDs of `f`, [`SVD_BATCH`] at a time ([`svd3_batch`]; the remainder one by one),
+/// written to `out` (the same length as `f`). Bitwise [`svd3`] of each matrix.
+pub fn svd3_many<T: Real>(f: &[Mat3<T>], out: &mut [Svd3<T>]) {
+    assert_eq!(f.len(), out.len(), "svd3_many: one output per matrix");
+    let mut fc = f.chunks_exact(SVD_BATCH);
+    let mut oc = out.chunks_exact_mut(SVD_BATCH);
+    for (fb, ob) in (&mut fc).zip(&mut oc) {
+        let fb: &[Mat3<T>; SVD_BATCH] = fb.try_into().expect("exact chunk");
+        ob.copy_from_slice(&svd3_batch(fb));
+    }
+    for (fi, oi) in fc.remainder().iter().zip(oc.into_remainder()) {
+        *oi = svd3(*fi);
+    }
+}
+
+/// The SVD of `f` from its right singular vectors `vm` (a rotation, columns ordered by
+/// descending singular value): `U` and the singular values by Gram-Schmidt QR of `F V`.
+#[inline(always)]
+fn from_right_vectors<T: Real>(f: Mat3<T>, vm: Mat3<T>) -> Svd3<T> {
     let tiny = T::min_positive_value();
     let eps = T::epsilon();
     // B = F V; QR by Gram-Schmidt: U = Q (a rotation), sigma = diag(R).
@@ -120,6 +177,55 @@ mod tests {
             check(f, 1e-11);
             let near = Mat3::identity() + Mat3::from_array(std::array::from_fn(|_| 1e-4 * rnd()));
             check(near, 1e-12);
+        }
+    }
+
+    #[test]
+    fn batches_give_bitwise_the_single_results() {
+        let mut seed = 7u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        // Mixed: near identity, general, rank-deficient, inverted, exactly diagonal.
+        let f: Vec<Mat3<f32>> = (0..37)
+            .map(|i| match i % 5 {
+                0 => {
+                    Mat3::identity()
+                        + Mat3::from_array(std::array::from_fn(|_| 1e-3 * rnd() as f32))
+                }
+                1 => Mat3::from_array(std::array::from_fn(|_| rnd() as f32)),
+                2 => Mat3::from_array([1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 1.0, 0.0, 1.0]),
+                3 => Mat3::diag([1.0, -1.0, 0.5]),
+                _ => Mat3::identity(),
+            })
+            .collect();
+        let mut out = vec![svd3(Mat3::<f32>::zero()); f.len()];
+        svd3_many(&f, &mut out);
+        for (fi, b) in f.iter().zip(&out) {
+            let a = svd3(*fi);
+            assert_eq!(
+                a.u.to_array().map(f32::to_bits),
+                b.u.to_array().map(f32::to_bits)
+            );
+            assert_eq!(
+                a.v.to_array().map(f32::to_bits),
+                b.v.to_array().map(f32::to_bits)
+            );
+            assert_eq!(a.sigma.map(f32::to_bits), b.sigma.map(f32::to_bits));
+        }
+        let fd: Vec<Mat3<f64>> = f.iter().map(|m| m.cast()).collect();
+        let mut outd = vec![svd3(Mat3::<f64>::zero()); fd.len()];
+        svd3_many(&fd, &mut outd);
+        for (fi, b) in fd.iter().zip(&outd) {
+            let a = svd3(*fi);
+            assert_eq!(
+                a.u.to_array().map(f64::to_bits),
+                b.u.to_array().map(f64::to_bits)
+            );
+            assert_eq!(a.sigma.map(f64::to_bits), b.sigma.map(f64::to_bits));
         }
     }
 

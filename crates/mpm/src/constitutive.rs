@@ -378,10 +378,23 @@ pub fn stress_update<T: Real>(
     grad_v: &Mat3<T>,
     dt: T,
 ) -> (Mat3<T>, Mat3<T>) {
+    stress_update_from_svd(f_trial, &svd3(f_trial), pc, state, grad_v, dt)
+}
+
+/// [`stress_update`] given `svd`, the SVD of `f_trial` (bitwise `svd3(f_trial)`; backends
+/// compute them in batches with [`crate::math::svd3_many`]).
+pub fn stress_update_from_svd<T: Real>(
+    f_trial: Mat3<T>,
+    svd: &Svd3<T>,
+    pc: &PartConsts,
+    state: &mut PlasticState<T>,
+    grad_v: &Mat3<T>,
+    dt: T,
+) -> (Mat3<T>, Mat3<T>) {
     if pc.material == 6 {
-        return fluid(&svd3(f_trial), pc, grad_v);
+        return fluid(svd, pc, grad_v);
     }
-    stress_update_with(f_trial, pc, state, MaterialParams::of(pc), dt)
+    stress_update_with_svd(f_trial, svd, pc, state, MaterialParams::of(pc), dt)
 }
 
 /// [`stress_update`] of the isotropic models with explicit material constants `p` (the
@@ -393,7 +406,19 @@ pub fn stress_update_with<T: Real>(
     p: MaterialParams<T>,
     dt: T,
 ) -> (Mat3<T>, Mat3<T>) {
-    let svd = svd3(f_trial);
+    stress_update_with_svd(f_trial, &svd3(f_trial), pc, state, p, dt)
+}
+
+/// [`stress_update_with`] given `svd`, the SVD of `f_trial` (bitwise `svd3(f_trial)`).
+#[inline(always)]
+pub fn stress_update_with_svd<T: Real>(
+    f_trial: Mat3<T>,
+    svd: &Svd3<T>,
+    pc: &PartConsts,
+    state: &mut PlasticState<T>,
+    p: MaterialParams<T>,
+    dt: T,
+) -> (Mat3<T>, Mat3<T>) {
     let input = ModelIn {
         sigma: svd.sigma,
         state: *state,

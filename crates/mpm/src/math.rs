@@ -2,4 +2,6 @@
 //! implementation shared with the renderer and the losses. Matrices are row-major: `m[i][j]`
 //! is row `i`, column `j`; for a deformation gradient `F[i][j] = dx_i / dX_j`.
 
-pub use r4d_math::{add, cross, dot, norm, scale, sub, svd3, Mat3, Real, Svd3, Vec3};
+pub use r4d_math::{
+    add, cross, dot, norm, scale, sub, svd3, svd3_many, Mat3, Real, Svd3, Vec3, SVD_BATCH,
+};

@@ -13,13 +13,13 @@
 //! `(i n + j) n + k` as `[momentum or velocity (3), mass]`.
 
 use crate::boundary::{BC_BOUNDING_BOX, BC_CUBOID, BC_SURFACE, PBC_IMPULSE, PBC_VELOCITY};
-use crate::constitutive::{stress_update, stress_update_with};
+use crate::constitutive::{stress_update_from_svd, stress_update_with_svd};
 use crate::kernels::{
     GridBc, Health, ParticleBc, StepConsts, FORCE_MLS, HEALTH_NAN, HEALTH_OUT_OF_DOMAIN,
     HEALTH_SPEED, OUT_OF_DOMAIN_CLAMP,
 };
 use crate::material::PartConsts;
-use crate::math::{Mat3, Real};
+use crate::math::{svd3, Mat3, Real, Svd3};
 use crate::params::{material_of, MAT_CONSTS};
 
 /// A device constant (stored as f32) in the kernel's scalar type.
@@ -162,12 +162,30 @@ pub fn particle_stress<T: Real>(
     mat: &[T; MAT_CONSTS],
     c: &StepConsts,
 ) -> [T; 9] {
+    let svd = svd3(Mat3::from_array(*f));
+    particle_stress_svd(f, &svd, plastic, c_affine, vol0, pc, mat, c)
+}
+
+/// [`particle_stress`] given `svd`, the SVD of `f` (bitwise `svd3(f)`; the CPU backend computes
+/// them in batches with [`crate::math::svd3_many`]).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn particle_stress_svd<T: Real>(
+    f: &mut [T; 9],
+    svd: &Svd3<T>,
+    plastic: &mut [T; 2],
+    c_affine: &[T; 9],
+    vol0: T,
+    pc: &PartConsts,
+    mat: &[T; MAT_CONSTS],
+    c: &StepConsts,
+) -> [T; 9] {
     let f_trial = Mat3::from_array(*f);
     let (fe, tau) = if pc.material == crate::Material::Fluid.kernel_id() {
         let grad_v = Mat3::from_array(*c_affine);
-        stress_update(f_trial, pc, plastic, &grad_v, k(c.dt))
+        stress_update_from_svd(f_trial, svd, pc, plastic, &grad_v, k(c.dt))
     } else {
-        stress_update_with(f_trial, pc, plastic, material_of(mat), k(c.dt))
+        stress_update_with_svd(f_trial, svd, pc, plastic, material_of(mat), k(c.dt))
     };
     *f = fe.to_array();
     tau.sym().scaled(stress_scale(vol0, c)).to_array()

@@ -1,4 +1,5 @@
-// 3x3 singular value decomposition: a port of `svd3` in crates/mpm/src/math.rs (f32).
+// 3x3 singular value decomposition: a port of `svd3` in crates/math/src/svd.rs and
+// `sym_eigen` in crates/math/src/eigen.rs (f32).
 //
 // F = U diag(sigma) V^T with McAdams et al.'s conventions: U and V are proper rotations
 // (det = +1), sigma.x >= sigma.y >= |sigma.z|, and sigma.z carries the sign of det F.
@@ -7,11 +8,10 @@
 // sweeps, stop when the off-diagonal mass is below eps^2 of the diagonal mass), sort the
 // eigenvalues descending with V's columns, make V a rotation, then Gram-Schmidt QR of F V for U.
 //
-// Storage: the Jacobi matrix S and the rotation V are kept as arrays of rows, `s[row][col]`,
-// exactly as the Rust arrays are indexed, so every update happens in the same order.
-// Infinities: for |tau| >= 2^64 the Rust `1 + tau * tau` overflows to +inf and IEEE arithmetic
-// gives t = 1 / (tau + inf) = 0. WGSL does not promise IEEE infinities, so that case is tested
-// explicitly (t = 0, as in Rust); below 2^64 nothing overflows and the formula is the same.
+// Storage: the symmetric Jacobi matrix as its six distinct entries and the rotation V as an
+// array of rows, `v[row][col]`, exactly as the Rust arrays are indexed, so every update happens
+// in the same order. Infinities: for |tau| >= 2^64 Rust sets t = 0 (where 1 + tau * tau would
+// overflow); WGSL does not promise IEEE infinities either, so the case is tested the same way.
 
 struct Svd3 {
     u: mat3x3<f32>,
@@ -42,62 +42,79 @@ fn svd_any_orthogonal(a: vec3<f32>) -> vec3<f32> {
     return w * (1.0 / svd_norm(w));
 }
 
+// One Jacobi rotation in the (p, q) plane (Rust `eigen::rotate`, one lane): the symmetric
+// matrix is kept as its six distinct entries s = (a00, a11, a22, a01, a02, a12); pq, pr, qr
+// are the positions of the off-diagonal entries (r the third axis). Only the entries the
+// rotation changes are updated; a_pq becomes exactly zero. A tiny a_pq leaves s and v as
+// they are.
+fn svd_rotate(
+    s: ptr<function, array<f32, 6>>,
+    v: ptr<function, array<vec3<f32>, 3>>,
+    p: u32,
+    q: u32,
+    pq: u32,
+    pr: u32,
+    qr: u32,
+) {
+    let apq = (*s)[pq];
+    if abs(apq) <= SVD_TINY {
+        return;
+    }
+    // Classic symmetric Schur rotation (Golub & Van Loan 8.4.2):
+    // t = sign(tau) / (|tau| + sqrt(1 + tau^2)).
+    let tau = ((*s)[q] - (*s)[p]) / (2.0 * apq);
+    var t = 0.0;
+    if abs(tau) < 18446744073709551616.0 {
+        let sgn = select(-1.0, 1.0, tau >= 0.0);
+        t = sgn / (abs(tau) + sqrt(1.0 + tau * tau));
+    }
+    let c = 1.0 / sqrt(1.0 + t * t);
+    let sn = t * c;
+    (*s)[p] = (*s)[p] - t * apq;
+    (*s)[q] = (*s)[q] + t * apq;
+    (*s)[pq] = 0.0;
+    let arp = (*s)[pr];
+    let arq = (*s)[qr];
+    (*s)[pr] = c * arp - sn * arq;
+    (*s)[qr] = sn * arp + c * arq;
+    for (var r = 0u; r < 3u; r++) {
+        let vp = (*v)[r][p];
+        let vq = (*v)[r][q];
+        (*v)[r][p] = c * vp - sn * vq;
+        (*v)[r][q] = sn * vp + c * vq;
+    }
+}
+
 fn svd3(f: mat3x3<f32>) -> Svd3 {
-    // A = F^T F, as rows (A is symmetric: row i = column i).
+    // A = F^T F (symmetric), as its six distinct entries (off-diagonals: the average of the
+    // two triangles, as in Rust).
     let a = transpose(f) * f;
-    var s = array<vec3<f32>, 3>(a[0], a[1], a[2]);
+    var s = array<f32, 6>(
+        a[0][0],
+        a[1][1],
+        a[2][2],
+        0.5 * (a[0][1] + a[1][0]),
+        0.5 * (a[0][2] + a[2][0]),
+        0.5 * (a[1][2] + a[2][1]),
+    );
     var v = array<vec3<f32>, 3>(
         vec3<f32>(1.0, 0.0, 0.0),
         vec3<f32>(0.0, 1.0, 0.0),
         vec3<f32>(0.0, 0.0, 1.0),
     );
     for (var sweep = 0u; sweep < 12u; sweep++) {
-        let off = s[0][1] * s[0][1] + s[0][2] * s[0][2] + s[1][2] * s[1][2];
-        let diag = s[0][0] * s[0][0] + s[1][1] * s[1][1] + s[2][2] * s[2][2];
+        let off = s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
+        let diag = s[0] * s[0] + s[1] * s[1] + s[2] * s[2];
         if off <= SVD_EPS * SVD_EPS * diag || off <= SVD_TINY {
             break;
         }
         // Pairs (0, 1), (0, 2), (1, 2).
-        for (var k = 0u; k < 3u; k++) {
-            let p = select(0u, 1u, k == 2u);
-            let q = select(1u, 2u, k > 0u);
-            let apq = s[p][q];
-            if abs(apq) <= SVD_TINY {
-                continue;
-            }
-            // Classic symmetric Schur rotation (Golub & Van Loan 8.4.2).
-            let tau = (s[q][q] - s[p][p]) / (2.0 * apq);
-            var t: f32;
-            if abs(tau) >= 18446744073709551616.0 {
-                t = 0.0;
-            } else if tau >= 0.0 {
-                t = 1.0 / (tau + sqrt(1.0 + tau * tau));
-            } else {
-                t = -1.0 / (-tau + sqrt(1.0 + tau * tau));
-            }
-            let c = 1.0 / sqrt(1.0 + t * t);
-            let sn = t * c;
-            // S <- J^T S J with J the rotation in the (p, q) plane: columns, then rows.
-            for (var r = 0u; r < 3u; r++) {
-                let skp = s[r][p];
-                let skq = s[r][q];
-                s[r][p] = c * skp - sn * skq;
-                s[r][q] = sn * skp + c * skq;
-            }
-            let sp = s[p];
-            let sq = s[q];
-            s[p] = c * sp - sn * sq;
-            s[q] = sn * sp + c * sq;
-            for (var r = 0u; r < 3u; r++) {
-                let vp = v[r][p];
-                let vq = v[r][q];
-                v[r][p] = c * vp - sn * vq;
-                v[r][q] = sn * vp + c * vq;
-            }
-        }
+        svd_rotate(&s, &v, 0u, 1u, 3u, 4u, 5u);
+        svd_rotate(&s, &v, 0u, 2u, 4u, 3u, 5u);
+        svd_rotate(&s, &v, 1u, 2u, 5u, 3u, 4u);
     }
     // Sort eigenvalues descending together with the columns of V.
-    var lam = vec3<f32>(s[0][0], s[1][1], s[2][2]);
+    var lam = vec3<f32>(s[0], s[1], s[2]);
     if lam.x < lam.y {
         lam = lam.yxz;
         v[0] = v[0].yxz;
