@@ -11,10 +11,10 @@
 
 use crate::{slabs, CpuBackend};
 use r4d_mpm::adjoint::engine::{AdjointScratch, MpmAdjointKernels, StateBufs};
-use r4d_mpm::adjoint::particle_vjp::{particle_stage_vjp, ParticleForward};
+use r4d_mpm::adjoint::particle_vjp::{particle_stage_vjp_svd, ParticleForward};
 use r4d_mpm::adjoint::transfer_vjp::{g2p_vjp, grid_node_vjp, G2pBar};
 use r4d_mpm::kernels::{Grid, GridBc, Particles, StepConsts};
-use r4d_mpm::math::Real;
+use r4d_mpm::math::{svd3_many, Mat3, Real, Svd3};
 use r4d_mpm::params::PARAM_ADJOINTS;
 use r4d_mpm::reference::reduce_slots_in_order;
 use r4d_mpm::substep::{SubstepTables, Tape};
@@ -130,37 +130,59 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
             f,
             plastic,
         } = adj;
+        // In chunks whose f64 SVDs of F_trial are computed side by side (bitwise `svd3`).
+        const CHUNK: usize = crate::STRESS_CHUNK;
         self.run(|| {
-            x.par_iter_mut()
-                .zip(v.par_iter_mut())
-                .zip(cm.par_iter_mut())
-                .zip(f.par_iter_mut())
-                .zip(plastic.par_iter_mut())
-                .zip(s.pgrad.par_iter_mut())
+            x.par_chunks_mut(CHUNK)
+                .zip(v.par_chunks_mut(CHUNK))
+                .zip(cm.par_chunks_mut(CHUNK))
+                .zip(f.par_chunks_mut(CHUNK))
+                .zip(plastic.par_chunks_mut(CHUNK))
+                .zip(s.pgrad.par_chunks_mut(CHUNK))
                 .enumerate()
-                .for_each(|(i, (((((ax, av), ac), af), ap), pg))| {
-                    let slot = p.part[i] as usize;
-                    let fw = ParticleForward {
-                        x0: p.x0[i],
-                        x: before.x[i],
-                        c: &before.c[i],
-                        f_trial: &before.f[i],
-                        plastic: before.plastic[i],
-                        v1: tape.v1[i],
-                        mass: p.mass[i],
-                        vol0: p.vol0[i],
-                        stress: &p.stress[i],
-                        pc: &t.parts[slot],
-                        mat: &t.mats[slot],
-                    };
-                    let (bar, g) =
-                        particle_stage_vjp(&fw, grid_in_bar, n, pbcs, c, &fe_bar[i], &x_bar[i], ap);
-                    *ax = bar.x;
-                    *av = bar.v;
-                    *ac = bar.c;
-                    *af = bar.f;
-                    *ap = bar.plastic;
-                    *pg = g;
+                .for_each(|(ci, (((((ax, av), ac), af), ap), pg))| {
+                    let i0 = ci * CHUNK;
+                    let len = ax.len();
+                    let mut fm = [Mat3::<f64>::default(); CHUNK];
+                    for (j, m) in fm[..len].iter_mut().enumerate() {
+                        *m = Mat3::from_array(before.f[i0 + j]).cast();
+                    }
+                    let mut svd = [Svd3::<f64>::default(); CHUNK];
+                    svd3_many(&fm[..len], &mut svd[..len]);
+                    for j in 0..len {
+                        let i = i0 + j;
+                        let slot = p.part[i] as usize;
+                        let fw = ParticleForward {
+                            x0: p.x0[i],
+                            x: before.x[i],
+                            c: &before.c[i],
+                            f_trial: &before.f[i],
+                            plastic: before.plastic[i],
+                            v1: tape.v1[i],
+                            mass: p.mass[i],
+                            vol0: p.vol0[i],
+                            stress: &p.stress[i],
+                            pc: &t.parts[slot],
+                            mat: &t.mats[slot],
+                        };
+                        let (bar, g) = particle_stage_vjp_svd(
+                            &fw,
+                            &svd[j],
+                            grid_in_bar,
+                            n,
+                            pbcs,
+                            c,
+                            &fe_bar[i],
+                            &x_bar[i],
+                            &ap[j],
+                        );
+                        ax[j] = bar.x;
+                        av[j] = bar.v;
+                        ac[j] = bar.c;
+                        af[j] = bar.f;
+                        ap[j] = bar.plastic;
+                        pg[j] = g;
+                    }
                 });
         });
         Ok(())

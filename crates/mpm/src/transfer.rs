@@ -222,14 +222,37 @@ pub fn scatter<T: Real>(
     s: &[T; 9],
     c: &StepConsts,
 ) {
+    if c.force_form == FORCE_MLS {
+        scatter_form::<T, true>(nodes, x_lo, n, st, v, cm, mass, s, c)
+    } else {
+        scatter_form::<T, false>(nodes, x_lo, n, st, v, cm, mass, s, c)
+    }
+}
+
+/// [`scatter`] for one force form (`MLS`: the stress folds into the affine matrix; classic:
+/// it enters through the weight gradients). Each node's four entries (momentum, mass) are
+/// updated as one 4-lane operation so that the compiler vectorises them.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn scatter_form<T: Real, const MLS: bool>(
+    nodes: &mut [[T; 4]],
+    x_lo: usize,
+    n: usize,
+    st: &Stencil<T>,
+    v: [T; 3],
+    cm: &[T; 9],
+    mass: T,
+    s: &[T; 9],
+    c: &StepConsts,
+) {
+    let z = T::zero();
     let dx = k::<T>(c.dx);
     // Momentum of node offsets (i, j, k): w (m v + m C dpos) + stress term.
-    let mut mc = [T::zero(); 9];
+    let mut mc = [z; 9];
     for e in 0..9 {
         mc[e] = mass * cm[e];
     }
-    let mls = c.force_form == FORCE_MLS;
-    if mls {
+    if MLS {
         // tau * w * dpos folds into the affine matrix.
         for e in 0..9 {
             mc[e] += s[e];
@@ -256,29 +279,34 @@ pub fn scatter<T: Real>(
                 ai[1] + mc[4] * dp[1][j],
                 ai[2] + mc[7] * dp[1][j],
             ];
-            // Per (i, j): A = w_ij a_ij, B = w_ij mC[:,2], P/Q from the stress (classic form).
-            let mut a = [wij * aij[0], wij * aij[1], wij * aij[2]];
-            let b = [wij * mc[2], wij * mc[5], wij * mc[8]];
-            let mut q = [T::zero(); 3];
-            if !mls {
+            // Per (i, j): A = w_ij a_ij (and the mass), B = w_ij mC[:,2], Q from the stress
+            // (classic form).
+            let mut a = [wij * aij[0], wij * aij[1], wij * aij[2], wij * mass];
+            let b = [wij * mc[2], wij * mc[5], wij * mc[8], z];
+            let mut q = [z; 4];
+            if !MLS {
                 let gx = d0[i] * w1[j];
                 let gy = w0[i] * d1[j];
                 a[0] += s[0] * gx + s[1] * gy;
                 a[1] += s[3] * gx + s[4] * gy;
                 a[2] += s[6] * gx + s[7] * gy;
-                q = [s[2] * wij, s[5] * wij, s[8] * wij];
+                q = [s[2] * wij, s[5] * wij, s[8] * wij, z];
             }
-            let m_ij = wij * mass;
             let base = (row_i + st.base[1] as usize + j) * n + bz;
             let cell = &mut nodes[base..base + 3];
             for (o, node) in cell.iter_mut().enumerate() {
                 let wk = w2[o];
                 let wdk = w2[o] * dp[2][o];
                 let dk = d2[o];
-                node[0] += wk * a[0] + wdk * b[0] + dk * q[0];
-                node[1] += wk * a[1] + wdk * b[1] + dk * q[1];
-                node[2] += wk * a[2] + wdk * b[2] + dk * q[2];
-                node[3] += wk * m_ij;
+                if MLS {
+                    for l in 0..4 {
+                        node[l] += wk * a[l] + wdk * b[l];
+                    }
+                } else {
+                    for l in 0..4 {
+                        node[l] += wk * a[l] + wdk * b[l] + dk * q[l];
+                    }
+                }
             }
         }
     }
@@ -423,58 +451,82 @@ pub struct Gathered<T> {
 /// Gathers velocity, APIC matrix and velocity gradient from the grid (full grid, x_lo = 0).
 #[inline(always)]
 pub fn gather<T: Real>(nodes: &[[T; 4]], n: usize, st: &Stencil<T>, c: &StepConsts) -> Gathered<T> {
+    if c.force_form == FORCE_MLS {
+        gather_form::<T, true>(nodes, n, st, c)
+    } else {
+        gather_form::<T, false>(nodes, n, st, c)
+    }
+}
+
+/// [`gather`] for one force form (`MLS`: the velocity gradient is C, so the weight-gradient
+/// sums are skipped). Sums run over all four entries of a node (the fourth, the mass, is
+/// dropped at the end) so that the compiler vectorises them.
+#[inline(always)]
+fn gather_form<T: Real, const MLS: bool>(
+    nodes: &[[T; 4]],
+    n: usize,
+    st: &Stencil<T>,
+    c: &StepConsts,
+) -> Gathered<T> {
     let (w0, w1, w2) = (st.w[0], st.w[1], st.w[2]);
     let (d0, d1, d2) = (st.dw[0], st.dw[1], st.dw[2]);
     let dp: [[T; 3]; 3] =
         std::array::from_fn(|a| std::array::from_fn(|o| T::c(o as f64) - st.fx[a]));
     let z = T::zero();
-    let mut v = [z; 3];
-    let mut cm = [z; 9];
-    let mut gv = [z; 9];
+    // v, the columns of C (C[a][b] = col[b][a]) and of the velocity gradient, as 4 lanes.
+    let mut v = [z; 4];
+    let mut cc = [[z; 4]; 3];
+    let mut gc = [[z; 4]; 3];
     let bz = st.base[2] as usize;
     for i in 0..3 {
         for j in 0..3 {
             let base = ((st.base[0] as usize + i) * n + st.base[1] as usize + j) * n + bz;
             let cell = &nodes[base..base + 3];
             // Sums over k: s0 = sum w_k v, s1 = sum w_k dpz_k v, s2 = sum dw_k v.
-            let mut s0 = [z; 3];
-            let mut s1 = [z; 3];
-            let mut s2 = [z; 3];
+            let mut s0 = [z; 4];
+            let mut s1 = [z; 4];
+            let mut s2 = [z; 4];
             for (o, node) in cell.iter().enumerate() {
-                for a in 0..3 {
-                    s0[a] += w2[o] * node[a];
-                    s1[a] += w2[o] * dp[2][o] * node[a];
-                    s2[a] += d2[o] * node[a];
+                let (wk, wdk) = (w2[o], w2[o] * dp[2][o]);
+                for l in 0..4 {
+                    s0[l] += wk * node[l];
+                    s1[l] += wdk * node[l];
+                }
+                if !MLS {
+                    for l in 0..4 {
+                        s2[l] += d2[o] * node[l];
+                    }
                 }
             }
             let wij = w0[i] * w1[j];
-            let gx = d0[i] * w1[j];
-            let gy = w0[i] * d1[j];
-            for a in 0..3 {
-                v[a] += wij * s0[a];
-                cm[3 * a] += wij * dp[0][i] * s0[a];
-                cm[3 * a + 1] += wij * dp[1][j] * s0[a];
-                cm[3 * a + 2] += wij * s1[a];
-                gv[3 * a] += gx * s0[a];
-                gv[3 * a + 1] += gy * s0[a];
-                gv[3 * a + 2] += wij * s2[a];
+            let (cx, cy) = (wij * dp[0][i], wij * dp[1][j]);
+            for l in 0..4 {
+                v[l] += wij * s0[l];
+                cc[0][l] += cx * s0[l];
+                cc[1][l] += cy * s0[l];
+                cc[2][l] += wij * s1[l];
+            }
+            if !MLS {
+                let gx = d0[i] * w1[j];
+                let gy = w0[i] * d1[j];
+                for l in 0..4 {
+                    gc[0][l] += gx * s0[l];
+                    gc[1][l] += gy * s0[l];
+                    gc[2][l] += wij * s2[l];
+                }
             }
         }
     }
     let inv_dx = k::<T>(c.inv_dx);
     let kc = T::c(4.0) * inv_dx;
-    for e in cm.iter_mut() {
-        *e *= kc;
-    }
-    if c.force_form == FORCE_MLS {
-        gv = cm;
+    let cm: [T; 9] = std::array::from_fn(|e| cc[e % 3][e / 3] * kc);
+    let gv = if MLS {
+        cm
     } else {
-        for e in gv.iter_mut() {
-            *e *= inv_dx;
-        }
-    }
+        std::array::from_fn(|e| gc[e % 3][e / 3] * inv_dx)
+    };
     Gathered {
-        v,
+        v: [v[0], v[1], v[2]],
         c: cm,
         grad_v: gv,
     }

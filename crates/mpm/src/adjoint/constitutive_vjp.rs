@@ -31,7 +31,7 @@
 
 use crate::constitutive::{scalar_model, MaterialParams, ModelIn, PlasticState, Scalar};
 use crate::material::PartConsts;
-use crate::math::{svd3, Mat3, Real};
+use crate::math::{svd3, Mat3, Real, Svd3};
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 /// Number of dual directions: 3 singular values, 2 plastic state entries, mu, lambda,
@@ -204,9 +204,37 @@ pub fn stress_update_vjp<T: Real>(
     tau_bar: Mat3<T>,
     state_bar: PlasticState<T>,
 ) -> ConstitutiveBar<T> {
+    let f64_trial: Mat3<f64> = f_trial.cast();
+    stress_update_vjp_svd(
+        &svd3(f64_trial),
+        pc,
+        state,
+        p,
+        dt,
+        fe_bar,
+        tau_bar,
+        state_bar,
+    )
+}
+
+/// [`stress_update_vjp`] given `svd`, the f64 SVD of F_trial (bitwise
+/// `svd3(f_trial.cast::<f64>())`, which is all the adjoint reads of F_trial; backends compute
+/// them in batches with [`crate::math::svd3_many`]).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn stress_update_vjp_svd<T: Real>(
+    svd: &Svd3<f64>,
+    pc: &PartConsts,
+    state: PlasticState<T>,
+    p: MaterialParams<T>,
+    dt: T,
+    fe_bar: Mat3<T>,
+    tau_bar: Mat3<T>,
+    state_bar: PlasticState<T>,
+) -> ConstitutiveBar<T> {
     let c = |x: T| x.f64();
     let b = stress_update_vjp_inner::<f64>(
-        f_trial.cast(),
+        svd,
         pc,
         state.map(c),
         MaterialParams {
@@ -237,7 +265,7 @@ pub fn stress_update_vjp<T: Real>(
 
 #[allow(clippy::too_many_arguments)]
 fn stress_update_vjp_inner<T: Real>(
-    f_trial: Mat3<T>,
+    svd: &Svd3<T>,
     pc: &PartConsts,
     state: PlasticState<T>,
     p: MaterialParams<T>,
@@ -250,7 +278,6 @@ fn stress_update_vjp_inner<T: Real>(
         pc.material != 6,
         "the fluid model is not differentiated yet"
     );
-    let svd = svd3(f_trial);
     let s = svd.sigma;
     let var = |v: T, i: usize| Dual::<T, DIRS>::var(v, i);
     let input = ModelIn {

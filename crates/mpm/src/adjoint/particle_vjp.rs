@@ -2,11 +2,11 @@
 //! stress, scatter) as one per-particle function, written once and called by every host
 //! backend's `p2g_vjp` kernel.
 
-use super::constitutive_vjp::stress_update_vjp;
+use super::constitutive_vjp::stress_update_vjp_svd;
 use super::transfer_vjp::{damped_affine_vjp, particle_bcs_vjp, scatter_vjp, ScatterBar};
 use crate::kernels::{ParticleBc, StepConsts};
 use crate::material::PartConsts;
-use crate::math::{Mat3, Real};
+use crate::math::{svd3, Mat3, Real, Svd3};
 use crate::params::{material_of, MAT_CONSTS, PARAM_ADJOINTS};
 use crate::transfer::{damped_affine, in_domain, k, stencil, stress_scale};
 
@@ -68,6 +68,36 @@ pub fn particle_stage_vjp<T: Real>(
     x_bar_g2p: &[T; 3],
     plastic_bar: &[T; 2],
 ) -> (ParticleBar<T>, [T; PARAM_ADJOINTS]) {
+    let svd = svd3(Mat3::from_array(*fw.f_trial).cast::<f64>());
+    particle_stage_vjp_svd(
+        fw,
+        &svd,
+        grid_in_bar,
+        n,
+        pbcs,
+        c,
+        fe_bar,
+        x_bar_g2p,
+        plastic_bar,
+    )
+}
+
+/// [`particle_stage_vjp`] given `svd`, the f64 SVD of F_trial (bitwise
+/// `svd3(f_trial.cast::<f64>())`; the CPU backend computes them in batches with
+/// [`crate::math::svd3_many`]).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn particle_stage_vjp_svd<T: Real>(
+    fw: &ParticleForward<T>,
+    svd: &Svd3<f64>,
+    grid_in_bar: &[[T; 4]],
+    n: usize,
+    pbcs: &[ParticleBc],
+    c: &StepConsts,
+    fe_bar: &[T; 9],
+    x_bar_g2p: &[T; 3],
+    plastic_bar: &[T; 2],
+) -> (ParticleBar<T>, [T; PARAM_ADJOINTS]) {
     let z = T::zero();
     if !in_domain(fw.x, k::<T>(c.inv_dx), n) {
         return (ParticleBar::default(), [z; PARAM_ADJOINTS]);
@@ -87,8 +117,8 @@ pub fn particle_stage_vjp<T: Real>(
         &mut sb,
     );
     let tau_bar = Mat3::from_array(sb.s).scaled(stress_scale(fw.vol0, c));
-    let cb = stress_update_vjp(
-        Mat3::from_array(*fw.f_trial),
+    let cb = stress_update_vjp_svd(
+        svd,
         fw.pc,
         fw.plastic,
         material_of(fw.mat),
