@@ -45,10 +45,15 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
             fe_bar,
             ..
         } = s;
-        self.run(|| {
-            grid_bar.par_iter_mut().for_each(|x| *x = [T::zero(); 4]);
+        let seq = self.sequential(np);
+        self.run_as(seq, || {
+            if seq {
+                grid_bar.fill([T::zero(); 4]);
+            } else {
+                grid_bar.par_iter_mut().for_each(|x| *x = [T::zero(); 4]);
+            }
             let per_slab: Vec<Vec<(u32, G2pBar<T>)>> =
-                slabs::scatter_by_slab(grid_bar, n * n, n, order, starts, |lo, ids, nodes| {
+                slabs::scatter_by_slab(seq, grid_bar, n * n, n, order, starts, |lo, ids, nodes| {
                     ids.iter()
                         .map(|&i| {
                             let p = i as usize;
@@ -69,13 +74,18 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
                         })
                         .collect()
                 });
-            x_bar
-                .par_iter_mut()
-                .zip(fe_bar.par_iter_mut())
-                .for_each(|(x, f)| {
-                    *x = [T::zero(); 3];
-                    *f = [T::zero(); 9];
-                });
+            if seq {
+                x_bar.fill([T::zero(); 3]);
+                fe_bar.fill([T::zero(); 9]);
+            } else {
+                x_bar
+                    .par_iter_mut()
+                    .zip(fe_bar.par_iter_mut())
+                    .for_each(|(x, f)| {
+                        *x = [T::zero(); 3];
+                        *f = [T::zero(); 9];
+                    });
+            }
             for (i, b) in per_slab.into_iter().flatten() {
                 debug_assert!(in_domain(before.x[i as usize], inv_dx, n));
                 x_bar[i as usize] = b.x;
@@ -95,18 +105,26 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
     ) -> Result<(), Infallible> {
         let bcs = &bcs[..c.n_grid_bcs as usize];
         let grid_bar = &s.grid_bar;
-        self.run(|| {
+        let plane_fn = |(i, plane): (usize, &mut [[T; 4]])| {
+            for (jk, out) in plane.iter_mut().enumerate() {
+                let idx = i * n * n + jk;
+                let ijk = [i, jk / n, jk % n];
+                *out = grid_node_vjp(ijk, tape.grid_in[idx], grid_bar[idx], bcs, c);
+            }
+        };
+        if self.sequential(n * n * n) {
             s.grid_in_bar
-                .par_chunks_mut(n * n)
+                .chunks_mut(n * n)
                 .enumerate()
-                .for_each(|(i, plane)| {
-                    for (jk, out) in plane.iter_mut().enumerate() {
-                        let idx = i * n * n + jk;
-                        let ijk = [i, jk / n, jk % n];
-                        *out = grid_node_vjp(ijk, tape.grid_in[idx], grid_bar[idx], bcs, c);
-                    }
-                });
-        });
+                .for_each(plane_fn);
+        } else {
+            self.run(|| {
+                s.grid_in_bar
+                    .par_chunks_mut(n * n)
+                    .enumerate()
+                    .for_each(plane_fn)
+            });
+        }
         Ok(())
     }
 
@@ -132,59 +150,84 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
         } = adj;
         // In chunks whose f64 SVDs of F_trial are computed side by side (bitwise `svd3`).
         const CHUNK: usize = crate::STRESS_CHUNK;
-        self.run(|| {
-            x.par_chunks_mut(CHUNK)
-                .zip(v.par_chunks_mut(CHUNK))
-                .zip(cm.par_chunks_mut(CHUNK))
-                .zip(f.par_chunks_mut(CHUNK))
-                .zip(plastic.par_chunks_mut(CHUNK))
-                .zip(s.pgrad.par_chunks_mut(CHUNK))
+        type Chunk<'a, T> = (
+            usize,
+            (
+                (
+                    (
+                        ((&'a mut [[T; 3]], &'a mut [[T; 3]]), &'a mut [[T; 9]]),
+                        &'a mut [[T; 9]],
+                    ),
+                    &'a mut [[T; 2]],
+                ),
+                &'a mut [[T; PARAM_ADJOINTS]],
+            ),
+        );
+        let stage = |(ci, (((((ax, av), ac), af), ap), pg)): Chunk<'_, T>| {
+            let i0 = ci * CHUNK;
+            let len = ax.len();
+            let mut fm = [Mat3::<f64>::default(); CHUNK];
+            for (j, m) in fm[..len].iter_mut().enumerate() {
+                *m = Mat3::from_array(before.f[i0 + j]).cast();
+            }
+            let mut svd = [Svd3::<f64>::default(); CHUNK];
+            svd3_many(&fm[..len], &mut svd[..len]);
+            for j in 0..len {
+                let i = i0 + j;
+                let slot = p.part[i] as usize;
+                let fw = ParticleForward {
+                    x0: p.x0[i],
+                    x: before.x[i],
+                    c: &before.c[i],
+                    f_trial: &before.f[i],
+                    plastic: before.plastic[i],
+                    v1: tape.v1[i],
+                    mass: p.mass[i],
+                    vol0: p.vol0[i],
+                    stress: &p.stress[i],
+                    pc: &t.parts[slot],
+                    mat: &t.mats[slot],
+                };
+                let (bar, g) = particle_stage_vjp_svd(
+                    &fw,
+                    &svd[j],
+                    grid_in_bar,
+                    n,
+                    pbcs,
+                    c,
+                    &fe_bar[i],
+                    &x_bar[i],
+                    &ap[j],
+                );
+                ax[j] = bar.x;
+                av[j] = bar.v;
+                ac[j] = bar.c;
+                af[j] = bar.f;
+                ap[j] = bar.plastic;
+                pg[j] = g;
+            }
+        };
+        if self.sequential(x.len()) {
+            x.chunks_mut(CHUNK)
+                .zip(v.chunks_mut(CHUNK))
+                .zip(cm.chunks_mut(CHUNK))
+                .zip(f.chunks_mut(CHUNK))
+                .zip(plastic.chunks_mut(CHUNK))
+                .zip(s.pgrad.chunks_mut(CHUNK))
                 .enumerate()
-                .for_each(|(ci, (((((ax, av), ac), af), ap), pg))| {
-                    let i0 = ci * CHUNK;
-                    let len = ax.len();
-                    let mut fm = [Mat3::<f64>::default(); CHUNK];
-                    for (j, m) in fm[..len].iter_mut().enumerate() {
-                        *m = Mat3::from_array(before.f[i0 + j]).cast();
-                    }
-                    let mut svd = [Svd3::<f64>::default(); CHUNK];
-                    svd3_many(&fm[..len], &mut svd[..len]);
-                    for j in 0..len {
-                        let i = i0 + j;
-                        let slot = p.part[i] as usize;
-                        let fw = ParticleForward {
-                            x0: p.x0[i],
-                            x: before.x[i],
-                            c: &before.c[i],
-                            f_trial: &before.f[i],
-                            plastic: before.plastic[i],
-                            v1: tape.v1[i],
-                            mass: p.mass[i],
-                            vol0: p.vol0[i],
-                            stress: &p.stress[i],
-                            pc: &t.parts[slot],
-                            mat: &t.mats[slot],
-                        };
-                        let (bar, g) = particle_stage_vjp_svd(
-                            &fw,
-                            &svd[j],
-                            grid_in_bar,
-                            n,
-                            pbcs,
-                            c,
-                            &fe_bar[i],
-                            &x_bar[i],
-                            &ap[j],
-                        );
-                        ax[j] = bar.x;
-                        av[j] = bar.v;
-                        ac[j] = bar.c;
-                        af[j] = bar.f;
-                        ap[j] = bar.plastic;
-                        pg[j] = g;
-                    }
-                });
-        });
+                .for_each(stage);
+        } else {
+            self.run(|| {
+                x.par_chunks_mut(CHUNK)
+                    .zip(v.par_chunks_mut(CHUNK))
+                    .zip(cm.par_chunks_mut(CHUNK))
+                    .zip(f.par_chunks_mut(CHUNK))
+                    .zip(plastic.par_chunks_mut(CHUNK))
+                    .zip(s.pgrad.par_chunks_mut(CHUNK))
+                    .enumerate()
+                    .for_each(stage)
+            });
+        }
         Ok(())
     }
 

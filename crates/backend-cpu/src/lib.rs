@@ -110,10 +110,31 @@ impl<T> CpuBackend<T> {
             None => f(),
         }
     }
+    /// Whether a kernel over `items` particles or nodes runs on the calling thread: always
+    /// with [`Par::Seq`], and below [`SEQUENTIAL_BELOW`] items, where handing the work to the
+    /// pool and waking its threads costs more than the work. The results do not depend on it
+    /// (every kernel is deterministic for any thread count).
+    fn sequential(&self, items: usize) -> bool {
+        self.par == Par::Seq || items < SEQUENTIAL_BELOW
+    }
+    /// Runs `f` on the calling thread when `seq`, else in the backend's pool.
+    fn run_as<R: Send>(&self, seq: bool, f: impl FnOnce() -> R + Send) -> R {
+        if seq {
+            f()
+        } else {
+            self.run(f)
+        }
+    }
 }
 
-/// Calls `f(bx, by, bz, block_nodes)` for each active block of an x-block slab.
+/// Kernels over fewer particles (or grid nodes) than this run on the calling thread
+/// ([`CpuBackend`]'s small-problem path): the demo's test-size scenes have a few hundred.
+pub const SEQUENTIAL_BELOW: usize = 2048;
+
+/// Calls `f(node_index, node)` for each node of an active block (x-block slabs in parallel
+/// unless `seq`).
 fn for_active_blocks<T: Send>(
+    seq: bool,
     nodes: &mut [[T; 4]],
     active: &[u32],
     n: usize,
@@ -121,30 +142,32 @@ fn for_active_blocks<T: Send>(
 ) {
     let nb = blocks_per_axis(n);
     let plane = BLOCK * n * n;
-    nodes
-        .par_chunks_mut(plane)
-        .enumerate()
-        .for_each(|(bx, slab)| {
-            let i0 = bx * BLOCK;
-            let i1 = (i0 + BLOCK).min(n);
-            for by in 0..nb {
-                for bz in 0..nb {
-                    if active[(bx * nb + by) * nb + bz] == 0 {
-                        continue;
-                    }
-                    let (j0, j1) = (by * BLOCK, (by * BLOCK + BLOCK).min(n));
-                    let (k0, k1) = (bz * BLOCK, (bz * BLOCK + BLOCK).min(n));
-                    for i in i0..i1 {
-                        for j in j0..j1 {
-                            let row = ((i - i0) * n + j) * n;
-                            for (k, node) in slab[row + k0..row + k1].iter_mut().enumerate() {
-                                f([i, j, k0 + k], node);
-                            }
+    let slab_fn = |(bx, slab): (usize, &mut [[T; 4]])| {
+        let i0 = bx * BLOCK;
+        let i1 = (i0 + BLOCK).min(n);
+        for by in 0..nb {
+            for bz in 0..nb {
+                if active[(bx * nb + by) * nb + bz] == 0 {
+                    continue;
+                }
+                let (j0, j1) = (by * BLOCK, (by * BLOCK + BLOCK).min(n));
+                let (k0, k1) = (bz * BLOCK, (bz * BLOCK + BLOCK).min(n));
+                for i in i0..i1 {
+                    for j in j0..j1 {
+                        let row = ((i - i0) * n + j) * n;
+                        for (k, node) in slab[row + k0..row + k1].iter_mut().enumerate() {
+                            f([i, j, k0 + k], node);
                         }
                     }
                 }
             }
-        });
+        }
+    };
+    if seq {
+        nodes.chunks_mut(plane).enumerate().for_each(slab_fn);
+    } else {
+        nodes.par_chunks_mut(plane).enumerate().for_each(slab_fn);
+    }
 }
 
 impl<T: Real> MpmKernels for CpuBackend<T> {
@@ -162,11 +185,12 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
     ) -> Result<(), Infallible> {
         let bcs = &bcs[..c.n_particle_bcs as usize];
         let (x0, mass) = (&p.x0, &p.mass);
-        self.run(|| {
-            p.v.par_iter_mut().enumerate().for_each(|(i, v)| {
-                particle_bcs(x0[i], v, mass[i], bcs, c);
-            })
-        });
+        let body = |(i, v): (usize, &mut [T; 3])| particle_bcs(x0[i], v, mass[i], bcs, c);
+        if self.sequential(p.count) {
+            p.v.iter_mut().enumerate().for_each(body);
+        } else {
+            self.run(|| p.v.par_iter_mut().enumerate().for_each(body));
+        }
         Ok(())
     }
 
@@ -186,49 +210,69 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
         if g.scratch.len() != 2 * np + n_slabs + 1 {
             g.scratch = vec![0; 2 * np + n_slabs + 1];
         }
-        self.run(|| {
+        let seq = self.sequential(np);
+        self.run_as(seq, || {
             // 1. Clear the blocks touched last substep (every other node is zero).
-            for_active_blocks(&mut g.nodes, &g.active, n, |_, node| *node = [T::zero(); 4]);
+            for_active_blocks(seq, &mut g.nodes, &g.active, n, |_, node| {
+                *node = [T::zero(); 4]
+            });
 
             // 2. Particle stage: return mapping + stress; key = stencil base cell.
             let (keys, rest) = g.scratch.split_at_mut(np);
             let (order, starts) = rest.split_at_mut(np);
             // In chunks whose SVDs are computed side by side (bitwise `svd3` of each F).
             let (x, cm, vol0, part) = (&p.x, &p.c, &p.vol0, &p.part);
-            p.f.par_chunks_mut(STRESS_CHUNK)
-                .zip(p.plastic.par_chunks_mut(STRESS_CHUNK))
-                .zip(p.stress.par_chunks_mut(STRESS_CHUNK))
-                .zip(keys.par_chunks_mut(STRESS_CHUNK))
-                .enumerate()
-                .for_each(|(ci, (((f, pl), s), key))| {
-                    let len = f.len();
-                    let mut fm = [Mat3::<T>::default(); STRESS_CHUNK];
-                    for (m, fi) in fm.iter_mut().zip(f.iter()) {
-                        *m = Mat3::from_array(*fi);
-                    }
-                    let mut svd = [Svd3::<T>::default(); STRESS_CHUNK];
-                    svd3_many(&fm[..len], &mut svd[..len]);
-                    for j in 0..len {
-                        let i = ci * STRESS_CHUNK + j;
-                        let slot = part[i] as usize;
-                        s[j] = particle_stress_svd(
-                            &mut f[j],
-                            &svd[j],
-                            &mut pl[j],
-                            &cm[i],
-                            vol0[i],
-                            &parts[slot],
-                            &mats[slot],
-                            c,
-                        );
-                        key[j] = if in_domain(x[i], inv_dx, n) {
-                            let b = stencil(x[i], inv_dx).base;
-                            ((b[0] as usize * n + b[1] as usize) * n + b[2] as usize) as u32
-                        } else {
-                            u32::MAX
-                        };
-                    }
-                });
+            type Chunk<'a, T> = (
+                usize,
+                (
+                    ((&'a mut [[T; 9]], &'a mut [[T; 2]]), &'a mut [[T; 9]]),
+                    &'a mut [u32],
+                ),
+            );
+            let stage = |(ci, (((f, pl), s), key)): Chunk<'_, T>| {
+                let len = f.len();
+                let mut fm = [Mat3::<T>::default(); STRESS_CHUNK];
+                for (m, fi) in fm.iter_mut().zip(f.iter()) {
+                    *m = Mat3::from_array(*fi);
+                }
+                let mut svd = [Svd3::<T>::default(); STRESS_CHUNK];
+                svd3_many(&fm[..len], &mut svd[..len]);
+                for j in 0..len {
+                    let i = ci * STRESS_CHUNK + j;
+                    let slot = part[i] as usize;
+                    s[j] = particle_stress_svd(
+                        &mut f[j],
+                        &svd[j],
+                        &mut pl[j],
+                        &cm[i],
+                        vol0[i],
+                        &parts[slot],
+                        &mats[slot],
+                        c,
+                    );
+                    key[j] = if in_domain(x[i], inv_dx, n) {
+                        let b = stencil(x[i], inv_dx).base;
+                        ((b[0] as usize * n + b[1] as usize) * n + b[2] as usize) as u32
+                    } else {
+                        u32::MAX
+                    };
+                }
+            };
+            if seq {
+                p.f.chunks_mut(STRESS_CHUNK)
+                    .zip(p.plastic.chunks_mut(STRESS_CHUNK))
+                    .zip(p.stress.chunks_mut(STRESS_CHUNK))
+                    .zip(keys.chunks_mut(STRESS_CHUNK))
+                    .enumerate()
+                    .for_each(stage);
+            } else {
+                p.f.par_chunks_mut(STRESS_CHUNK)
+                    .zip(p.plastic.par_chunks_mut(STRESS_CHUNK))
+                    .zip(p.stress.par_chunks_mut(STRESS_CHUNK))
+                    .zip(keys.par_chunks_mut(STRESS_CHUNK))
+                    .enumerate()
+                    .for_each(stage);
+            }
 
             // 3. Mark the active blocks; sort the particles by slab.
             g.active.fill(0);
@@ -254,14 +298,22 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
 
             // 4. Scatter: even slabs in parallel, then odd slabs.
             let (v, mass, stress) = (&p.v, &p.mass, &p.stress);
-            slabs::scatter_by_slab(&mut g.nodes, n * n, n, order, starts, |lo, ids, nodes| {
-                for &i in ids {
-                    let i = i as usize;
-                    let st = stencil(x[i], inv_dx);
-                    let a = damped_affine(&cm[i], c.rpic_damping);
-                    scatter(nodes, lo, n, &st, v[i], &a, mass[i], &stress[i], c);
-                }
-            });
+            slabs::scatter_by_slab(
+                seq,
+                &mut g.nodes,
+                n * n,
+                n,
+                order,
+                starts,
+                |lo, ids, nodes| {
+                    for &i in ids {
+                        let i = i as usize;
+                        let st = stencil(x[i], inv_dx);
+                        let a = damped_affine(&cm[i], c.rpic_damping);
+                        scatter(nodes, lo, n, &st, v[i], &a, mass[i], &stress[i], c);
+                    }
+                },
+            );
         });
         Ok(())
     }
@@ -274,8 +326,10 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
     ) -> Result<(), Infallible> {
         let bcs = &bcs[..c.n_grid_bcs as usize];
         let n = g.n;
-        self.run(|| {
-            for_active_blocks(&mut g.nodes, &g.active, n, |ijk, node| {
+        let active_nodes = g.active.iter().filter(|&&a| a != 0).count() * BLOCK.pow(3);
+        let seq = self.sequential(active_nodes);
+        self.run_as(seq, || {
+            for_active_blocks(seq, &mut g.nodes, &g.active, n, |ijk, node| {
                 grid_node_update(ijk, node, bcs, c)
             })
         });
@@ -291,31 +345,48 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
         let n = g.n;
         let nodes = &g.nodes;
         let inv_dx = k::<T>(c.inv_dx);
-        let worst = self.run(|| {
-            p.x.par_iter_mut()
-                .zip(p.v.par_iter_mut())
-                .zip(p.c.par_iter_mut())
-                .zip(p.f.par_iter_mut())
+        type Item<'a, T> = (
+            usize,
+            (
+                ((&'a mut [T; 3], &'a mut [T; 3]), &'a mut [T; 9]),
+                &'a mut [T; 9],
+            ),
+        );
+        type Problem = Option<(u32, u32, f32)>;
+        let earliest = |a: Problem, b: Problem| match (a, b) {
+            (Some(a), Some(b)) => Some(if a.1 <= b.1 { a } else { b }),
+            (a, None) => a,
+            (None, b) => b,
+        };
+        let one = |(i, (((x, v), cm), f)): Item<'_, T>| -> Problem {
+            if !in_domain(*x, inv_dx, n) {
+                let worst = out_of_domain_coordinate(*x, inv_dx, n);
+                return Some((HEALTH_OUT_OF_DOMAIN, i as u32, worst));
+            }
+            let st = stencil(*x, inv_dx);
+            let gathered = gather(nodes, n, &st, c);
+            let (code, val) = g2p_finish(&gathered, x, v, cm, f, c);
+            (code != 0).then_some((code, i as u32, val))
+        };
+        let worst = if self.sequential(p.count) {
+            p.x.iter_mut()
+                .zip(p.v.iter_mut())
+                .zip(p.c.iter_mut())
+                .zip(p.f.iter_mut())
                 .enumerate()
-                .map(|(i, (((x, v), cm), f))| {
-                    if !in_domain(*x, inv_dx, n) {
-                        let worst = out_of_domain_coordinate(*x, inv_dx, n);
-                        return Some((HEALTH_OUT_OF_DOMAIN, i as u32, worst));
-                    }
-                    let st = stencil(*x, inv_dx);
-                    let gathered = gather(nodes, n, &st, c);
-                    let (code, val) = g2p_finish(&gathered, x, v, cm, f, c);
-                    (code != 0).then_some((code, i as u32, val))
-                })
-                .reduce(
-                    || None,
-                    |a, b| match (a, b) {
-                        (Some(a), Some(b)) => Some(if a.1 <= b.1 { a } else { b }),
-                        (a, None) => a,
-                        (None, b) => b,
-                    },
-                )
-        });
+                .map(one)
+                .fold(None, earliest)
+        } else {
+            self.run(|| {
+                p.x.par_iter_mut()
+                    .zip(p.v.par_iter_mut())
+                    .zip(p.c.par_iter_mut())
+                    .zip(p.f.par_iter_mut())
+                    .enumerate()
+                    .map(one)
+                    .reduce(|| None, earliest)
+            })
+        };
         if let Some((code, i, val)) = worst {
             record(&mut g.health[0], code, c.substep, i, val);
         }

@@ -42,9 +42,10 @@ pub fn sort_by_slab(base_x: &[Option<u32>], n: usize, order: &mut [u32], starts:
 }
 
 /// Runs `f(x_lo, ids, slab_nodes)` for every non-empty slab, even slabs in parallel, then odd
-/// ones. `nodes` is the x-major grid with `layer` entries per x layer; `slab_nodes` starts at
-/// layer `x_lo`. Returns the results in slab order.
+/// ones (all on the calling thread when `seq`). `nodes` is the x-major grid with `layer`
+/// entries per x layer; `slab_nodes` starts at layer `x_lo`. Returns the results in slab order.
 pub fn scatter_by_slab<T: Send, R: Send>(
+    seq: bool,
     nodes: &mut [T],
     layer: usize,
     n: usize,
@@ -70,10 +71,17 @@ pub fn scatter_by_slab<T: Send, R: Send>(
                 tasks.push((lo, ids, mine));
             }
         }
-        let results: Vec<R> = tasks
-            .into_par_iter()
-            .map(|(lo, ids, slab)| f(lo, ids, slab))
-            .collect();
+        let results: Vec<R> = if seq {
+            tasks
+                .into_iter()
+                .map(|(lo, ids, slab)| f(lo, ids, slab))
+                .collect()
+        } else {
+            tasks
+                .into_par_iter()
+                .map(|(lo, ids, slab)| f(lo, ids, slab))
+                .collect()
+        };
         out.extend(results);
     }
     out
