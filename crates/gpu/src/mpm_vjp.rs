@@ -27,7 +27,7 @@
 //!
 //! A particle outside the grid is skipped by the transfers and gets a zero adjoint, as on the
 //! CPU. Scattered sums follow the hardware's order: results are not bitwise reproducible.
-//! Measured on wgpu against the CPU backend in f32 (tests/adjoint_conformance.rs, 2142 particles, 3 frames x 20
+//! Measured on wgpu against the CPU backend in f32 (tests/backends/adjoint_conformance.rs, 2142 particles, 3 frames x 20
 //! substeps, every boundary condition kind): jelly within 1.2e-4 relative; metal, sand,
 //! foam, plasticine within 5e-4, snow 1.1e-3 (6e-3 on a nearly cancelled gradient); the
 //! initial F adjoint within 1.4e-4 except sand's 1.2e-2 (f32 near the Drucker-Prager apex)

@@ -1,7 +1,7 @@
 //! LPIPS without pretrained weights: random weights, against a straightforward f64
 //! reference written here (direct convolution loops, the official formula), and the
 //! weights file's errors. The golden values with the real weights are checked by the
-//! root package's `tests/lpips.rs`.
+//! root package's `tests/references/lpips.rs`.
 
 use super::*;
 use std::collections::HashMap;

@@ -9,7 +9,7 @@
 //! `../shared/ref/mpm/README.md` for what PhysGaussian's solver gets on the same stubby beam
 //! (-1.1% against Timoshenko).
 
-mod common;
+use crate::common;
 
 use common::scenes::config;
 use r4d_backend_cpu::CpuBackend;

@@ -4,7 +4,7 @@
 //! the pixel coordinates of known points in every camera convention. Then `dataset inspect
 //! --json`, typed errors, and a multi-view fit from a dataset folder.
 
-mod common;
+use crate::common;
 
 use r4d_datasets::{load, Dataset, LoadOptions};
 use std::path::{Path, PathBuf};

@@ -4,7 +4,7 @@
 //! gradient array within 5e-3 relative L2 with matching sign patterns. Run for the
 //! single-threaded reference (f32 and f64) and the parallel CPU backend.
 
-mod common;
+use crate::common;
 use common::{fixture, read_npy, Array};
 use r4d_backend_cpu::splat::CpuSplat;
 use r4d_splat::project::CamParams;

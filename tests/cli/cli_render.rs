@@ -1,7 +1,7 @@
 //! `r4d render` and `r4d prepare`: raw output against the gsplat golden, the simulation link
 //! end to end (prepare -> simulate -> render), sequences, and errors.
 
-mod common;
+use crate::common;
 
 use common::{fixture, parse_npy, read_npy};
 use std::path::PathBuf;

@@ -1,7 +1,7 @@
 //! Physics checks of the simulator: conservation, analytic free fall, determinism of the
 //! parallel backend and agreement with the single-threaded reference.
 
-mod common;
+use crate::common;
 
 use common::scenes::{boxed, config, jelly};
 use r4d_backend_cpu::{CpuBackend, Par};

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-mod common;
+use crate::common;
 
 fn r4d(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_r4d"))
@@ -221,7 +221,7 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
             })
             .collect()
     };
-    // Kill instants from a seeded generator (R4D_FAULT_SEED, as tests/fault_injection.rs).
+    // Kill instants from a seeded generator (R4D_FAULT_SEED, as tests/robustness/fault_injection.rs).
     let mut seed: u64 = std::env::var("R4D_FAULT_SEED")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -305,7 +305,7 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
 
 /// `r4d fit` on PhysGaussian's fitting case (a video PhysGaussian's solver simulated and
 /// gsplat rendered, 8-bit PNG frames of camera 0): E/density within 10%. Minutes: run with
-/// `cargo test --release --test cli_fit -- --ignored`.
+/// `cargo test --release --test cli -- cli_fit:: --ignored`.
 #[test]
 #[ignore]
 fn physgaussian_fit_jelly_arch_recovers_e_over_density() {

@@ -8,7 +8,7 @@
 //! ignored, with the reason (see `build.rs`); the pipeline itself is still checked with random
 //! weights against a reference implementation in `r4d-loss` (`lpips::tests`).
 
-mod common;
+use crate::common;
 
 use common::fixture;
 use r4d_loss::lpips::{Lpips, LpipsNet};

@@ -4,7 +4,7 @@
 //! Jelly: every particle within 0.05 dx at every frame. Metal, sand, plasticine (path
 //! dependent): centroid within 0.25 dx and bounding box within 0.5 dx at every frame.
 
-mod common;
+use crate::common;
 
 use common::{fixture, read_npz, Array};
 use r4d_backend_cpu::CpuBackend;

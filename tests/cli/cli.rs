@@ -1,6 +1,6 @@
 //! The `r4d` binary: output layout and formats, PhysGaussian import, error exit codes.
 
-mod common;
+use crate::common;
 
 use common::fixture;
 use r4d_mpm::ply::read_ply;

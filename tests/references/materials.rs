@@ -1,6 +1,6 @@
 //! Every material shows its signature, checked with numbers.
 
-mod common;
+use crate::common;
 
 use common::scenes::{bbox, boxed, config, jelly, sim};
 use r4d_backend_cpu::CpuBackend;

@@ -3,7 +3,7 @@
 //! fitted parameters to 1% (issue 9's CPU-vs-wgpu bound). Skipped without an adapter unless
 //! `R4D_REQUIRE_GPU=1`.
 
-mod common;
+use crate::common;
 
 use common::fixture;
 use r4d_backend_cpu::CpuBackend;
@@ -48,7 +48,7 @@ fn vulkan_fit_matches_the_cpu_fit() {
 }
 
 fn gpu_fit_matches_the_cpu_fit(gpu: std::sync::Arc<dyn Compute>) {
-    // The sagging beam of tests/fit_trajectory.rs, over two frames, from E 10x off (as there).
+    // The sagging beam of tests/fits/fit_trajectory.rs, over two frames, from E 10x off (as there).
     let mut truth = SimConfig::load(&fixture("fit/beam.toml")).unwrap();
     truth.time.frames = 2;
     let scene = ParticleSet::from_shapes(&truth.shapes, truth.domain.dx());

@@ -1,7 +1,7 @@
 //! Point-trajectory metrics against `../shared/ref/metrics` (numpy + scipy cKDTree goldens,
 //! copied to `tests/fixtures/metrics`): every variant, every pair, the trajectory means.
 
-mod common;
+use crate::common;
 use common::{fixture, read_npz, Array};
 use r4d_loss::trajectory::{cloud_metrics, trajectory_metrics, CloudMetrics, REFERENCE_TAUS};
 use serde_json::Value;

@@ -1,7 +1,7 @@
 //! Recovery of material parameters from trajectories with the adjoint gradients
 //! (`resonance4d::fit_trajectory`; no finite differences or derivative-free search).
 
-mod common;
+use crate::common;
 
 use common::fixture;
 use r4d_backend_cpu::CpuBackend;

@@ -7,7 +7,7 @@
 //!
 //! Run with `--nocapture` to see the worst error of every quantity.
 
-mod common;
+use crate::common;
 
 use common::{fixture, read_npz, Array};
 use r4d_loss::metrics::{l1, psnr};

@@ -1,7 +1,7 @@
 //! `r4d metrics`: videos as PNG directories (8-bit, as `r4d render --frames` writes them) and
 //! float32 `.npy`, against the loss goldens (`tests/fixtures/loss/`), and its errors.
 
-mod common;
+use crate::common;
 
 use common::fixture;
 use r4d_loss::io::{write_npy, write_png_dir};

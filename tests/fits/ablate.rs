@@ -2,7 +2,7 @@
 //! per variant, a two-shard run merges to the unsharded `ablation.json` byte for byte, a
 //! finished variant is not fitted again, and gaps and overlaps in a shard set are refused.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -1,7 +1,7 @@
 //! Bad input and exploding simulations give typed errors that name the file, field, frame
 //! and substep; never a panic, never silent garbage.
 
-mod common;
+use crate::common;
 
 use common::scenes::{boxed, config, jelly};
 use r4d_backend_cpu::CpuBackend;

@@ -343,7 +343,7 @@ fn plastic_materials() -> Vec<(&'static str, PartParams)> {
 }
 
 /// Bounds: 1e-2 relative per gradient (floored at 1e-2 of the field's largest slot gradient), as
-/// the f32 CPU adjoint's own bound against f64 for these models (tests/adjoint_parallel.rs);
+/// the f32 CPU adjoint's own bound against f64 for these models (tests/backends/adjoint_parallel.rs);
 /// measured on lavapipe, either scatter: <= 5e-4 for metal, sand, foam and plasticine, snow
 /// 1.1e-3 (d/dnu of part 1) and 6e-3 on its nearly cancelled d/dE. Initial adjoint: x, v
 /// 1e-3 (measured 1.4e-5); F 5e-2 (measured up to 1.2e-2, sand; 1.4e-4 metal).
