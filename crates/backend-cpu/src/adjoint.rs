@@ -112,7 +112,7 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
                 *out = grid_node_vjp(ijk, tape.grid_in[idx], grid_bar[idx], bcs, c);
             }
         };
-        if self.sequential(n * n * n) {
+        if self.sequential_nodes(n * n * n) {
             s.grid_in_bar
                 .chunks_mut(n * n)
                 .enumerate()

@@ -110,12 +110,17 @@ impl<T> CpuBackend<T> {
             None => f(),
         }
     }
-    /// Whether a kernel over `items` particles or nodes runs on the calling thread: always
-    /// with [`Par::Seq`], and below [`SEQUENTIAL_BELOW`] items, where handing the work to the
+    /// Whether a kernel over `particles` particles runs on the calling thread: always with
+    /// [`Par::Seq`], and below [`SEQUENTIAL_BELOW`] particles, where handing the work to the
     /// pool and waking its threads costs more than the work. The results do not depend on it
     /// (every kernel is deterministic for any thread count).
-    fn sequential(&self, items: usize) -> bool {
-        self.par == Par::Seq || items < SEQUENTIAL_BELOW
+    fn sequential(&self, particles: usize) -> bool {
+        self.par == Par::Seq || particles < SEQUENTIAL_BELOW
+    }
+    /// [`Self::sequential`] for a kernel over `nodes` grid nodes (a node's work is about
+    /// [`NODES_PER_PARTICLE`] times cheaper than a particle's).
+    fn sequential_nodes(&self, nodes: usize) -> bool {
+        self.sequential(nodes / NODES_PER_PARTICLE)
     }
     /// Runs `f` on the calling thread when `seq`, else in the backend's pool.
     fn run_as<R: Send>(&self, seq: bool, f: impl FnOnce() -> R + Send) -> R {
@@ -127,9 +132,13 @@ impl<T> CpuBackend<T> {
     }
 }
 
-/// Kernels over fewer particles (or grid nodes) than this run on the calling thread
-/// ([`CpuBackend`]'s small-problem path): the demo's test-size scenes have a few hundred.
-pub const SEQUENTIAL_BELOW: usize = 2048;
+/// Kernels over fewer particles than this run on the calling thread ([`CpuBackend`]'s
+/// small-problem path): the demo's test-size scenes have a few hundred particles, the plant
+/// demo 1 836 (parallel).
+pub const SEQUENTIAL_BELOW: usize = 1024;
+
+/// Grid nodes counted as one particle's work by the small-problem rule.
+pub const NODES_PER_PARTICLE: usize = 8;
 
 /// Calls `f(node_index, node)` for each node of an active block (x-block slabs in parallel
 /// unless `seq`).
@@ -327,7 +336,7 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
         let bcs = &bcs[..c.n_grid_bcs as usize];
         let n = g.n;
         let active_nodes = g.active.iter().filter(|&&a| a != 0).count() * BLOCK.pow(3);
-        let seq = self.sequential(active_nodes);
+        let seq = self.sequential_nodes(active_nodes);
         self.run_as(seq, || {
             for_active_blocks(seq, &mut g.nodes, &g.active, n, |ijk, node| {
                 grid_node_update(ijk, node, bcs, c)
