@@ -7,8 +7,10 @@
 //! * [`vec3`]: 3-vectors as `[T; 3]` (dot, cross, norm, ...);
 //! * [`m3`]: 3x3 matrices as row-major `[[T; 3]; 3]` arrays (products, transposes,
 //!   determinant, casts); [`Mat3`] is a typed wrapper whose operators call these functions;
-//! * [`eigen::sym_eigen`]: cyclic Jacobi eigen-decomposition of a symmetric matrix;
-//! * [`svd::svd3`]: the SVD with PhysGaussian's sign conventions, built on `sym_eigen`;
+//! * [`eigen::sym_eigen`]: cyclic Jacobi eigen-decomposition of a symmetric matrix
+//!   ([`eigen::sym_eigen_lanes`]: several side by side, bitwise the same results);
+//! * [`svd::svd3`]: the SVD with PhysGaussian's sign conventions, built on `sym_eigen`
+//!   ([`svd::svd3_many`]: many at once, 8 per batch, AVX2 when the processor has it);
 //! * [`polar`]: the polar rotation and its VJP.
 //!
 //! ```
