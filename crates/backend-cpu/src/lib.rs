@@ -42,7 +42,7 @@ pub use slabs::SLAB;
 
 /// Particles per work item of the particle stress stage: their SVDs are computed side by side
 /// ([`r4d_mpm::math::svd3_many`]).
-const STRESS_CHUNK: usize = 64;
+const STRESS_CHUNK: usize = 8 * r4d_mpm::math::SVD_BATCH;
 
 /// Parallelism of the CPU backend.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]

@@ -225,7 +225,21 @@ mod tests {
                 a.u.to_array().map(f64::to_bits),
                 b.u.to_array().map(f64::to_bits)
             );
+            assert_eq!(
+                a.v.to_array().map(f64::to_bits),
+                b.v.to_array().map(f64::to_bits)
+            );
             assert_eq!(a.sigma.map(f64::to_bits), b.sigma.map(f64::to_bits));
+        }
+        // The portable lanes (what runs without AVX2) give the same bits too.
+        let first: &[Mat3<f32>; SVD_BATCH] = f[..SVD_BATCH].try_into().unwrap();
+        for (fi, b) in first.iter().zip(svd3_lanes(first)) {
+            let a = svd3(*fi);
+            assert_eq!(
+                a.u.to_array().map(f32::to_bits),
+                b.u.to_array().map(f32::to_bits)
+            );
+            assert_eq!(a.sigma.map(f32::to_bits), b.sigma.map(f32::to_bits));
         }
     }
 
