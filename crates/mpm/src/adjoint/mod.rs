@@ -38,4 +38,6 @@ pub mod trajectory_loss;
 pub mod transfer_vjp;
 
 #[cfg(test)]
+mod per_node_vjp;
+#[cfg(test)]
 mod tests;

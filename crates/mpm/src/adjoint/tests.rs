@@ -1095,3 +1095,67 @@ mod precision {
         }
     }
 }
+
+/// Largest absolute difference between two slices, relative to the largest entry of `a`.
+fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
+    let scale = a.iter().fold(1e-300f64, |m, v| m.max(v.abs()));
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        / scale
+}
+
+#[test]
+fn separable_transfer_vjps_match_the_node_by_node_oracle() {
+    use super::per_node_vjp::{g2p_vjp_per_node, scatter_vjp_per_node};
+    for force in [FORCE_CLASSIC, FORCE_MLS] {
+        let c = consts(force);
+        let mut r = Rng(101 + force as u64);
+        for _ in 0..20 {
+            let x: [f64; 3] = std::array::from_fn(|a| 0.3 + 0.4 * r.next().abs() + 0.01 * a as f64);
+            let bar: Vec<[f64; 4]> = (0..N * N * N).map(|_| r.arr(1.0)).collect();
+            let st = stencil(x, 8.0);
+            let (v, a, s): ([f64; 3], [f64; 9], [f64; 9]) = (r.arr(1.0), r.arr(3.0), r.arr(2.0));
+            let m = 0.5 + r.next().abs();
+            let (mut fast, mut slow) = (ScatterBar::default(), ScatterBar::default());
+            scatter_vjp(&bar, N, &st, v, &a, m, &s, &c, &mut fast);
+            scatter_vjp_per_node(&bar, N, &st, v, &a, m, &s, &c, &mut slow);
+            let flat = |b: &ScatterBar<f64>| {
+                let mut o = Vec::new();
+                o.extend_from_slice(&b.x);
+                o.extend_from_slice(&b.v);
+                o.extend_from_slice(&b.a);
+                o.push(b.mass);
+                o.extend_from_slice(&b.s);
+                o
+            };
+            let e = rel_diff(&flat(&slow), &flat(&fast));
+            assert!(e < 1e-13, "scatter_vjp, force {force}: rel diff {e:e}");
+
+            let nodes: Vec<[f64; 4]> = (0..N * N * N)
+                .map(|_| [r.next(), r.next(), r.next(), 1.0 + r.next().abs()])
+                .collect();
+            let fe: [f64; 9] =
+                std::array::from_fn(|e| if e % 4 == 0 { 1.0 } else { 0.0 } + 0.2 * r.next());
+            let (xb, vb, cb, fb): ([f64; 3], [f64; 3], [f64; 9], [f64; 9]) =
+                (r.arr(1.0), r.arr(1.0), r.arr(1.0), r.arr(1.0));
+            let init: Vec<[f64; 4]> = (0..N * N * N).map(|_| r.arr(1.0)).collect();
+            let (mut nb_fast, mut nb_slow) = (init.clone(), init);
+            let f = g2p_vjp(&nodes, N, x, &fe, &c, xb, vb, &cb, &fb, &mut nb_fast, 0);
+            let g = g2p_vjp_per_node(&nodes, N, x, &fe, &c, xb, vb, &cb, &fb, &mut nb_slow, 0);
+            let e = rel_diff(
+                &[g.x.as_slice(), &g.f_elastic].concat(),
+                &[f.x.as_slice(), &f.f_elastic].concat(),
+            );
+            assert!(
+                e < 1e-13,
+                "g2p_vjp particle adjoints, force {force}: rel diff {e:e}"
+            );
+            let e = rel_diff(nb_slow.as_flattened(), nb_fast.as_flattened());
+            assert!(
+                e < 1e-13,
+                "g2p_vjp node adjoints, force {force}: rel diff {e:e}"
+            );
+        }
+    }
+}

@@ -4,8 +4,10 @@
 //!
 //! Each function takes the forward inputs (recomputed from a checkpoint by the caller) and the
 //! adjoints of the forward outputs, and *accumulates* (`+=`) into the adjoints of the inputs.
-//! Written for clarity over speed (plain loops over the 27 stencil nodes), generic over
-//! [`Real`] so they are checked against f64 finite differences; the fast backends mirror them.
+//! Generic over [`Real`] so they are checked against f64 finite differences; the host
+//! backends call them, the GPU backends mirror them. The P2G and G2P adjoints sum over the 27
+//! stencil nodes axis by axis (the weights are products of one factor per axis); their
+//! node-by-node derivation is the test oracle.
 //!
 //! Non-smooth points (a boundary condition switching on a velocity sign, the truncation of the
 //! stencil base, the out-of-domain clamp) are differentiated piecewise: the derivative of the
@@ -60,45 +62,61 @@ pub fn damped_affine_vjp<T: Real>(a_bar: &[T; 9], r: f32) -> [T; 9] {
     crate::transfer::damped_affine(a_bar, r)
 }
 
-/// Grid index of the stencil node at offset `off` (full grid of `n` nodes per axis).
+/// `acc += k v` on four lanes (one node's entries; the compiler vectorises it).
 #[inline(always)]
-fn node_index<T>(st: &Stencil<T>, off: [usize; 3], n: usize) -> usize {
-    ((st.base[0] as usize + off[0]) * n + st.base[1] as usize + off[1]) * n
-        + st.base[2] as usize
-        + off[2]
+fn fma4<T: Real>(acc: &mut [T; 4], k: T, v: &[T; 4]) {
+    for l in 0..4 {
+        acc[l] += k * v[l];
+    }
 }
 
-/// Stencil weight of node offset `o` and its derivatives with respect to `fx` on each axis.
+/// The offsets of the stencil nodes from the particle in cells: `d[a][o] = o - fx[a]`.
 #[inline(always)]
-fn weight_and_grad<T: Real>(st: &Stencil<T>, o: [usize; 3]) -> (T, [T; 3]) {
-    let w = st.w[0][o[0]] * st.w[1][o[1]] * st.w[2][o[2]];
-    let dw = [
-        st.dw[0][o[0]] * st.w[1][o[1]] * st.w[2][o[2]],
-        st.w[0][o[0]] * st.dw[1][o[1]] * st.w[2][o[2]],
-        st.w[0][o[0]] * st.w[1][o[1]] * st.dw[2][o[2]],
-    ];
-    (w, dw)
+fn offsets<T: Real>(st: &Stencil<T>) -> [[T; 3]; 3] {
+    std::array::from_fn(|a| std::array::from_fn(|o| T::c(o as f64) - st.fx[a]))
 }
 
-/// The classic-form weight gradient `g_b = dN_b/d(x_b/dx)` of node offset `o`, and
-/// `dg[b][a] = d g_b / d fx_a`.
+/// Adds one stencil column's `(i, j)` share to the classic form's weight-gradient moments:
+/// `g[b] += sum_k g_b y` and the six distinct second moments
+/// `h = [H00, H11, H22, H01, H02, H12]`, `H_ba = sum_k dg_b/dfx_a y`, where `r0`, `r2`, `r3`
+/// are the column's sums of `w_k y`, `dw_k y` and `ddw_k y` over its three nodes.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn grad_and_hessian<T: Real>(st: &Stencil<T>, o: [usize; 3]) -> ([T; 3], [[T; 3]; 3]) {
-    let h = |b: usize, c: usize, a: Option<usize>| -> T {
-        // Factor of axis c in g_b, differentiated once more along `a` when a == Some(c).
-        let first = b == c;
-        let second = a == Some(c);
-        match (first, second) {
-            (false, false) => st.w[c][o[c]],
-            (true, false) | (false, true) => st.dw[c][o[c]],
-            (true, true) => T::c(DDW[o[c]]),
-        }
-    };
-    let g = std::array::from_fn(|b| h(b, 0, None) * h(b, 1, None) * h(b, 2, None));
-    let dg = std::array::from_fn(|b| {
-        std::array::from_fn(|a| h(b, 0, Some(a)) * h(b, 1, Some(a)) * h(b, 2, Some(a)))
-    });
-    (g, dg)
+fn classic_moments<T: Real>(
+    st: &Stencil<T>,
+    i: usize,
+    j: usize,
+    r0: &[T; 4],
+    r2: &[T; 4],
+    r3: &[T; 4],
+    g: &mut [[T; 4]; 3],
+    h: &mut [[T; 4]; 6],
+) {
+    let (w0, w1, d0, d1) = (st.w[0], st.w[1], st.dw[0], st.dw[1]);
+    let wij = w0[i] * w1[j];
+    let (gx, gy) = (d0[i] * w1[j], w0[i] * d1[j]);
+    fma4(&mut g[0], gx, r0);
+    fma4(&mut g[1], gy, r0);
+    fma4(&mut g[2], wij, r2);
+    fma4(&mut h[0], T::c(DDW[i]) * w1[j], r0);
+    fma4(&mut h[1], w0[i] * T::c(DDW[j]), r0);
+    fma4(&mut h[2], wij, r3);
+    fma4(&mut h[3], d0[i] * d1[j], r0);
+    fma4(&mut h[4], gx, r2);
+    fma4(&mut h[5], gy, r2);
+}
+
+/// `sum_b m[:, b] . H_ba` for each axis `a`, from the six second moments of
+/// [`classic_moments`] (`H` is symmetric in `a, b`).
+#[inline(always)]
+fn hessian_term<T: Real>(m: &Mat3<T>, h: &[[T; 4]; 6]) -> [T; 3] {
+    const IDX: [[usize; 3]; 3] = [[0, 3, 4], [3, 1, 5], [4, 5, 2]];
+    std::array::from_fn(|a| {
+        (0..3).fold(T::zero(), |acc, b| {
+            let hv = &h[IDX[b][a]];
+            acc + m.0[0][b] * hv[0] + m.0[1][b] * hv[1] + m.0[2][b] * hv[2]
+        })
+    })
 }
 
 /// Adjoints of one particle's scatter inputs, accumulated by [`scatter_vjp`].
@@ -118,6 +136,14 @@ pub struct ScatterBar<T> {
 
 /// Adjoint of [`crate::transfer::scatter`] for one particle on the full grid (`x_lo = 0`):
 /// `nodes_bar` holds the adjoints of the scattered `[momentum (3), mass]` of every node.
+///
+/// With `y` a node's adjoint, `d = offset - fx` its offset in cells and `w` its weight, every
+/// input adjoint is a sum over the 27 nodes of `w y`, `w d y^T` or `dw s`, where
+/// `s = y . [m v + dx mC d, m]` is the node's scattered momentum and mass dotted with their
+/// adjoints per unit weight. The weights are products of one factor per axis, so the sums run
+/// over the innermost axis first (three nodes contiguous in memory), then over the nine
+/// columns, as the forward scatter does. The node-by-node derivation is kept as the test
+/// oracle (`per_node_vjp`).
 #[allow(clippy::too_many_arguments)]
 pub fn scatter_vjp<T: Real>(
     nodes_bar: &[[T; 4]],
@@ -130,69 +156,123 @@ pub fn scatter_vjp<T: Real>(
     c: &StepConsts,
     out: &mut ScatterBar<T>,
 ) {
+    if c.force_form == FORCE_MLS {
+        scatter_vjp_form::<T, true>(nodes_bar, n, st, v, a, mass, s, c, out)
+    } else {
+        scatter_vjp_form::<T, false>(nodes_bar, n, st, v, a, mass, s, c, out)
+    }
+}
+
+/// [`scatter_vjp`] for one force form (`MLS`: the stress is part of the affine matrix;
+/// classic: it enters through the weight gradients, whose first and second moments are
+/// summed too).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn scatter_vjp_form<T: Real, const MLS: bool>(
+    nodes_bar: &[[T; 4]],
+    n: usize,
+    st: &Stencil<T>,
+    v: [T; 3],
+    a: &[T; 9],
+    mass: T,
+    s: &[T; 9],
+    c: &StepConsts,
+    out: &mut ScatterBar<T>,
+) {
+    let z = T::zero();
     let dx = k::<T>(c.dx);
     let inv_dx = k::<T>(c.inv_dx);
-    let mls = c.force_form == FORCE_MLS;
     let am = Mat3::from_array(*a);
     let sm = Mat3::from_array(*s);
     // The affine matrix of the momentum: m A (+ S in MLS form).
-    let mc = if mls {
+    let mc = if MLS {
         am.scaled(mass) + sm
     } else {
         am.scaled(mass)
     };
-    let mut mc_bar = Mat3::<T>::zero();
-    let mut s_bar = Mat3::<T>::zero();
-    let mut f_bar = [T::zero(); 3];
+    let m = mc.0;
+    let d = offsets(st);
+    let (w0, w1, w2) = (st.w[0], st.w[1], st.w[2]);
+    let (d0, d1, d2) = (st.dw[0], st.dw[1], st.dw[2]);
+    // The innermost axis's share of [m v + dx mC d, m]: dx mC[:, 2] d_z.
+    let zk: [[T; 4]; 3] = std::array::from_fn(|o| {
+        let t = dx * d[2][o];
+        [m[0][2] * t, m[1][2] * t, m[2][2] * t, z]
+    });
+    let mut s0 = [z; 4]; // sum w y
+    let mut t1 = [[z; 4]; 3]; // t1[b] = sum w d_b y
+    let mut fb = [z; 3]; // fb[a] = sum dw_a s
+    let mut g = [[z; 4]; 3]; // classic: g[b] = sum g_b y
+    let mut h = [[z; 4]; 6]; // classic: second moments
+    let bz = st.base[2] as usize;
     for i in 0..3 {
         for j in 0..3 {
-            for o in 0..3 {
-                let off = [i, j, o];
-                let idx = node_index(st, off, n);
-                let nb = nodes_bar[idx];
-                let mom_bar = [nb[0], nb[1], nb[2]];
-                let m_bar = nb[3];
-                let (w, dw) = weight_and_grad(st, off);
-                let dpos: [T; 3] = std::array::from_fn(|q| (T::c(off[q] as f64) - st.fx[q]) * dx);
-                let aff = mc.mul_vec(dpos);
-                let p: [T; 3] = std::array::from_fn(|q| mass * v[q] + aff[q]);
-                let p_dot = (0..3).fold(T::zero(), |acc, q| acc + p[q] * mom_bar[q]);
-                // mass, velocity
-                for q in 0..3 {
-                    out.v[q] += w * mass * mom_bar[q];
+            let base = ((st.base[0] as usize + i) * n + st.base[1] as usize + j) * n + bz;
+            let cell = &nodes_bar[base..base + 3];
+            let zij = [
+                mass * v[0] + dx * (m[0][0] * d[0][i] + m[0][1] * d[1][j]),
+                mass * v[1] + dx * (m[1][0] * d[0][i] + m[1][1] * d[1][j]),
+                mass * v[2] + dx * (m[2][0] * d[0][i] + m[2][1] * d[1][j]),
+                mass,
+            ];
+            let (mut r0, mut r1, mut r2, mut r3) = ([z; 4], [z; 4], [z; 4], [z; 4]);
+            let (mut sw, mut sdw) = (z, z);
+            for (o, y) in cell.iter().enumerate() {
+                let sn = (0..4).fold(z, |acc, l| acc + y[l] * (zij[l] + zk[o][l]));
+                fma4(&mut r0, w2[o], y);
+                fma4(&mut r1, w2[o] * d[2][o], y);
+                sw += w2[o] * sn;
+                sdw += d2[o] * sn;
+                if !MLS {
+                    fma4(&mut r2, d2[o], y);
+                    fma4(&mut r3, T::c(DDW[o]), y);
                 }
-                let va_dot = (0..3).fold(T::zero(), |acc, q| acc + v[q] * mom_bar[q]);
-                let a_dpos = am.mul_vec(dpos);
-                let ad_dot = (0..3).fold(T::zero(), |acc, q| acc + a_dpos[q] * mom_bar[q]);
-                out.mass += w * (va_dot + ad_dot) + w * m_bar;
-                // affine matrix
-                mc_bar = mc_bar + Mat3::outer(mom_bar, dpos).scaled(w);
-                // position through w and dpos
-                for ax in 0..3 {
-                    f_bar[ax] += dw[ax] * (p_dot + mass * m_bar);
-                    let col = mc.col(ax);
-                    let cd = (0..3).fold(T::zero(), |acc, q| acc + col[q] * mom_bar[q]);
-                    f_bar[ax] -= w * cd * dx;
-                }
-                if !mls {
-                    let (g, dg) = grad_and_hessian(st, off);
-                    s_bar = s_bar + Mat3::outer(mom_bar, g);
-                    for ax in 0..3 {
-                        let dg_a = [dg[0][ax], dg[1][ax], dg[2][ax]];
-                        let sg = sm.mul_vec(dg_a);
-                        f_bar[ax] += (0..3).fold(T::zero(), |acc, q| acc + sg[q] * mom_bar[q]);
-                    }
-                }
+            }
+            let wij = w0[i] * w1[j];
+            fma4(&mut s0, wij, &r0);
+            fma4(&mut t1[0], wij * d[0][i], &r0);
+            fma4(&mut t1[1], wij * d[1][j], &r0);
+            fma4(&mut t1[2], wij, &r1);
+            fb[0] += d0[i] * w1[j] * sw;
+            fb[1] += w0[i] * d1[j] * sw;
+            fb[2] += wij * sdw;
+            if !MLS {
+                classic_moments(st, i, j, &r0, &r2, &r3, &mut g, &mut h);
             }
         }
     }
-    let a_bar = mc_bar.scaled(mass);
-    if mls {
-        s_bar = s_bar + mc_bar;
+    // The adjoint of mC: sum w y dpos^T = dx sum w y d^T.
+    let mc_bar = Mat3(std::array::from_fn(|q| {
+        std::array::from_fn(|b| dx * t1[b][q])
+    }));
+    let ys = [s0[0], s0[1], s0[2]];
+    for q in 0..3 {
+        out.v[q] += mass * ys[q];
     }
+    // mass: sum w (v . y + (A dpos) . y + m_bar) = v . ys + <A, mc_bar> + sum w m_bar.
+    let a_mc = (0..3).fold(z, |acc, q| {
+        acc + am.0[q][0] * mc_bar.0[q][0]
+            + am.0[q][1] * mc_bar.0[q][1]
+            + am.0[q][2] * mc_bar.0[q][2]
+    });
+    out.mass += v[0] * ys[0] + v[1] * ys[1] + v[2] * ys[2] + a_mc + s0[3];
+    // position: through the weights (fb) and through dpos (-dx mC^T sum w y).
+    let mty = mc.transpose().mul_vec(ys);
+    let mut f_bar: [T; 3] = std::array::from_fn(|ax| fb[ax] - dx * mty[ax]);
+    let s_bar = if MLS {
+        mc_bar
+    } else {
+        let ht = hessian_term(&sm, &h);
+        for ax in 0..3 {
+            f_bar[ax] += ht[ax];
+        }
+        Mat3(std::array::from_fn(|q| std::array::from_fn(|b| g[b][q])))
+    };
+    let a_bar = mc_bar.scaled(mass).to_array();
+    let s_bar = s_bar.to_array();
     for e in 0..9 {
-        out.a[e] += a_bar.to_array()[e];
-        out.s[e] += s_bar.to_array()[e];
+        out.a[e] += a_bar[e];
+        out.s[e] += s_bar[e];
     }
     for ax in 0..3 {
         out.x[ax] += f_bar[ax] * inv_dx;
@@ -343,6 +423,12 @@ pub struct G2pBar<T> {
 /// given the adjoints of the new `x, v, C, F`, accumulates the adjoints of the grid node
 /// velocities into `nodes_bar[..][0..3]` (a slab of the grid starting at node layer `x_lo`,
 /// as in [`crate::transfer::scatter`]) and returns those of the old position and F_elastic.
+///
+/// One pass over the 27 nodes, axis by axis as in [`scatter_vjp`]: each node's adjoint is
+/// `w u` (plus the weight-gradient term in the classic form) with
+/// `u = v_bar + dt x_bar + 4/dx Cbar d`, the position adjoint sums `dw_a (v . u)`, and the
+/// velocity gradient of the F update is summed again in the same pass (it is needed only for
+/// the adjoint of F_elastic).
 #[allow(clippy::too_many_arguments)]
 pub fn g2p_vjp<T: Real>(
     nodes: &[[T; 4]],
@@ -357,62 +443,144 @@ pub fn g2p_vjp<T: Real>(
     nodes_bar: &mut [[T; 4]],
     x_lo: usize,
 ) -> G2pBar<T> {
+    if c.force_form == FORCE_MLS {
+        g2p_vjp_form::<T, true>(
+            nodes, n, x, f_elastic, c, x_bar, v_bar, c_bar, f_bar, nodes_bar, x_lo,
+        )
+    } else {
+        g2p_vjp_form::<T, false>(
+            nodes, n, x, f_elastic, c, x_bar, v_bar, c_bar, f_bar, nodes_bar, x_lo,
+        )
+    }
+}
+
+/// [`g2p_vjp`] for one force form (`MLS`: the velocity gradient is C).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn g2p_vjp_form<T: Real, const MLS: bool>(
+    nodes: &[[T; 4]],
+    n: usize,
+    x: [T; 3],
+    f_elastic: &[T; 9],
+    c: &StepConsts,
+    x_bar: [T; 3],
+    v_bar: [T; 3],
+    c_bar: &[T; 9],
+    f_bar: &[T; 9],
+    nodes_bar: &mut [[T; 4]],
+    x_lo: usize,
+) -> G2pBar<T> {
+    let z = T::zero();
     let lo = x_lo * n * n;
     let dt = k::<T>(c.dt);
     let inv_dx = k::<T>(c.inv_dx);
+    let kc = T::c(4.0) * inv_dx;
     let st = crate::transfer::stencil(x, inv_dx);
-    let g = crate::transfer::gather(nodes, n, &st, c);
     let fe = Mat3::from_array(*f_elastic);
-    let mut l = Mat3::from_array(g.grad_v).scaled(dt);
-    for a in 0..3 {
-        l.0[a][a] += T::one();
-    }
     let fb = Mat3::from_array(*f_bar);
-    let fe_bar = l.transpose() * fb;
+    // The adjoint of the velocity gradient: F = (I + dt grad_v) F_elastic.
     let g_bar = (fb * fe.transpose()).scaled(dt);
-    let mls = c.force_form == FORCE_MLS;
-    let cm_bar = if mls {
+    let cm_bar = if MLS {
         Mat3::from_array(*c_bar) + g_bar
     } else {
         Mat3::from_array(*c_bar)
     };
+    let cb = cm_bar.0;
+    // Classic form: node adjoint inv_dx g_bar g.
+    let gb = g_bar.scaled(inv_dx).0;
     let vp_bar: [T; 3] = std::array::from_fn(|a| v_bar[a] + dt * x_bar[a]);
-    let kc = T::c(4.0) * inv_dx;
-    let mut f_pos_bar = [T::zero(); 3];
+    let d = offsets(&st);
+    let (w0, w1, w2) = (st.w[0], st.w[1], st.w[2]);
+    let (d0, d1, d2) = (st.dw[0], st.dw[1], st.dw[2]);
+    // The innermost axis's share of u: kc Cbar[:, 2] d_z.
+    let uk: [[T; 4]; 3] = std::array::from_fn(|o| {
+        let t = kc * d[2][o];
+        [cb[0][2] * t, cb[1][2] * t, cb[2][2] * t, z]
+    });
+    let mut rv = [z; 4]; // sum w v_i
+    let mut cw = [[z; 4]; 3]; // cw[b] = sum w d_b v_i
+    let mut fp = [z; 3]; // fp[a] = sum dw_a (v_i . u)
+    let mut g = [[z; 4]; 3]; // classic: g[b] = sum g_b v_i
+    let mut h = [[z; 4]; 6]; // classic: second moments
+    let bz = st.base[2] as usize;
     for i in 0..3 {
         for j in 0..3 {
-            for o in 0..3 {
-                let off = [i, j, o];
-                let idx = node_index(&st, off, n);
-                let vi = [nodes[idx][0], nodes[idx][1], nodes[idx][2]];
-                let (w, dw) = weight_and_grad(&st, off);
-                let d: [T; 3] = std::array::from_fn(|q| T::c(off[q] as f64) - st.fx[q]);
-                // C = kc sum w v d^T: node adjoint kc w Cbar d; position through w and d.
-                let cd = cm_bar.mul_vec(d);
-                let vcd = (0..3).fold(T::zero(), |s, q| s + vi[q] * cd[q]);
-                let vvp = (0..3).fold(T::zero(), |s, q| s + vi[q] * vp_bar[q]);
+            let wij = w0[i] * w1[j];
+            let uij = [
+                vp_bar[0] + kc * (cb[0][0] * d[0][i] + cb[0][1] * d[1][j]),
+                vp_bar[1] + kc * (cb[1][0] * d[0][i] + cb[1][1] * d[1][j]),
+                vp_bar[2] + kc * (cb[2][0] * d[0][i] + cb[2][1] * d[1][j]),
+                z,
+            ];
+            // Node adjoint: w_k (wij uij [+ gx gb[:,0] + gy gb[:,1]]) + wij w_k uk
+            // [+ dw_k wij gb[:,2]].
+            let mut aij = [wij * uij[0], wij * uij[1], wij * uij[2], z];
+            let mut hij = [z; 4];
+            if !MLS {
+                let (gx, gy) = (d0[i] * w1[j], w0[i] * d1[j]);
                 for q in 0..3 {
-                    nodes_bar[idx - lo][q] += w * vp_bar[q] + kc * w * cd[q];
-                }
-                for ax in 0..3 {
-                    let col = cm_bar.col(ax);
-                    let vcol = (0..3).fold(T::zero(), |s, q| s + vi[q] * col[q]);
-                    f_pos_bar[ax] += dw[ax] * (vvp + kc * vcd) - kc * w * vcol;
-                }
-                if !mls {
-                    // grad_v = inv_dx sum v g^T.
-                    let (gg, dg) = grad_and_hessian(&st, off);
-                    let gb = g_bar.mul_vec(gg);
-                    for q in 0..3 {
-                        nodes_bar[idx - lo][q] += inv_dx * gb[q];
-                    }
-                    for ax in 0..3 {
-                        let dga = [dg[0][ax], dg[1][ax], dg[2][ax]];
-                        let gbd = g_bar.mul_vec(dga);
-                        f_pos_bar[ax] += inv_dx * (0..3).fold(T::zero(), |s, q| s + vi[q] * gbd[q]);
-                    }
+                    aij[q] += gx * gb[q][0] + gy * gb[q][1];
+                    hij[q] = wij * gb[q][2];
                 }
             }
+            let base = ((st.base[0] as usize + i) * n + st.base[1] as usize + j) * n + bz;
+            let cell = &nodes[base..base + 3];
+            let cell_bar = &mut nodes_bar[base - lo..base - lo + 3];
+            let (mut r0, mut r1, mut r2, mut r3) = ([z; 4], [z; 4], [z; 4], [z; 4]);
+            let (mut sw, mut sdw) = (z, z);
+            for (o, (vi, nb)) in cell.iter().zip(cell_bar.iter_mut()).enumerate() {
+                let wk = wij * w2[o];
+                for l in 0..4 {
+                    nb[l] += w2[o] * aij[l] + wk * uk[o][l];
+                }
+                if !MLS {
+                    fma4(nb, d2[o], &hij);
+                }
+                let sn = (0..3).fold(z, |acc, q| acc + vi[q] * (uij[q] + uk[o][q]));
+                sw += w2[o] * sn;
+                sdw += d2[o] * sn;
+                fma4(&mut r0, w2[o], vi);
+                fma4(&mut r1, w2[o] * d[2][o], vi);
+                if !MLS {
+                    fma4(&mut r2, d2[o], vi);
+                    fma4(&mut r3, T::c(DDW[o]), vi);
+                }
+            }
+            fma4(&mut rv, wij, &r0);
+            fma4(&mut cw[0], wij * d[0][i], &r0);
+            fma4(&mut cw[1], wij * d[1][j], &r0);
+            fma4(&mut cw[2], wij, &r1);
+            fp[0] += d0[i] * w1[j] * sw;
+            fp[1] += w0[i] * d1[j] * sw;
+            fp[2] += wij * sdw;
+            if !MLS {
+                classic_moments(&st, i, j, &r0, &r2, &r3, &mut g, &mut h);
+            }
+        }
+    }
+    // The velocity gradient of the forward F update: C = kc sum w v d^T (MLS) or
+    // inv_dx sum v g^T (classic).
+    let grad_v = if MLS {
+        Mat3(std::array::from_fn(|q| {
+            std::array::from_fn(|b| kc * cw[b][q])
+        }))
+    } else {
+        Mat3(std::array::from_fn(|q| {
+            std::array::from_fn(|b| inv_dx * g[b][q])
+        }))
+    };
+    let mut l = grad_v.scaled(dt);
+    for a in 0..3 {
+        l.0[a][a] += T::one();
+    }
+    let fe_bar = l.transpose() * fb;
+    // Position: through the weights (fp) and through d (-kc Cbar^T sum w v_i).
+    let ctv = cm_bar.transpose().mul_vec([rv[0], rv[1], rv[2]]);
+    let mut f_pos_bar: [T; 3] = std::array::from_fn(|a| fp[a] - kc * ctv[a]);
+    if !MLS {
+        let ht = hessian_term(&g_bar, &h);
+        for a in 0..3 {
+            f_pos_bar[a] += inv_dx * ht[a];
         }
     }
     G2pBar {
