@@ -13,7 +13,7 @@ use crate::{slabs, CpuBackend};
 use r4d_mpm::adjoint::engine::{AdjointScratch, MpmAdjointKernels, StateBufs};
 use r4d_mpm::adjoint::particle_vjp::{particle_stage_vjp_svd, ParticleForward};
 use r4d_mpm::adjoint::transfer_vjp::{g2p_vjp, grid_node_vjp, G2pBar};
-use r4d_mpm::kernels::{Grid, GridBc, Particles, StepConsts};
+use r4d_mpm::kernels::{Grid, GridBc, Particles, StepConsts, BLOCK};
 use r4d_mpm::math::{svd3_many, Mat3, Real, Svd3};
 use r4d_mpm::params::PARAM_ADJOINTS;
 use r4d_mpm::reference::reduce_slots_in_order;
@@ -47,11 +47,8 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
         } = s;
         let seq = self.sequential(np);
         self.run_as(seq, || {
-            if seq {
-                grid_bar.fill([T::zero(); 4]);
-            } else {
-                grid_bar.par_iter_mut().for_each(|x| *x = [T::zero(); 4]);
-            }
+            // Every node G2P's stencils reach lies in a block the forward P2G marked active.
+            crate::for_active_blocks(seq, grid_bar, &g.active, n, |_, x| *x = [T::zero(); 4]);
             let per_slab: Vec<Vec<(u32, G2pBar<T>)>> =
                 slabs::scatter_by_slab(seq, grid_bar, n * n, n, order, starts, |lo, ids, nodes| {
                     ids.iter()
@@ -98,33 +95,25 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
     fn grid_update_vjp(
         &self,
         tape: &Tape<Self>,
-        n: usize,
+        g: &Grid<Self>,
         bcs: &Vec<GridBc>,
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
     ) -> Result<(), Infallible> {
+        // Only the active blocks: every stencil node of this substep lies in one, and the
+        // other nodes of `grid_in_bar` are never read.
         let bcs = &bcs[..c.n_grid_bcs as usize];
+        let n = g.n;
         let grid_bar = &s.grid_bar;
-        let plane_fn = |(i, plane): (usize, &mut [[T; 4]])| {
-            for (jk, out) in plane.iter_mut().enumerate() {
-                let idx = i * n * n + jk;
-                let ijk = [i, jk / n, jk % n];
-                *out = grid_node_vjp(ijk, tape.grid_in[idx], grid_bar[idx], bcs, c);
-            }
-        };
-        if self.sequential_nodes(n * n * n) {
-            s.grid_in_bar
-                .chunks_mut(n * n)
-                .enumerate()
-                .for_each(plane_fn);
-        } else {
-            self.run(|| {
-                s.grid_in_bar
-                    .par_chunks_mut(n * n)
-                    .enumerate()
-                    .for_each(plane_fn)
-            });
-        }
+        let grid_in = &tape.grid_in;
+        let active_nodes = g.active.iter().filter(|&&a| a != 0).count() * BLOCK.pow(3);
+        let seq = self.sequential_nodes(active_nodes);
+        self.run_as(seq, || {
+            crate::for_active_blocks(seq, &mut s.grid_in_bar, &g.active, n, |ijk, out| {
+                let idx = (ijk[0] * n + ijk[1]) * n + ijk[2];
+                *out = grid_node_vjp(ijk, grid_in[idx], grid_bar[idx], bcs, c);
+            })
+        });
         Ok(())
     }
 

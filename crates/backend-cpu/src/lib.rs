@@ -142,7 +142,7 @@ pub const NODES_PER_PARTICLE: usize = 8;
 
 /// Calls `f(node_index, node)` for each node of an active block (x-block slabs in parallel
 /// unless `seq`).
-fn for_active_blocks<T: Send>(
+pub(crate) fn for_active_blocks<T: Send>(
     seq: bool,
     nodes: &mut [[T; 4]],
     active: &[u32],

@@ -96,11 +96,12 @@ impl<E: GpuEngine> MpmAdjointKernels for GpuMpm<E> {
     fn grid_update_vjp(
         &self,
         tape: &Tape<Self>,
-        n: usize,
+        g: &Grid<Self>,
         bcs: &GpuBuf<E, GridBc>,
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
     ) -> Result<(), E::Error> {
+        let n = g.n;
         let mut r = Recording::new();
         let bind = [
             r.uniform(c),

@@ -194,12 +194,13 @@ impl<T: Real> MpmAdjointKernels for ReferenceBackend<T> {
     fn grid_update_vjp(
         &self,
         tape: &Tape<Self>,
-        n: usize,
+        g: &Grid<Self>,
         bcs: &Vec<GridBc>,
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
     ) -> Result<(), Infallible> {
         let bcs = &bcs[..c.n_grid_bcs as usize];
+        let n = g.n;
         for i in 0..n {
             for j in 0..n {
                 for kk in 0..n {

@@ -93,6 +93,6 @@ pub fn reverse<B: MpmAdjointKernels>(
     adj: &mut StateBufs<B>,
 ) -> Result<(), B::Error> {
     b.g2p_vjp(before, tape, g, adj, c, s)?;
-    b.grid_update_vjp(tape, g.n, t.grid_bcs, c, s)?;
+    b.grid_update_vjp(tape, g, t.grid_bcs, c, s)?;
     b.p2g_vjp(p, before, tape, t, g.n, c, s, adj)
 }

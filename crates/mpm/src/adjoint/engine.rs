@@ -150,7 +150,7 @@ impl<B: MpmKernels> AdjointScratch<B> {
 /// [`super::particle_vjp`].
 pub trait MpmAdjointKernels: MpmKernels {
     /// Reverse of G2P: from the adjoint `adj` of the state after the substep, writes the node
-    /// velocity adjoints into `s.grid_bar` (cleared first) and each particle's position and
+    /// velocity adjoints into `s.grid_bar` (cleared first, at least on the active blocks) and each particle's position and
     /// F_elastic adjoints into `s.x_bar`, `s.fe_bar`. `before` is the state at the start of
     /// the substep, `g` the updated grid, `tape` the forward intermediates.
     #[allow(clippy::too_many_arguments)]
@@ -163,12 +163,14 @@ pub trait MpmAdjointKernels: MpmKernels {
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
     ) -> Result<(), Self::Error>;
-    /// Reverse of the grid update: `s.grid_in_bar` from `s.grid_bar` (every node; zero where
-    /// the velocity adjoint is zero).
+    /// Reverse of the grid update: `s.grid_in_bar` from `s.grid_bar` (zero where the velocity
+    /// adjoint is zero), on every node of the blocks `g.active` marks (the forward pass of the
+    /// same substep marked them); a backend may leave the other nodes as they are, since no
+    /// particle's stencil reaches them.
     fn grid_update_vjp(
         &self,
         tape: &Tape<Self>,
-        n: usize,
+        g: &Grid<Self>,
         bcs: &Self::Buf<GridBc>,
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
