@@ -2,7 +2,7 @@
 //! memory (see `resonance4d::bench_scale`).
 
 use anyhow::{bail, Context, Result};
-use resonance4d::bench_scale::{run, table, BenchScale};
+use resonance4d::bench_scale::{compute_bound_line, run, table, BenchScale};
 use std::path::PathBuf;
 
 /// Arguments of `r4d bench-scale` (defaults: the paper's scale).
@@ -11,8 +11,10 @@ pub struct BenchScaleArgs {
     /// Where the simulation, rendering and their backward passes run: cpu or wgpu.
     #[arg(long, value_enum, default_value_t = super::BackendKind::Cpu)]
     backend: super::BackendKind,
-    /// Print the GPU time of every kernel when the command ends (timestamp queries; the
-    /// Vulkan backend measures it, the others say they cannot).
+    /// Print, besides the per-stage table, the forward simulation's throughput against a
+    /// rough compute bound of this machine's cores (`cpu`), and the GPU time of every kernel
+    /// when the command ends (timestamp queries; the Vulkan backend measures it, the others
+    /// say they cannot).
     #[arg(long)]
     profile: bool,
     /// Cells per side of the simulated block (8 particles per cell; 23: 97 336 particles).
@@ -90,6 +92,9 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
         std::sync::Arc::new(resonance4d::alloc::CountingProbe);
     let (_, report) = run(&scale, backend, Some(heap))?;
     println!("{}", table(&report));
+    if let (true, Some(b)) = (a.profile, &report.compute_bound) {
+        println!("{}", compute_bound_line(b));
+    }
     if let Some(path) = &a.json {
         let text = serde_json::to_string_pretty(&report)?;
         r4d_fsio::write_atomic(path, text.as_bytes())

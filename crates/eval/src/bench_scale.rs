@@ -517,6 +517,9 @@ pub struct BenchReport {
     pub reference_s: f64,
     /// Whether the counting allocator measured the heap (false: peaks are 0).
     pub heap_measured: bool,
+    /// The forward simulation against a rough compute bound of this machine's cores (`cpu`
+    /// backend only).
+    pub compute_bound: Option<ComputeBound>,
 }
 
 /// Runs one iteration (f32 simulation) and measures it.
@@ -572,6 +575,11 @@ pub fn run(
         memory_plan_bytes: plan.peak_bytes,
         reference_s: scene.reference_s,
         heap_measured: peak > 0,
+        compute_bound: None,
+    };
+    let report = BenchReport {
+        compute_bound: (report.backend == "cpu").then(|| compute_bound(&report)),
+        ..report
     };
     Ok((scene, report))
 }
@@ -658,4 +666,71 @@ pub fn table(r: &BenchReport) -> String {
         s += &format!("{name:<36} {gb:>6.2}   {:>6.1}x\n", gb / ours.max(1e-12));
     }
     s
+}
+
+/// Estimated floating-point operations of one particle-substep of the forward MPM (f32, MLS,
+/// fixed corotated): the 3x3 SVD and stress (~700), the 27-node scatter (~600) and gather
+/// (~500) with their weights, the F update and the grid update's share (~200).
+pub const FLOPS_PER_PARTICLE_SUBSTEP: f64 = 2000.0;
+
+/// Single-precision operations per cycle per core the bound assumes: one 8-lane AVX2
+/// multiply or add per cycle (no fused multiply-add; the kernels keep their rounding).
+pub const FLOPS_PER_CYCLE: f64 = 8.0;
+
+/// How close the forward simulation came to a rough compute bound.
+#[derive(Clone, Debug, Serialize)]
+pub struct ComputeBound {
+    /// Particle-substeps per second of the checkpointed forward pass (frame read-backs
+    /// included).
+    pub particle_substeps_per_s: f64,
+    /// Cores the bound counts (the parallelism available to the process).
+    pub cores: usize,
+    /// Clock the bound assumes (GHz; from `/proc/cpuinfo` when it can be read, else 3.0).
+    pub clock_ghz: f64,
+    /// The bound: `cores * clock * FLOPS_PER_CYCLE / FLOPS_PER_PARTICLE_SUBSTEP`.
+    pub bound_per_s: f64,
+    /// `particle_substeps_per_s / bound_per_s`.
+    pub fraction: f64,
+}
+
+/// The mean clock of this machine's cores from `/proc/cpuinfo` (GHz), when it can be read.
+fn clock_ghz() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let mhz: Vec<f64> = text
+        .lines()
+        .filter(|l| l.starts_with("cpu MHz"))
+        .filter_map(|l| l.split(':').nth(1)?.trim().parse().ok())
+        .filter(|v: &f64| v.is_finite() && *v > 100.0 && *v < 10_000.0)
+        .collect();
+    (!mhz.is_empty()).then(|| mhz.iter().sum::<f64>() / mhz.len() as f64 / 1000.0)
+}
+
+/// The forward simulation's throughput against the compute bound of this machine's cores
+/// (meaningful for the `cpu` backend).
+pub fn compute_bound(r: &BenchReport) -> ComputeBound {
+    let work = (r.particles * r.frames * r.substeps_per_frame) as f64;
+    let rate = work / r.profile.forward_s.max(1e-12);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let clock = clock_ghz().unwrap_or(3.0);
+    let bound = cores as f64 * clock * 1e9 * FLOPS_PER_CYCLE / FLOPS_PER_PARTICLE_SUBSTEP;
+    ComputeBound {
+        particle_substeps_per_s: rate,
+        cores,
+        clock_ghz: clock,
+        bound_per_s: bound,
+        fraction: rate / bound,
+    }
+}
+
+/// [`compute_bound`] as one line of text.
+pub fn compute_bound_line(b: &ComputeBound) -> String {
+    format!(
+        "forward simulation: {:.3e} particle-substeps/s = {:.0}% of a rough compute bound of {:.3e}/s \
+         ({} cores x {:.2} GHz x {FLOPS_PER_CYCLE} flop/cycle / {FLOPS_PER_PARTICLE_SUBSTEP} flop per particle-substep)",
+        b.particle_substeps_per_s,
+        100.0 * b.fraction,
+        b.bound_per_s,
+        b.cores,
+        b.clock_ghz
+    )
 }
