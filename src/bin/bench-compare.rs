@@ -31,6 +31,17 @@
 //! `--criterion-dir DIR` (default `target/criterion`), `--filter SUBSTRING` (compare only the
 //! benchmarks whose id contains it). A benchmark not re-run after the baseline was saved keeps
 //! the `new/` of that run, so it compares equal (0%).
+//!
+//! Baselines kept in the repository: `--save FILE` writes the medians of the latest runs
+//! (`new/`) to a JSON file (`{"format": "r4d-bench-baseline/1", "machine": ...,
+//! "medians_ns": {id: ns}}`) instead of comparing; `--against FILE` compares the latest runs
+//! with such a file instead of a criterion baseline, so a regression against the committed
+//! figures shows in one command after `cargo bench`:
+//!
+//! ```sh
+//! cargo bench --bench mpm --bench mpm_backward -- cpu
+//! cargo run --release --bin bench-compare -- --against benches/baselines/2core-vm.json --threshold 15
+//! ```
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
@@ -58,6 +69,89 @@ struct Args {
     /// Compare only the benchmarks whose id contains this substring.
     #[arg(long)]
     filter: Option<String>,
+    /// Compare with the medians saved in this file (`--save`) instead of a criterion
+    /// baseline.
+    #[arg(long, conflicts_with = "save")]
+    against: Option<PathBuf>,
+    /// Write the medians of the latest runs to this file (a baseline to commit) instead of
+    /// comparing.
+    #[arg(long)]
+    save: Option<PathBuf>,
+    /// With `--save`: what the figures were measured on (written into the file).
+    #[arg(long, default_value = "")]
+    machine: String,
+}
+
+/// Format tag of a saved baseline file.
+const BASELINE_FORMAT: &str = "r4d-bench-baseline/1";
+
+/// Largest baseline file read (bytes).
+const MAX_BASELINE_BYTES: u64 = 16 << 20;
+
+/// Where the baseline medians come from.
+enum Baseline {
+    /// A criterion baseline directory name (`<bench>/<name>/estimates.json`).
+    Dir(String),
+    /// Medians read from a `--save` file, by benchmark id.
+    File(std::collections::BTreeMap<String, f64>),
+}
+
+/// Reads a baseline file written by `--save`.
+fn read_baseline_file(path: &Path) -> Result<std::collections::BTreeMap<String, f64>> {
+    use std::io::Read as _;
+    let f = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let mut text = String::new();
+    f.take(MAX_BASELINE_BYTES + 1)
+        .read_to_string(&mut text)
+        .with_context(|| format!("reading {}", path.display()))?;
+    if text.len() as u64 > MAX_BASELINE_BYTES {
+        bail!(
+            "{}: larger than {MAX_BASELINE_BYTES} bytes, not a baseline file",
+            path.display()
+        );
+    }
+    let v: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    let format = v.get("format").and_then(|f| f.as_str()).unwrap_or("");
+    if format != BASELINE_FORMAT {
+        bail!(
+            "{}: field 'format' is '{format}', expected '{BASELINE_FORMAT}' (write one with --save)",
+            path.display()
+        );
+    }
+    let medians = v
+        .get("medians_ns")
+        .and_then(|m| m.as_object())
+        .with_context(|| format!("{}: no object 'medians_ns'", path.display()))?;
+    let mut out = std::collections::BTreeMap::new();
+    for (id, ns) in medians {
+        let ns = ns
+            .as_f64()
+            .filter(|x| x.is_finite() && *x > 0.0)
+            .with_context(|| {
+                format!(
+                    "{}: medians_ns['{id}'] is not a positive time in ns",
+                    path.display()
+                )
+            })?;
+        out.insert(id.clone(), ns);
+    }
+    Ok(out)
+}
+
+/// The medians of the latest runs as a baseline file's text.
+fn baseline_file_text(report: &Report, machine: &str) -> String {
+    let medians: serde_json::Map<String, serde_json::Value> = report
+        .latest
+        .iter()
+        .map(|(id, ns)| (id.clone(), serde_json::json!(ns)))
+        .collect();
+    let v = serde_json::json!({
+        "format": BASELINE_FORMAT,
+        "machine": machine,
+        "medians_ns": medians,
+    });
+    serde_json::to_string_pretty(&v).expect("a JSON value serialises") + "\n"
 }
 
 /// One benchmark's medians.
@@ -90,6 +184,8 @@ struct Report {
     compared: Vec<Comparison>,
     /// Ids of benchmarks (matching the filter) with a latest run but no such baseline.
     without_baseline: Vec<String>,
+    /// Every latest run (matching the filter): id and median (ns), sorted by id.
+    latest: Vec<(String, f64)>,
 }
 
 impl Report {
@@ -136,19 +232,30 @@ fn bench_id(dir: &Path, root: &Path) -> String {
 }
 
 /// Walks `dir` (criterion's `report/` directories excluded), adding every benchmark found.
-fn walk(dir: &Path, root: &Path, args: &Args, out: &mut Report) -> Result<()> {
+fn walk(dir: &Path, root: &Path, args: &Args, base: &Baseline, out: &mut Report) -> Result<()> {
     if dir.join("new").join("estimates.json").is_file() {
         let id = bench_id(dir, root);
         if args.filter.as_ref().is_none_or(|f| id.contains(f.as_str())) {
-            let base = dir.join(&args.baseline).join("estimates.json");
-            if base.is_file() {
-                out.compared.push(Comparison {
-                    baseline_ns: median_ns(&base)?,
-                    new_ns: median_ns(&dir.join("new").join("estimates.json"))?,
+            let new_ns = median_ns(&dir.join("new").join("estimates.json"))?;
+            out.latest.push((id.clone(), new_ns));
+            let baseline_ns = match base {
+                Baseline::Dir(name) => {
+                    let path = dir.join(name).join("estimates.json");
+                    if path.is_file() {
+                        Some(median_ns(&path)?)
+                    } else {
+                        None
+                    }
+                }
+                Baseline::File(m) => m.get(&id).copied(),
+            };
+            match baseline_ns {
+                Some(baseline_ns) => out.compared.push(Comparison {
+                    baseline_ns,
+                    new_ns,
                     id,
-                });
-            } else {
-                out.without_baseline.push(id);
+                }),
+                None => out.without_baseline.push(id),
             }
         }
     }
@@ -162,7 +269,7 @@ fn walk(dir: &Path, root: &Path, args: &Args, out: &mut Report) -> Result<()> {
     }
     subdirs.sort();
     for d in subdirs {
-        walk(&d, root, args, out)?;
+        walk(&d, root, args, base, out)?;
     }
     Ok(())
 }
@@ -180,10 +287,35 @@ fn collect(args: &Args) -> Result<Report> {
     if !args.threshold.is_finite() {
         bail!("--threshold must be a finite percentage");
     }
+    let base = match &args.against {
+        Some(path) => Baseline::File(read_baseline_file(path)?),
+        None => Baseline::Dir(args.baseline.clone()),
+    };
     let mut report = Report::default();
-    walk(root, root, args, &mut report)?;
+    walk(root, root, args, &base, &mut report)?;
     report.compared.sort_by(|a, b| a.id.cmp(&b.id));
     report.without_baseline.sort();
+    report.latest.sort_by(|a, b| a.0.cmp(&b.0));
+    if args.save.is_some() {
+        if report.latest.is_empty() {
+            bail!(
+                "no criterion results{} under {} to save (run `cargo bench` first)",
+                args.filter
+                    .as_ref()
+                    .map_or(String::new(), |f| format!(" whose id contains '{f}'")),
+                root.display()
+            );
+        }
+        return Ok(report);
+    }
+    if let (true, Some(path)) = (report.compared.is_empty(), &args.against) {
+        bail!(
+            "none of the {} latest run(s) under {} is in {} (run the benches it lists)",
+            report.without_baseline.len(),
+            root.display(),
+            path.display()
+        );
+    }
     if report.compared.is_empty() {
         let scope = match &args.filter {
             Some(f) => format!(" whose id contains '{f}'"),
@@ -230,7 +362,8 @@ fn render(report: &Report, args: &Args) -> String {
         .max()
         .unwrap_or(0)
         .max("benchmark".len());
-    let base_head = format!("baseline ({})", args.baseline);
+    let base_name = baseline_name(args);
+    let base_head = format!("baseline ({base_name})");
     let bw = base_head.len().max(12);
     let _ = writeln!(
         s,
@@ -259,7 +392,7 @@ fn render(report: &Report, args: &Args) -> String {
         s,
         "\n{} benchmark(s) compared against '{}': {} slower than +{}%",
         report.compared.len(),
-        args.baseline,
+        base_name,
         bad.len(),
         args.threshold
     );
@@ -270,7 +403,7 @@ fn render(report: &Report, args: &Args) -> String {
             s,
             "{} benchmark(s) without baseline '{}', not compared: {}{}",
             missing.len(),
-            args.baseline,
+            base_name,
             missing[..shown].join(", "),
             if missing.len() > shown {
                 ", ... (--filter narrows the set)"
@@ -282,9 +415,30 @@ fn render(report: &Report, args: &Args) -> String {
     s
 }
 
-/// Runs the comparison: `Ok(true)` when something regressed.
+/// The baseline's name in the table: the criterion baseline or the file.
+fn baseline_name(args: &Args) -> String {
+    match &args.against {
+        Some(p) => p.display().to_string(),
+        None => args.baseline.clone(),
+    }
+}
+
+/// Runs the comparison: `Ok(true)` when something regressed. With `--save`, writes the
+/// baseline file instead and says so.
 fn run(args: &Args) -> Result<(bool, String)> {
     let report = collect(args)?;
+    if let Some(path) = &args.save {
+        r4d_fsio::write_atomic(path, baseline_file_text(&report, &args.machine).as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
+        return Ok((
+            false,
+            format!(
+                "saved the medians of {} benchmark(s) to {}\n",
+                report.latest.len(),
+                path.display()
+            ),
+        ));
+    }
     let text = render(&report, args);
     Ok((!report.regressions(args.threshold).is_empty(), text))
 }
@@ -349,7 +503,51 @@ mod tests {
             threshold: 10.0,
             criterion_dir: root.to_path_buf(),
             filter: None,
+            against: None,
+            save: None,
+            machine: String::new(),
         }
+    }
+
+    #[test]
+    fn saved_files_are_baselines() {
+        let root = temp_tree("file");
+        put(&root, "substep_cpu/32768", "new", 4.0e6);
+        put(&root, "adjoint_substep_cpu/backward/32768", "new", 2.0e7);
+        let file = root.join("baseline.json");
+        let save = Args {
+            save: Some(file.clone()),
+            machine: "test".into(),
+            ..args(&root)
+        };
+        let (regressed, text) = run(&save).unwrap();
+        assert!(!regressed && text.contains("2 benchmark(s)"), "{text}");
+        put(&root, "substep_cpu/32768", "new", 5.0e6); // +25%
+        put(&root, "splat/forward/1", "new", 1.0e6); // not in the file
+        let against = Args {
+            against: Some(file.clone()),
+            ..args(&root)
+        };
+        let report = collect(&against).unwrap();
+        assert_eq!(report.compared.len(), 2);
+        assert_eq!(report.without_baseline, vec!["splat/forward/1".to_string()]);
+        let (regressed, text) = run(&against).unwrap();
+        assert!(regressed && text.contains("+25.00%  REGRESSED"), "{text}");
+        // Bad files are errors naming the file and the field.
+        std::fs::write(
+            &file,
+            r#"{"format":"r4d-bench-baseline/1","medians_ns":{"a":-1}}"#,
+        )
+        .unwrap();
+        let e = format!("{:#}", collect(&against).unwrap_err());
+        assert!(
+            e.contains("medians_ns['a']") && e.contains("baseline.json"),
+            "{e}"
+        );
+        std::fs::write(&file, r#"{"medians_ns":{}}"#).unwrap();
+        let e = format!("{:#}", collect(&against).unwrap_err());
+        assert!(e.contains("field 'format'"), "{e}");
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]
