@@ -299,11 +299,7 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
                     }
                 }
             }
-            let base_x: Vec<Option<u32>> = keys
-                .iter()
-                .map(|&k| (k != u32::MAX).then(|| k / (n * n) as u32))
-                .collect();
-            slabs::sort_by_slab(&base_x, n, order, starts);
+            slabs::sort_by_slab(keys, n, order, starts);
 
             // 4. Scatter: even slabs in parallel, then odd slabs.
             let (v, mass, stress) = (&p.v, &p.mass, &p.stress);

@@ -19,26 +19,33 @@ fn slab_layers(s: usize, n: usize) -> (usize, usize) {
     (s * SLAB, (s * SLAB + SLAB + 2).min(n))
 }
 
-/// Stable counting sort of particles by the slab of their stencil's base x layer
-/// (`base_x[i] = None`: the particle is left out). `order` (one entry per particle) receives
-/// the ids, `starts` (`slab_count(n) + 1` entries) the slab boundaries in `order`.
-pub fn sort_by_slab(base_x: &[Option<u32>], n: usize, order: &mut [u32], starts: &mut [u32]) {
+/// Stable counting sort of particles by the slab of their stencil's base x layer. `keys[i]`
+/// is particle `i`'s base node index `(x n + y) n + z` on the `n^3` grid, `u32::MAX` for a
+/// particle left out. `order` (one entry per particle) receives the ids, `starts`
+/// (`slab_count(n) + 1` entries) the slab boundaries in `order`.
+pub fn sort_by_slab(keys: &[u32], n: usize, order: &mut [u32], starts: &mut [u32]) {
     let ns = slab_count(n);
+    let layer = (n * n) as u32;
     starts.fill(0);
-    for b in base_x.iter().flatten() {
-        starts[*b as usize / SLAB + 1] += 1;
+    for &k in keys.iter().filter(|&&k| k != u32::MAX) {
+        starts[(k / layer) as usize / SLAB + 1] += 1;
     }
     for s in 0..ns {
         starts[s + 1] += starts[s];
     }
-    let mut fill: Vec<u32> = starts[..ns].to_vec();
-    for (i, b) in base_x.iter().enumerate() {
-        if let Some(b) = b {
-            let s = *b as usize / SLAB;
-            order[fill[s] as usize] = i as u32;
-            fill[s] += 1;
+    // `starts[s]` is slab s's fill position until the pass below, which leaves it at slab s's
+    // end, i.e. at the start of slab s + 1; shifting back restores the starts.
+    for (i, &k) in keys.iter().enumerate() {
+        if k != u32::MAX {
+            let s = (k / layer) as usize / SLAB;
+            order[starts[s] as usize] = i as u32;
+            starts[s] += 1;
         }
     }
+    for s in (1..=ns).rev() {
+        starts[s] = starts[s - 1];
+    }
+    starts[0] = 0;
 }
 
 /// Runs `f(x_lo, ids, slab_nodes)` for every non-empty slab, even slabs in parallel, then odd
@@ -85,4 +92,35 @@ pub fn scatter_by_slab<T: Send, R: Send>(
         out.extend(results);
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sort_by_slab_is_a_stable_sort_by_slab_leaving_out_the_marked() {
+        let n = 9;
+        let layer = (n * n) as u32;
+        let mut keys: Vec<u32> = (0..200u32)
+            .map(|i| (i.wrapping_mul(2654435761) >> 7) % (n as u32 * layer))
+            .collect();
+        keys[3] = u32::MAX;
+        keys[150] = u32::MAX;
+        let mut order = vec![0; keys.len()];
+        let mut starts = vec![7; slab_count(n) + 1];
+        sort_by_slab(&keys, n, &mut order, &mut starts);
+        let mut want: Vec<u32> = (0..keys.len() as u32)
+            .filter(|&i| keys[i as usize] != u32::MAX)
+            .collect();
+        want.sort_by_key(|&i| keys[i as usize] / layer / SLAB as u32);
+        assert_eq!(starts[0], 0);
+        assert_eq!(*starts.last().unwrap() as usize, want.len());
+        assert_eq!(&order[..want.len()], &want[..]);
+        for s in 0..slab_count(n) {
+            for &i in &order[starts[s] as usize..starts[s + 1] as usize] {
+                assert_eq!((keys[i as usize] / layer) as usize / SLAB, s);
+            }
+        }
+    }
 }
