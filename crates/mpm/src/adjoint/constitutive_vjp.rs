@@ -9,7 +9,8 @@
 //! `tau = U diag(t(s)) U^T`, `state' = h(s, state)`, where `(g, t, h)` come from
 //! [`scalar_model`]. The Jacobian of that scalar part is computed by forward-mode dual numbers
 //! ([`Dual`], 10 directions: 3 singular values, 2 state entries, 5 constants), so the scalar
-//! math exists once. The matrix part uses the classic derivative of isotropic matrix
+//! math exists once; the jelly's (fixed corotated, the hottest path) is written in closed form
+//! and checked against the dual numbers. The matrix part uses the classic derivative of isotropic matrix
 //! functions (Ogden; Irving, Teran and Fedkiw 2004): in the rotated frame
 //! `dF^ = U^T dF V`,
 //!
@@ -29,7 +30,7 @@
 //! magnitude. A material at rest (`F = I`, all singular values equal) is therefore handled
 //! exactly by the limit.
 
-use crate::constitutive::{scalar_model, MaterialParams, ModelIn, PlasticState, Scalar};
+use crate::constitutive::{scalar_model, MaterialParams, ModelIn, ModelOut, PlasticState, Scalar};
 use crate::material::PartConsts;
 use crate::math::{svd3, Mat3, Real, Svd3};
 use std::ops::{Add, Div, Mul, Neg, Sub};
@@ -164,6 +165,44 @@ pub struct ConstitutiveBar<T> {
     pub params: MaterialParams<T>,
 }
 
+/// The jelly's scalar model (fixed corotated, purely elastic) with its Jacobian in closed form:
+/// `t_i = 2 mu (s_i - 1) s_i + lambda J (J - 1)`, `J = s_0 s_1 s_2`, so
+/// `dt_i/ds_j = [i = j] 2 mu (2 s_i - 1) + lambda (2 J - 1) J / s_j` (`J / s_j` the product of
+/// the other two), `dt_i/dmu = 2 (s_i - 1) s_i`, `dt_i/dlambda = J (J - 1)`; F and the plastic
+/// state pass through unchanged. The same values and derivatives as [`scalar_model`] on dual
+/// numbers (the test oracle) without the ten-direction arithmetic of the hottest material.
+fn fixed_corotated_jacobian<T: Real>(
+    s: [T; 3],
+    state: PlasticState<T>,
+    p: MaterialParams<T>,
+) -> ModelOut<Dual<T, DIRS>> {
+    let (one, two) = (T::one(), T::c(2.0));
+    let j = s[0] * s[1] * s[2];
+    let vol = p.lambda * j * (j - one);
+    let cof = [s[1] * s[2], s[0] * s[2], s[0] * s[1]];
+    let dvol = p.lambda * (two * j - one);
+    let t = std::array::from_fn(|i| {
+        let mut d = [T::zero(); DIRS];
+        for (jj, dj) in d.iter_mut().take(3).enumerate() {
+            *dj = dvol * cof[jj];
+        }
+        d[i] += two * p.mu * (two * s[i] - one);
+        d[5] = two * (s[i] - one) * s[i];
+        d[6] = j * (j - one);
+        Dual {
+            v: two * p.mu * (s[i] - one) * s[i] + vol,
+            d,
+        }
+    });
+    let var = |v: T, i: usize| Dual::<T, DIRS>::var(v, i);
+    ModelOut {
+        sigma_e: [var(s[0], 0), var(s[1], 1), var(s[2], 2)],
+        t,
+        state: [var(state[0], 3), var(state[1], 4)],
+        unchanged: true,
+    }
+}
+
 /// Stable divided difference `(g_i - g_j) / (s_i - s_j)` (see the module docs).
 fn divided<T: Real>(g: &[Dual<T, DIRS>; 3], s: [T; 3], i: usize, j: usize, eps: T) -> T {
     let gap = s[i] - s[j];
@@ -289,7 +328,11 @@ fn stress_update_vjp_inner<T: Real>(
         alpha: var(p.alpha, 8),
         h: var(p.h, 9),
     };
-    let out = scalar_model(pc, input, dt.f64());
+    let out = if pc.material == 0 {
+        fixed_corotated_jacobian(s, state, p)
+    } else {
+        scalar_model(pc, input, dt.f64())
+    };
     let (u, v) = (svd.u, svd.v);
     let g_hat = u.transpose() * fe_bar * v;
     let t_hat = u.transpose() * tau_bar.sym() * u;
@@ -340,5 +383,82 @@ fn stress_update_vjp_inner<T: Real>(
             alpha: d_bar[8],
             h: d_bar[9],
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::material::PartConsts;
+
+    #[test]
+    fn jelly_jacobian_in_closed_form_matches_the_dual_numbers() {
+        let pc = PartConsts {
+            material: 0,
+            ..Default::default()
+        };
+        let mut seed = 17u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for k in 0..200 {
+            // Near rest, stretched, compressed, inverted (negative last value), repeated.
+            let mut s = [0.5 + rnd(), 0.5 + rnd(), 0.5 + rnd()];
+            if k % 5 == 0 {
+                s[2] = -s[2];
+            }
+            if k % 7 == 0 {
+                s[1] = s[0];
+            }
+            let state = [rnd() * 1e3, 1.0 + rnd()];
+            let p = MaterialParams {
+                mu: 1e3 + 1e5 * rnd(),
+                lambda: 1e3 + 1e5 * rnd(),
+                eta: rnd(),
+                alpha: rnd(),
+                h: rnd(),
+            };
+            let var = |v: f64, i: usize| Dual::<f64, DIRS>::var(v, i);
+            let input = ModelIn {
+                sigma: [var(s[0], 0), var(s[1], 1), var(s[2], 2)],
+                state: [var(state[0], 3), var(state[1], 4)],
+                mu: var(p.mu, 5),
+                lambda: var(p.lambda, 6),
+                eta: var(p.eta, 7),
+                alpha: var(p.alpha, 8),
+                h: var(p.h, 9),
+            };
+            let want = scalar_model(&pc, input, 1e-4);
+            let got = fixed_corotated_jacobian(s, state, p);
+            assert_eq!(want.unchanged, got.unchanged);
+            let pairs = want
+                .t
+                .iter()
+                .zip(&got.t)
+                .chain(want.sigma_e.iter().zip(&got.sigma_e))
+                .chain(want.state.iter().zip(&got.state));
+            for (w, g) in pairs {
+                let scale =
+                    w.v.abs()
+                        .max(w.d.iter().fold(0.0f64, |m, x| m.max(x.abs())));
+                assert!(
+                    (w.v - g.v).abs() <= 1e-13 * scale.max(1.0),
+                    "{s:?}: {} vs {}",
+                    w.v,
+                    g.v
+                );
+                for e in 0..DIRS {
+                    assert!(
+                        (w.d[e] - g.d[e]).abs() <= 1e-12 * scale.max(1.0),
+                        "{s:?} direction {e}: {} vs {}",
+                        w.d[e],
+                        g.d[e]
+                    );
+                }
+            }
+        }
     }
 }
