@@ -46,31 +46,42 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
             ..
         } = s;
         let seq = self.sequential(np);
+        let sorted = starts[slabs::slab_count(n)] as usize;
+        // Another thread using a clone of this backend holds the buffer: use a fresh one.
+        let mut guard = self.g2p_bar.try_lock().ok();
+        let mut fresh = Vec::new();
+        let buf = guard.as_deref_mut().unwrap_or(&mut fresh);
+        buf.resize(sorted, G2pBar::default());
         self.run_as(seq, || {
             // Every node G2P's stencils reach lies in a block the forward P2G marked active.
             crate::for_active_blocks(seq, grid_bar, &g.active, n, |_, x| *x = [T::zero(); 4]);
-            let per_slab: Vec<Vec<(u32, G2pBar<T>)>> =
-                slabs::scatter_by_slab(seq, grid_bar, n * n, n, order, starts, |lo, ids, nodes| {
-                    ids.iter()
-                        .map(|&i| {
-                            let p = i as usize;
-                            let b = g2p_vjp(
-                                &g.nodes,
-                                n,
-                                before.x[p],
-                                &tape.f_elastic[p],
-                                c,
-                                adj.x[p],
-                                adj.v[p],
-                                &adj.c[p],
-                                &adj.f[p],
-                                nodes,
-                                lo,
-                            );
-                            (i, b)
-                        })
-                        .collect()
-                });
+            slabs::scatter_by_slab(
+                seq,
+                grid_bar,
+                n * n,
+                n,
+                order,
+                starts,
+                &mut buf[..],
+                |lo, ids, nodes, out| {
+                    for (&i, o) in ids.iter().zip(out.iter_mut()) {
+                        let p = i as usize;
+                        *o = g2p_vjp(
+                            &g.nodes,
+                            n,
+                            before.x[p],
+                            &tape.f_elastic[p],
+                            c,
+                            adj.x[p],
+                            adj.v[p],
+                            &adj.c[p],
+                            &adj.f[p],
+                            nodes,
+                            lo,
+                        );
+                    }
+                },
+            );
             if seq {
                 x_bar.fill([T::zero(); 3]);
                 fe_bar.fill([T::zero(); 9]);
@@ -83,7 +94,7 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
                         *f = [T::zero(); 9];
                     });
             }
-            for (i, b) in per_slab.into_iter().flatten() {
+            for (&i, b) in order[..sorted].iter().zip(buf.iter()) {
                 debug_assert!(in_domain(before.x[i as usize], inv_dx, n));
                 x_bar[i as usize] = b.x;
                 fe_bar[i as usize] = b.f_elastic;

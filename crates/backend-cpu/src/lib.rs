@@ -62,6 +62,9 @@ pub enum Par {
 pub struct CpuBackend<T = f32> {
     pool: Option<Arc<rayon::ThreadPool>>,
     par: Par,
+    /// The reverse G2P's per-particle results in slab order, kept between substeps (a
+    /// buffer of this size allocated every substep costs its page faults each time).
+    g2p_bar: Arc<std::sync::Mutex<Vec<r4d_mpm::adjoint::transfer_vjp::G2pBar<T>>>>,
     _t: PhantomData<T>,
 }
 
@@ -97,6 +100,7 @@ impl<T> CpuBackend<T> {
         CpuBackend {
             pool,
             par,
+            g2p_bar: Default::default(),
             _t: PhantomData,
         }
     }
@@ -310,7 +314,8 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
                 n,
                 order,
                 starts,
-                |lo, ids, nodes| {
+                &mut [] as &mut [()],
+                |lo, ids, nodes, _| {
                     for &i in ids {
                         let i = i as usize;
                         let st = stencil(x[i], inv_dx);

@@ -48,50 +48,72 @@ pub fn sort_by_slab(keys: &[u32], n: usize, order: &mut [u32], starts: &mut [u32
     starts[0] = 0;
 }
 
-/// Runs `f(x_lo, ids, slab_nodes)` for every non-empty slab, even slabs in parallel, then odd
-/// ones (all on the calling thread when `seq`). `nodes` is the x-major grid with `layer`
-/// entries per x layer; `slab_nodes` starts at layer `x_lo`. Returns the results in slab order.
-pub fn scatter_by_slab<T: Send, R: Send>(
+/// One slab's work: its first node layer, its particles, its nodes and its outputs.
+type SlabTask<'a, T, O> = (usize, &'a [u32], &'a mut [T], &'a mut [O]);
+
+/// Runs `f(x_lo, ids, slab_nodes, slab_out)` for every non-empty slab, even slabs in
+/// parallel, then odd ones (all on the calling thread when `seq`). `nodes` is the x-major
+/// grid with `layer` entries per x layer; `slab_nodes` starts at layer `x_lo`. `out` is empty
+/// (no per-particle results: every `slab_out` is empty) or has one entry per sorted particle
+/// (`starts`' last entry), in `order`'s order: `slab_out[j]` belongs to `ids[j]`.
+#[allow(clippy::too_many_arguments)]
+pub fn scatter_by_slab<T: Send, O: Send>(
     seq: bool,
     nodes: &mut [T],
     layer: usize,
     n: usize,
     order: &[u32],
     starts: &[u32],
-    f: impl Fn(usize, &[u32], &mut [T]) -> R + Sync,
-) -> Vec<R> {
+    out: &mut [O],
+    f: impl Fn(usize, &[u32], &mut [T], &mut [O]) + Sync,
+) {
     let ns = slab_count(n);
-    let mut out = Vec::new();
+    let with_out = !out.is_empty();
+    assert!(
+        !with_out || out.len() == starts[ns] as usize,
+        "scatter_by_slab: one output per sorted particle"
+    );
+    // Each colour hands out disjoint pieces of `nodes` and `out`; the second colour needs
+    // the whole of both again, so split them per colour from reborrows.
     for colour in 0..2 {
-        let mut tasks: Vec<(usize, &[u32], &mut [T])> = Vec::new();
+        let mut tasks: Vec<SlabTask<'_, T, O>> = Vec::new();
         let mut rest: &mut [T] = &mut *nodes;
         let mut rest_lo = 0usize;
+        let mut rest_out: &mut [O] = &mut *out;
+        let mut out_lo = 0usize;
         for s in (colour..ns).step_by(2) {
-            let ids = &order[starts[s] as usize..starts[s + 1] as usize];
+            let (a, b) = (starts[s] as usize, starts[s + 1] as usize);
+            let ids = &order[a..b];
             let (lo, hi) = slab_layers(s, n);
             let tail = std::mem::take(&mut rest);
             let (_, tail) = tail.split_at_mut((lo - rest_lo) * layer);
             let (mine, tail) = tail.split_at_mut((hi - lo) * layer);
             rest = tail;
             rest_lo = hi;
+            let mine_out = if with_out {
+                let tail = std::mem::take(&mut rest_out);
+                let (_, tail) = tail.split_at_mut(a - out_lo);
+                let (m, tail) = tail.split_at_mut(b - a);
+                rest_out = tail;
+                out_lo = b;
+                m
+            } else {
+                &mut []
+            };
             if !ids.is_empty() {
-                tasks.push((lo, ids, mine));
+                tasks.push((lo, ids, mine, mine_out));
             }
         }
-        let results: Vec<R> = if seq {
+        if seq {
             tasks
                 .into_iter()
-                .map(|(lo, ids, slab)| f(lo, ids, slab))
-                .collect()
+                .for_each(|(lo, ids, slab, o)| f(lo, ids, slab, o));
         } else {
             tasks
                 .into_par_iter()
-                .map(|(lo, ids, slab)| f(lo, ids, slab))
-                .collect()
-        };
-        out.extend(results);
+                .for_each(|(lo, ids, slab, o)| f(lo, ids, slab, o));
+        }
     }
-    out
 }
 
 #[cfg(test)]
