@@ -64,6 +64,7 @@ pub mod lpips;
 pub mod metrics;
 mod par;
 mod real;
+mod real_fft;
 mod rows;
 pub mod spectral;
 pub mod ssim;

@@ -3,14 +3,26 @@
 //! The hot loops of SSIM are short FIR filters over long contiguous rows: `out[e] =
 //! sum_d taps[d] * rows[d][e]`, where `rows[d]` is a row of the input (the vertical pass) or
 //! the same row shifted by `d` pixels (the horizontal pass). Each kernel is written once as
-//! an `#[inline(always)]` generic function over lanes of 16 contiguous values (which LLVM
+//! an `#[inline(always)]` generic function over blocks of contiguous values (which LLVM
 //! vectorises), and instantiated twice: plain (the target's baseline, SSE2 on x86-64) and
 //! inside a `#[target_feature(enable = "avx2,fma")]` function, chosen at runtime by
 //! [`Isa::detect`]. Fused multiply-adds change rounding only (~1 ulp per operation).
+//!
+//! A block holds as many independent sums as it takes to hide the latency of a fused
+//! multiply-add (4 cycles, 2 per cycle: 8 vector registers of sums), so the loops run at the
+//! throughput of the FMA units instead of waiting on one chain. The block width does not
+//! change any value: each sum still runs over the taps in order.
 
 use crate::real::Real;
 
-/// Values per inner block.
+/// Values per block of the wide loops in f64 (twice as many in f32): 8 AVX registers of
+/// independent sums, enough to cover the latency of a chain of fused multiply-adds.
+const WIDE: usize = 32;
+
+/// Values per block of the tails of the wide loops, and of the three-sum kernel in f64.
+const NARROW: usize = 8;
+
+/// Values per block of the three-sum kernel in f64 (twice as many in f32).
 const L: usize = 16;
 
 /// The instruction set the row kernels use.
@@ -68,19 +80,12 @@ unsafe fn conv_avx2<S: Real>(out: &mut [S], rows: &[&[S]], taps: &[S]) {
 
 #[inline(always)]
 fn conv_impl<S: Real, const FMA: bool>(out: &mut [S], rows: &[&[S]], taps: &[S]) {
-    let n = out.len();
-    let mut e = 0;
-    while e + L <= n {
-        let mut acc = [S::zero(); L];
-        for (row, &g) in rows.iter().zip(taps) {
-            let r = &row[e..e + L];
-            for l in 0..L {
-                acc[l] = madd::<S, FMA>(g, r[l], acc[l]);
-            }
-        }
-        out[e..e + L].copy_from_slice(&acc);
-        e += L;
-    }
+    let e = if std::mem::size_of::<S>() == 4 {
+        conv_blocks::<S, FMA, { 2 * WIDE }>(out, rows, taps, 0)
+    } else {
+        conv_blocks::<S, FMA, WIDE>(out, rows, taps, 0)
+    };
+    let e = conv_blocks::<S, FMA, NARROW>(out, rows, taps, e);
     for (k, o) in out.iter_mut().enumerate().skip(e) {
         let mut a = S::zero();
         for (row, &g) in rows.iter().zip(taps) {
@@ -88,6 +93,105 @@ fn conv_impl<S: Real, const FMA: bool>(out: &mut [S], rows: &[&[S]], taps: &[S])
         }
         *o = a;
     }
+}
+
+/// [`conv_impl`] over blocks of `B` values from `e` while a whole block fits; returns where
+/// it stopped. Each value's sum runs over the taps in order, whatever `B`.
+#[inline(always)]
+fn conv_blocks<S: Real, const FMA: bool, const B: usize>(
+    out: &mut [S],
+    rows: &[&[S]],
+    taps: &[S],
+    mut e: usize,
+) -> usize {
+    let n = out.len();
+    while e + B <= n {
+        let mut acc = [S::zero(); B];
+        for (row, &g) in rows.iter().zip(taps) {
+            let r = &row[e..e + B];
+            for l in 0..B {
+                acc[l] = madd::<S, FMA>(g, r[l], acc[l]);
+            }
+        }
+        out[e..e + B].copy_from_slice(&acc);
+        e += B;
+    }
+    e
+}
+
+/// The vertical pass of the five statistics in one pass over the input rows:
+/// `out[0][e] = sum_d taps[d] x[d][e]`, `out[1]` the same of `y`, `out[2]` of `x^2`,
+/// `out[3]` of `y^2` and `out[4]` of `x y`, each product formed (and rounded) as its rows are
+/// read, so only `x` and `y` are loaded: the same values as filtering stored product rows.
+pub(crate) fn stats_vertical<S: Real>(
+    isa: Isa,
+    out: [&mut [S]; 5],
+    x: &[&[S]],
+    y: &[&[S]],
+    taps: &[S],
+) {
+    debug_assert!(x.len() == taps.len() && y.len() == taps.len());
+    debug_assert!(out.iter().all(|o| o.len() == out[0].len()));
+    match isa {
+        Isa::Generic => stats_vertical_impl::<S, false>(out, x, y, taps),
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `conv`.
+        Isa::Avx2Fma => unsafe { stats_vertical_avx2(out, x, y, taps) },
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn stats_vertical_avx2<S: Real>(out: [&mut [S]; 5], x: &[&[S]], y: &[&[S]], taps: &[S]) {
+    stats_vertical_impl::<S, true>(out, x, y, taps)
+}
+
+#[inline(always)]
+fn stats_vertical_impl<S: Real, const FMA: bool>(
+    mut out: [&mut [S]; 5],
+    x: &[&[S]],
+    y: &[&[S]],
+    taps: &[S],
+) {
+    let e = if std::mem::size_of::<S>() == 4 {
+        stats_blocks::<S, FMA, 16>(&mut out, x, y, taps, 0)
+    } else {
+        stats_blocks::<S, FMA, NARROW>(&mut out, x, y, taps, 0)
+    };
+    let e = stats_blocks::<S, FMA, NARROW>(&mut out, x, y, taps, e);
+    stats_blocks::<S, FMA, 1>(&mut out, x, y, taps, e);
+}
+
+/// [`stats_vertical_impl`] over blocks of `B` values from `e` while a whole block fits;
+/// returns where it stopped.
+#[inline(always)]
+fn stats_blocks<S: Real, const FMA: bool, const B: usize>(
+    out: &mut [&mut [S]; 5],
+    x: &[&[S]],
+    y: &[&[S]],
+    taps: &[S],
+    mut e: usize,
+) -> usize {
+    let n = out[0].len();
+    while e + B <= n {
+        let mut acc = [[S::zero(); B]; 5];
+        for ((xr, yr), &g) in x.iter().zip(y).zip(taps) {
+            let (xr, yr) = (&xr[e..e + B], &yr[e..e + B]);
+            for l in 0..B {
+                let (a, b) = (xr[l], yr[l]);
+                acc[0][l] = madd::<S, FMA>(g, a, acc[0][l]);
+                acc[1][l] = madd::<S, FMA>(g, b, acc[1][l]);
+                acc[2][l] = madd::<S, FMA>(g, a * a, acc[2][l]);
+                acc[3][l] = madd::<S, FMA>(g, b * b, acc[3][l]);
+                acc[4][l] = madd::<S, FMA>(g, a * b, acc[4][l]);
+            }
+        }
+        for (o, a) in out.iter_mut().zip(&acc) {
+            o[e..e + B].copy_from_slice(a);
+        }
+        e += B;
+    }
+    e
 }
 
 /// The transposed vertical pass of the SSIM gradient, fused with the chain rule through
@@ -123,31 +227,15 @@ fn conv3_impl<S: Real, const FMA: bool>(
     x: &[S],
     y: &[S],
 ) {
-    let n = out.len();
+    let e = if std::mem::size_of::<S>() == 4 {
+        conv3_blocks::<S, FMA, { 2 * L }>(out, abc, taps, x, y, 0)
+    } else {
+        conv3_blocks::<S, FMA, L>(out, abc, taps, x, y, 0)
+    };
+    let e = conv3_blocks::<S, FMA, NARROW>(out, abc, taps, x, y, e);
     let two = S::one() + S::one();
     let [a, b, c] = abc;
-    let mut e = 0;
-    while e + L <= n {
-        let mut aa = [S::zero(); L];
-        let mut bb = [S::zero(); L];
-        let mut cc = [S::zero(); L];
-        for d in 0..taps.len() {
-            let g = taps[d];
-            let (ra, rb, rc) = (&a[d][e..e + L], &b[d][e..e + L], &c[d][e..e + L]);
-            for l in 0..L {
-                aa[l] = madd::<S, FMA>(g, ra[l], aa[l]);
-                bb[l] = madd::<S, FMA>(g, rb[l], bb[l]);
-                cc[l] = madd::<S, FMA>(g, rc[l], cc[l]);
-            }
-        }
-        let (xs, ys) = (&x[e..e + L], &y[e..e + L]);
-        let o = &mut out[e..e + L];
-        for l in 0..L {
-            o[l] = madd::<S, FMA>(two * xs[l], bb[l], madd::<S, FMA>(ys[l], cc[l], aa[l]));
-        }
-        e += L;
-    }
-    for k in e..n {
+    for k in e..out.len() {
         let (mut aa, mut bb, mut cc) = (S::zero(), S::zero(), S::zero());
         for d in 0..taps.len() {
             let g = taps[d];
@@ -157,6 +245,43 @@ fn conv3_impl<S: Real, const FMA: bool>(
         }
         out[k] = madd::<S, FMA>(two * x[k], bb, madd::<S, FMA>(y[k], cc, aa));
     }
+}
+
+/// [`conv3_impl`] over blocks of `B` values from `e` while a whole block fits; returns where
+/// it stopped.
+#[inline(always)]
+fn conv3_blocks<S: Real, const FMA: bool, const B: usize>(
+    out: &mut [S],
+    abc: [&[&[S]]; 3],
+    taps: &[S],
+    x: &[S],
+    y: &[S],
+    mut e: usize,
+) -> usize {
+    let n = out.len();
+    let two = S::one() + S::one();
+    let [a, b, c] = abc;
+    while e + B <= n {
+        let mut aa = [S::zero(); B];
+        let mut bb = [S::zero(); B];
+        let mut cc = [S::zero(); B];
+        for d in 0..taps.len() {
+            let g = taps[d];
+            let (ra, rb, rc) = (&a[d][e..e + B], &b[d][e..e + B], &c[d][e..e + B]);
+            for l in 0..B {
+                aa[l] = madd::<S, FMA>(g, ra[l], aa[l]);
+                bb[l] = madd::<S, FMA>(g, rb[l], bb[l]);
+                cc[l] = madd::<S, FMA>(g, rc[l], cc[l]);
+            }
+        }
+        let (xs, ys) = (&x[e..e + B], &y[e..e + B]);
+        let o = &mut out[e..e + B];
+        for l in 0..B {
+            o[l] = madd::<S, FMA>(two * xs[l], bb[l], madd::<S, FMA>(ys[l], cc[l], aa[l]));
+        }
+        e += B;
+    }
+    e
 }
 
 /// The five filtered statistics of one output row: `mu_x, mu_y, E[x^2], E[y^2], E[x y]`.

@@ -15,18 +15,24 @@
 //! All spectral arithmetic is f64 (in f32 the round-off of spectral entries that are
 //! mathematically zero, ~1e-7 max|F|, is far above `eps` and turns them into unit phasors
 //! of random phase: the README measured L_phase moving by 4e-4). Both videos are real, so
-//! one complex 3-D FFT of `D_rendered + i D_reference` gives both spectra
-//! (`F_r[k] = (Z[k] + conj Z[-k]) / 2`, `F_g[k] = (Z[k] - conj Z[-k]) / 2i`), which are then
-//! exactly Hermitian; each conjugate pair `k, -k` is evaluated once. The 3-D DFT is three
-//! batches of 1-D rustfft transforms (plans built once in [`Spectral::new`]) along the
+//! their spectra are Hermitian (`F[-k] = conj F[k]`) and only the half with
+//! `kw <= pw / 2` is computed: a real-input DFT along `w` (`pw / 2 + 1` frequencies, one
+//! complex FFT of `pw / 2` per row), then complex DFTs along `h` and `t` of that half. Each
+//! video is transformed on its own, so a patch whose differences are zero has an exactly
+//! zero spectrum. The sums over the whole spectrum weigh each entry of the half by 2 (it
+//! stands for itself and its conjugate), except in the self-conjugate planes `kw = 0` and
+//! (even `pw`) `kw = pw / 2`, which hold both members of each pair: there each pair
+//! `k, -k` is evaluated once with weight 2 (1 for a self-conjugate entry). The 3-D DFT is
+//! three batches of 1-D rustfft transforms (plans built once in [`Spectral::new`]) along the
 //! contiguous axis, with a transpose between batches.
 //!
 //! # Gradient
 //!
 //! With `G[k] = dL/dRe F[k] + i dL/dIm F[k]` for a spectrum `F = DFT(x)` of a real `x`,
 //! `dL/dx = Re(DFT(conj G))`: the adjoint of a DFT is a DFT. `G` is Hermitian (the loss is
-//! symmetric in `k, -k`), so `DFT(conj G)` is real, and the gradients of two patches come
-//! from one complex FFT of `conj G_1 + i conj G_2`. Per entry, with `r = |F|`:
+//! symmetric in `k, -k`), so `DFT(conj G)`, the unnormalised inverse DFT of `G`, is real: it
+//! is computed from the half of `G` (inverse DFTs along `t` and `h`, then the inverse
+//! real-output DFT along `w`, which supplies the conjugate half). Per entry, with `r = |F|`:
 //! `d|F| = F / r` (0 at `F = 0`, PyTorch's subgradient), the magnitude term gives
 //! `sign(ln(1+r) - ln(1+r_g)) / (1 + r) * F / r`, the phase term
 //! `q G_P - q^2 Re(conj(G_P) F) F / r` with `q = 1 / (r + eps)` and `G_P = -P_g / N`.
@@ -41,12 +47,13 @@
 //! [`SpectralConfig::phase_mask`] (entries where either spectrum's magnitude is below the
 //! threshold contribute `S = 0` and no gradient).
 //!
-//! Memory: the videos are read patch by patch; the only temporaries are a few
-//! `(T - 1) x ph x pw` complex buffers per worker.
+//! Memory: the videos are read band by band; the only temporaries are a band's gray frames
+//! and a few `(T - 1) x ph x pw` buffers per worker.
 
 use crate::error::{Input, LossError};
 use crate::par;
 use crate::real::Real;
+use crate::real_fft::RealFft;
 use crate::video::{check_grad_len, check_pair, Video};
 use rustfft::num_complex::Complex;
 use rustfft::{Fft, FftPlanner};
@@ -155,7 +162,10 @@ pub struct Spectral {
     width: usize,
     fft_t: Arc<dyn Fft<f64>>,
     fft_h: Arc<dyn Fft<f64>>,
-    fft_w: Arc<dyn Fft<f64>>,
+    ifft_t: Arc<dyn Fft<f64>>,
+    ifft_h: Arc<dyn Fft<f64>>,
+    /// Real-input DFTs along `w`.
+    rfft_w: RealFft,
     scratch: usize,
 }
 
@@ -216,12 +226,15 @@ impl Spectral {
         let mut planner = FftPlanner::<f64>::new();
         let fft_t = planner.plan_fft_forward(frames - 1);
         let fft_h = planner.plan_fft_forward(ph);
-        let fft_w = planner.plan_fft_forward(pw);
-        let scratch = [&fft_t, &fft_h, &fft_w]
+        let ifft_t = planner.plan_fft_inverse(frames - 1);
+        let ifft_h = planner.plan_fft_inverse(ph);
+        let rfft_w = RealFft::new(pw, &mut planner);
+        let scratch = [&fft_t, &fft_h, &ifft_t, &ifft_h]
             .iter()
             .map(|f| f.get_inplace_scratch_len())
             .max()
-            .unwrap_or(0);
+            .unwrap_or(0)
+            .max(rfft_w.scratch_len());
         Ok(Spectral {
             cfg,
             frames,
@@ -229,7 +242,9 @@ impl Spectral {
             width,
             fft_t,
             fft_h,
-            fft_w,
+            ifft_t,
+            ifft_h,
+            rfft_w,
             scratch,
         })
     }
@@ -293,16 +308,14 @@ impl Spectral {
     pub fn transforms_only(&self, grad: bool) {
         let [ph, pw] = self.cfg.patch;
         let (nb, npw) = (self.height / ph, self.width / pw);
-        let len = (self.frames - 1) * ph * pw;
         par::map((0..nb).collect(), |_| {
-            let mut z = vec![C64::default(); len];
-            let mut tmp = vec![C64::default(); len];
-            let mut scratch = vec![C64::default(); self.scratch];
-            for j in 0..npw {
-                self.forward(&mut z, &mut tmp, &mut scratch);
-                self.forward(&mut z, &mut tmp, &mut scratch);
-                if grad && (j % 2 == 1 || j + 1 == npw) {
-                    self.backward_transform(&mut z, &mut tmp, &mut scratch);
+            let mut ws = Workspace::new(self, false);
+            let mut d = vec![0.0; (self.frames - 1) * ph * pw];
+            for _ in 0..npw {
+                self.forward(&ws.dr, &mut ws.z, &mut ws.tmp, &mut ws.scratch);
+                self.forward(&ws.dg, &mut ws.zg, &mut ws.tmp, &mut ws.scratch);
+                if grad {
+                    self.backward_transform(&mut ws.g, &mut d, &mut ws.tmp, &mut ws.scratch);
                 }
             }
         });
@@ -376,7 +389,7 @@ impl Spectral {
         }
     }
 
-    /// One band of patches (patch row `b`), two patches at a time. The band's gray frames of
+    /// One band of patches (patch row `b`), one patch at a time. The band's gray frames of
     /// both videos are read once, sequentially, into `(T, ph, W)` f64 buffers; with a
     /// gradient, the band's gray-frame gradient is accumulated likewise and added to the
     /// frames at the end (sequential access instead of one strided read per patch row).
@@ -408,24 +421,20 @@ impl Spectral {
             }
         }
         let mut sums = BandSums::default();
-        let mut j = 0;
-        while j < npw {
-            let pair = if j + 1 < npw { 2 } else { 1 };
-            for k in 0..pair {
-                self.gather(j + k, ws);
-                self.forward(&mut ws.z, &mut ws.tmp, &mut ws.scratch);
-                self.forward(&mut ws.zg, &mut ws.tmp, &mut ws.scratch);
-                let gw = grad.as_ref().map(|(w, _)| *w);
-                let s = self.entries_pass(&ws.z, &ws.zg, gw.map(|w| (w, &mut ws.g[k][..])));
-                sums.mag += s.mag;
-                sums.phase += s.phase;
-                sums.masked += s.masked;
-            }
+        for j in 0..npw {
+            self.gather(j, ws);
+            self.forward(&ws.dr, &mut ws.z, &mut ws.tmp, &mut ws.scratch);
+            self.forward(&ws.dg, &mut ws.zg, &mut ws.tmp, &mut ws.scratch);
+            let gw = grad.as_ref().map(|(w, _)| *w);
+            let s = self.entries_pass(&ws.z, &ws.zg, gw.map(|w| (w, &mut ws.g[..])));
+            sums.mag += s.mag;
+            sums.phase += s.phase;
+            sums.masked += s.masked;
             if grad.is_some() {
-                self.backward(ws, pair);
-                self.scatter(j, pair, ws);
+                // The gradient with respect to the patch's differences, into `dr` (read).
+                self.backward_transform(&mut ws.g, &mut ws.dr, &mut ws.tmp, &mut ws.scratch);
+                self.scatter(j, ws);
             }
-            j += pair;
         }
         if let Some((_, g)) = grad {
             for (t, frame) in g.iter_mut().enumerate() {
@@ -446,66 +455,63 @@ impl Spectral {
         sums
     }
 
-    /// Gray frame differences of patch `j` of the band: `z = D_rendered`,
-    /// `zg = D_reference` (imaginary parts 0), layout `(t, h, w)`.
+    /// Gray frame differences of patch `j` of the band: `dr = D_rendered`,
+    /// `dg = D_reference`, layout `(t, h, w)`.
     fn gather(&self, j: usize, ws: &mut Workspace) {
         let [ph, pw] = self.cfg.patch;
         let pl = ph * pw;
         let base = j * self.frames * pl;
         for t in 0..self.frames - 1 {
             let (a, c) = (base + t * pl, base + (t + 1) * pl);
-            let (z, zg) = (
-                &mut ws.z[t * pl..(t + 1) * pl],
-                &mut ws.zg[t * pl..(t + 1) * pl],
-            );
+            let out = t * pl..(t + 1) * pl;
+            let (dr, dg) = (&mut ws.dr[out.clone()], &mut ws.dg[out]);
+            let (r0, r1) = (&ws.yr[a..a + pl], &ws.yr[c..c + pl]);
+            let (g0, g1) = (&ws.yg[a..a + pl], &ws.yg[c..c + pl]);
             for q in 0..pl {
-                z[q] = C64::new(ws.yr[c + q] - ws.yr[a + q], 0.0);
-                zg[q] = C64::new(ws.yg[c + q] - ws.yg[a + q], 0.0);
+                dr[q] = r1[q] - r0[q];
+                dg[q] = g1[q] - g0[q];
             }
         }
     }
 
-    /// Forward 3-D DFT of `z`: layout `(t, h, w)` in, `(kh, kw, kt)` out.
-    fn forward(&self, z: &mut [C64], tmp: &mut [C64], scratch: &mut [C64]) {
-        let [ph, pw] = self.cfg.patch;
-        let td = self.frames - 1;
-        self.fft_w.process_with_scratch(z, scratch);
-        transpose(z, tmp, td * ph, pw); // (pw, td, ph)
-        self.fft_h.process_with_scratch(tmp, scratch);
-        transpose(tmp, z, pw * td, ph); // (ph, pw, td)
+    /// The half spectrum of the real `(t, h, w)` differences `d` into `z`, layout
+    /// `(kh, kw, kt)` with `kw <= pw / 2`.
+    fn forward(&self, d: &[f64], z: &mut [C64], tmp: &mut [C64], scratch: &mut [C64]) {
+        let ph = self.cfg.patch[0];
+        let (td, nw) = (self.frames - 1, self.rfft_w.bins());
+        let len = td * ph * nw;
+        let z = &mut z[..len];
+        self.rfft_w.forward(d, z, tmp, scratch); // (td, ph, nw)
+        transpose(z, &mut tmp[..len], td * ph, nw); // (nw, td, ph)
+        self.fft_h.process_with_scratch(&mut tmp[..len], scratch);
+        transpose(&tmp[..len], z, nw * td, ph); // (ph, nw, td)
         self.fft_t.process_with_scratch(z, scratch);
     }
 
-    /// `z = DFT(conj G_1 + i conj G_2)`: layout `(kh, kw, kt)` in, `(w, t, h)` out; the real
-    /// part is patch 1's gradient with respect to its differences, the imaginary part
-    /// patch 2's.
-    fn backward(&self, ws: &mut Workspace, pair: usize) {
-        let [g1, g2] = &ws.g;
-        if pair == 2 {
-            for ((z, a), c) in ws.z.iter_mut().zip(g1).zip(g2) {
-                *z = C64::new(a.re + c.im, c.re - a.im);
-            }
-        } else {
-            for (z, a) in ws.z.iter_mut().zip(g1) {
-                *z = a.conj();
-            }
-        }
-        self.backward_transform(&mut ws.z, &mut ws.tmp, &mut ws.scratch);
+    /// The real `(t, h, w)` inverse DFT of the Hermitian spectrum whose half is `g` (layout
+    /// `(kh, kw, kt)`, overwritten) into `d`: `Re(DFT(conj G))`, the gradient with respect
+    /// to the differences.
+    fn backward_transform(
+        &self,
+        g: &mut [C64],
+        d: &mut [f64],
+        tmp: &mut [C64],
+        scratch: &mut [C64],
+    ) {
+        let ph = self.cfg.patch[0];
+        let (td, nw) = (self.frames - 1, self.rfft_w.bins());
+        let len = td * ph * nw;
+        let g = &mut g[..len];
+        self.ifft_t.process_with_scratch(g, scratch);
+        transpose(g, &mut tmp[..len], ph, nw * td); // (nw, td, ph)
+        self.ifft_h.process_with_scratch(&mut tmp[..len], scratch);
+        transpose(&tmp[..len], g, nw, td * ph); // (td, ph, nw)
+        self.rfft_w.inverse(g, d, tmp, scratch);
     }
 
-    /// The 3-D DFT of the backward pass: layout `(kh, kw, kt)` in, `(w, t, h)` out.
-    fn backward_transform(&self, z: &mut [C64], tmp: &mut [C64], scratch: &mut [C64]) {
-        let [ph, pw] = self.cfg.patch;
-        let td = self.frames - 1;
-        self.fft_t.process_with_scratch(z, scratch);
-        transpose(z, tmp, ph * pw, td); // (td, ph, pw)
-        self.fft_w.process_with_scratch(tmp, scratch);
-        transpose(tmp, z, td * ph, pw); // (pw, td, ph)
-        self.fft_h.process_with_scratch(z, scratch);
-    }
-
-    /// Values of every entry of a forward-transformed `z` (layout `(kh, kw, kt)`); with
-    /// `grad`, also `G` of the rendered spectrum into `g` (same layout).
+    /// Values of every entry of the spectrum whose half is `zr` (layout `(kh, kw, kt)`,
+    /// `kw <= pw / 2`); with `grad`, also the half of `G` of the rendered spectrum into `g`
+    /// (same layout).
     fn entries_pass(
         &self,
         zr: &[C64],
@@ -513,7 +519,7 @@ impl Spectral {
         grad: Option<(GradWeights, &mut [C64])>,
     ) -> BandSums {
         let [ph, pw] = self.cfg.patch;
-        let td = self.frames - 1;
+        let (td, nw) = (self.frames - 1, self.rfft_w.bins());
         let s = match self.cfg.norm {
             FftNorm::Backward => 1.0,
             FftNorm::Ortho => 1.0 / ((td * ph * pw) as f64).sqrt(),
@@ -527,13 +533,20 @@ impl Spectral {
         };
         for kh in 0..ph {
             let mh = (ph - kh) % ph;
-            for kw in 0..pw {
-                let mw = (pw - kw) % pw;
-                let row = (kh * pw + kw) * td;
-                let mrow = (mh * pw + mw) * td;
+            for kw in 0..nw {
+                // The planes kw = 0 and kw = pw / 2 hold their own conjugates (kw = -kw mod
+                // pw); every other entry stands for itself and its conjugate in the half
+                // that is not stored.
+                let self_conjugate = kw == 0 || 2 * kw == pw;
+                let row = (kh * nw + kw) * td;
+                let mrow = (mh * nw + kw) * td;
                 for kt in 0..td {
                     let e = row + kt;
-                    let m = mrow + if kt == 0 { 0 } else { td - kt };
+                    let m = if self_conjugate {
+                        mrow + if kt == 0 { 0 } else { td - kt }
+                    } else {
+                        usize::MAX
+                    };
                     if m < e {
                         continue;
                     }
@@ -572,7 +585,9 @@ impl Spectral {
                         }
                         ge *= s;
                         g[e] = ge;
-                        g[m] = ge.conj();
+                        if self_conjugate {
+                            g[m] = ge.conj();
+                        }
                     }
                 }
             }
@@ -580,32 +595,23 @@ impl Spectral {
         sums
     }
 
-    /// Adds the gradient of the patch pair starting at column `j` (in `z`, layout
-    /// `(w, t, h)`) to the band's gray-frame gradient, through the differences
-    /// (`dL/dY_t = g_{t-1} - g_t`).
-    fn scatter(&self, j: usize, pair: usize, ws: &mut Workspace) {
+    /// Adds the gradient of patch `j` with respect to its differences (in `dr`, layout
+    /// `(t, h, w)`) to the band's gray-frame gradient (`dL/dY_t = g_{t-1} - g_t`).
+    fn scatter(&self, j: usize, ws: &mut Workspace) {
         let [ph, pw] = self.cfg.patch;
         let (nt, td) = (self.frames, self.frames - 1);
         let pl = ph * pw;
-        for k in 0..pair {
-            let part = |c: C64| if k == 0 { c.re } else { c.im };
-            for t in 0..nt {
-                for h in 0..ph {
-                    let o = ((j + k) * nt + t) * pl + h * pw;
-                    for ww in 0..pw {
-                        let base = ww * td * ph + h;
-                        let after = if t < td {
-                            part(ws.z[base + t * ph])
-                        } else {
-                            0.0
-                        };
-                        let before = if t > 0 {
-                            part(ws.z[base + (t - 1) * ph])
-                        } else {
-                            0.0
-                        };
-                        ws.gy[o + ww] += before - after;
-                    }
+        for t in 0..nt {
+            let o = (j * nt + t) * pl;
+            let gy = &mut ws.gy[o..o + pl];
+            if t > 0 {
+                for (y, &d) in gy.iter_mut().zip(&ws.dr[(t - 1) * pl..t * pl]) {
+                    *y += d;
+                }
+            }
+            if t < td {
+                for (y, &d) in gy.iter_mut().zip(&ws.dr[t * pl..(t + 1) * pl]) {
+                    *y -= d;
                 }
             }
         }
@@ -616,16 +622,19 @@ impl Workspace {
     /// Buffers for one worker.
     fn new(sp: &Spectral, with_grad: bool) -> Self {
         let [ph, pw] = sp.cfg.patch;
-        let len = (sp.frames - 1) * ph * pw;
+        let td = sp.frames - 1;
+        let half = td * ph * sp.rfft_w.bins();
         let n = sp.frames * ph * (sp.width / pw) * pw;
         Workspace {
             yr: vec![0.0; n],
             yg: vec![0.0; n],
             gy: vec![0.0; if with_grad { n } else { 0 }],
-            z: vec![C64::default(); len],
-            zg: vec![C64::default(); len],
-            tmp: vec![C64::default(); len],
-            g: [vec![C64::default(); len], vec![C64::default(); len]],
+            dr: vec![0.0; td * ph * pw],
+            dg: vec![0.0; td * ph * pw],
+            z: vec![C64::default(); half],
+            zg: vec![C64::default(); half],
+            tmp: vec![C64::default(); half.max(td * ph * sp.rfft_w.buffer_len())],
+            g: vec![C64::default(); half],
             scratch: vec![C64::default(); sp.scratch],
         }
     }
@@ -645,12 +654,17 @@ struct Workspace {
     yg: Vec<f64>,
     /// The band's gray-frame gradient, same layout.
     gy: Vec<f64>,
+    /// One patch's differences `(T - 1, ph, pw)`: rendered (then the gradient with respect
+    /// to them), reference.
+    dr: Vec<f64>,
+    dg: Vec<f64>,
+    /// Half spectra `(ph, pw / 2 + 1, T - 1)`: rendered, reference, `G`.
     z: Vec<C64>,
-    tmp: Vec<C64>,
-    g: [Vec<C64>; 2],
-    scratch: Vec<C64>,
-    /// The reference's differences and spectrum.
     zg: Vec<C64>,
+    g: Vec<C64>,
+    /// Transposes and the real-input DFTs' work buffer.
+    tmp: Vec<C64>,
+    scratch: Vec<C64>,
 }
 
 /// Transposes the `rows x cols` matrix `src` into `dst` (`cols x rows`).

@@ -384,8 +384,9 @@ pub(crate) struct PlaneSums {
 }
 
 /// SSIM of one image (`h x w x ch`, interleaved) in precision `S`, streaming rows: a ring of
-/// `window` input rows (converted, zero-padded, with their squares and products), the
-/// vertical then the horizontal pass for one output row, its maps; with `grad = (u, g)` also
+/// `window` input rows (converted, zero-padded), the vertical pass of all five statistics in
+/// one pass over the ring (products formed as the rows are read), the horizontal pass, the
+/// output row's maps; with `grad = (u, g)` also
 /// the cotangents (upstream `u` per map element) into a ring of `window` rows, their
 /// transposed horizontal pass, and, once an input row has received every output row's
 /// contribution, the transposed vertical pass added to `g`.
@@ -443,8 +444,11 @@ fn ssim_tile<T: Real, S: Real>(
     let (r0, r1) = (cols.0.max(pad) - pad, (cols.0 + wi).min(pad + w) - pad);
     let off = (r0 + pad - cols.0) * ch;
     let span = (r0 * ch, r1 * ch);
-    // Input rings: x, y, xx, yy, xy.
-    let mut ring: [Vec<S>; 5] = std::array::from_fn(|_| vec![S::zero(); n * li]);
+    // Input rings: x, y, and with the 2-D residual xx, yy, xy (the vertical pass forms the
+    // products itself).
+    let products = f.residual.is_some();
+    let mut ring: [Vec<S>; 5] =
+        std::array::from_fn(|q| vec![S::zero(); if q < 2 || products { n * li } else { 0 }]);
     let mut v: [Vec<S>; 5] = std::array::from_fn(|_| vec![S::zero(); li]);
     let mut m: [Vec<S>; 5] = std::array::from_fn(|_| vec![S::zero(); lo]);
     let mut corr = vec![S::zero(); if f.residual.is_some() { li } else { 0 }];
@@ -489,6 +493,9 @@ fn ssim_tile<T: Real, S: Real>(
                 }
             }
         }
+        if !products {
+            return;
+        }
         let [rx, ry, rxx, ryy, rxy] = ring;
         let (rx, ry) = (&rx[s..s + li], &ry[s..s + li]);
         for e in 0..li {
@@ -504,15 +511,15 @@ fn ssim_tile<T: Real, S: Real>(
     }
     for o in 0..ho {
         load(&mut ring, o + n - 1);
-        // Vertical pass: v_q = sum_d g_d q[o + d].
-        for q in 0..5 {
-            let mut rows = empty;
-            for d in 0..n {
-                let s = ((o + d) % n) * li;
-                rows[d] = &ring[q][s..s + li];
-            }
-            rows::conv(isa, &mut v[q], &rows[..n], taps);
+        // Vertical pass: v_q = sum_d g_d q[o + d] for q = x, y, xx, yy, xy.
+        let (mut xrows, mut yrows) = (empty, empty);
+        for d in 0..n {
+            let s = ((o + d) % n) * li;
+            xrows[d] = &ring[0][s..s + li];
+            yrows[d] = &ring[1][s..s + li];
         }
+        let [v0, v1, v2, v3, v4] = &mut v;
+        rows::stats_vertical(isa, [v0, v1, v2, v3, v4], &xrows[..n], &yrows[..n], taps);
         // Horizontal pass: m_q[e] = sum_d g_d v_q[e + d ch].
         for q in 0..5 {
             let mut rows = empty;

@@ -180,8 +180,11 @@ fn spectral_gradients_match_finite_differences() {
         moving_video(6, 5, 20, 27, 1.7),
     );
     type Variant = (&'static str, fn(&mut SpectralConfig));
-    let variants: [Variant; 5] = [
+    let variants: [Variant; 6] = [
         ("16x16 (crop to 16x16)", |_| {}),
+        // Odd patch width: the real-input DFT along w by a full-length complex FFT, and a
+        // single self-conjugate plane.
+        ("5x7 (crop to 20x21)", |s| s.patch = [5, 7]),
         ("8x8 (crop to 16x24)", |s| s.patch = [8, 8]),
         ("4x8 ortho", |s| {
             s.patch = [4, 8];
