@@ -5,11 +5,12 @@
 //! * `project` / `project_vjp`: parallel over Gaussians.
 //! * `bin_tiles`: parallel depth sort (stable order: f32 depth, then index), then a counting
 //!   pass and a fill pass that keep each tile's list front to back.
-//! * `rasterize`: parallel over rows of tiles; each thread writes its own band of the image;
-//!   a tile's Gaussians are gathered into contiguous arrays once for its 256 pixels.
-//! * `rasterize_vjp`: rows of tiles are dealt round-robin to `min(threads, 8)` workers, each
-//!   with its own per-Gaussian accumulator (36 bytes per Gaussian); the accumulators are
-//!   summed in a fixed order, so the result does not depend on scheduling.
+//! * `rasterize`: parallel over the rows of tiles that cover the composited rows
+//!   (`CameraConsts::rows`); each job writes its own slices of the images; a tile's Gaussians
+//!   are gathered into contiguous arrays once for its pixels.
+//! * `rasterize_vjp`: rows of tiles are dealt round-robin to four workers, each with its own
+//!   per-Gaussian accumulator (36 bytes per Gaussian); the accumulators are added to the
+//!   caller's gradient in a fixed order, so the result does not depend on scheduling.
 
 use r4d_splat::kernels::{ImageBufs, SceneBufs, SceneGradBufs, TileBufs};
 use r4d_splat::project::{self as pj, GaussianIn, Projected, ProjectedGrad};
@@ -110,24 +111,43 @@ impl SplatKernels for CpuSplat {
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
     ) -> Result<ImageBufs<Self>, Infallible> {
-        let [w, h] = cam.size;
-        let (w, h) = (w as usize, h as usize);
+        let w = cam.size[0] as usize;
+        let [r0, r1] = [cam.rows[0] as usize, cam.rows[1] as usize];
+        let n = w * (r1 - r0);
         let tiles_x = cam.tiles[0] as usize;
         let bg = cam.bg();
-        let mut rgb = vec![0f32; w * h * 3];
-        let mut alpha = vec![0f32; w * h];
-        let mut depth = vec![0f32; w * h];
-        let mut t_final = vec![0f32; w * h];
-        let mut last = vec![0u32; w * h];
-        let band = 16 * w;
-        rgb.par_chunks_mut(band * 3)
-            .zip(alpha.par_chunks_mut(band))
-            .zip(depth.par_chunks_mut(band))
-            .zip(t_final.par_chunks_mut(band))
-            .zip(last.par_chunks_mut(band))
-            .enumerate()
-            .for_each(|(ty, ((((rgb, alpha), depth), t_final), last))| {
-                let rows = alpha.len() / w;
+        let mut rgb = vec![0f32; n * 3];
+        let mut alpha = vec![0f32; n];
+        let mut depth = vec![0f32; n];
+        let mut t_final = vec![0f32; n];
+        let mut last = vec![0u32; n];
+        // One job per row of tiles: the rows of the band it covers, each job writing its own
+        // slices of the images.
+        let mut jobs = Vec::new();
+        let (mut rgb_r, mut alpha_r, mut depth_r, mut t_r, mut last_r) = (
+            &mut rgb[..],
+            &mut alpha[..],
+            &mut depth[..],
+            &mut t_final[..],
+            &mut last[..],
+        );
+        for ty in r0 / 16..r1.div_ceil(16) {
+            let rows = (ty * 16).max(r0)..((ty + 1) * 16).min(r1);
+            let k = rows.len() * w;
+            let (a, rest) = std::mem::take(&mut rgb_r).split_at_mut(3 * k);
+            rgb_r = rest;
+            let (b, rest) = std::mem::take(&mut alpha_r).split_at_mut(k);
+            alpha_r = rest;
+            let (c, rest) = std::mem::take(&mut depth_r).split_at_mut(k);
+            depth_r = rest;
+            let (d, rest) = std::mem::take(&mut t_r).split_at_mut(k);
+            t_r = rest;
+            let (e, rest) = std::mem::take(&mut last_r).split_at_mut(k);
+            last_r = rest;
+            jobs.push((ty, rows, a, b, c, d, e));
+        }
+        jobs.into_par_iter()
+            .for_each(|(ty, rows, rgb, alpha, depth, t_final, last)| {
                 let mut tile = TileSplats::default();
                 for tx in 0..tiles_x {
                     let t = ty * tiles_x + tx;
@@ -135,8 +155,7 @@ impl SplatKernels for CpuSplat {
                         &bins.ids[bins.offsets[t] as usize..bins.offsets[t + 1] as usize],
                         proj,
                     );
-                    for r in 0..rows {
-                        let j = ty * 16 + r;
+                    for (r, j) in rows.clone().enumerate() {
                         for i in tx * 16..((tx + 1) * 16).min(w) {
                             let (px, tf) =
                                 raster::composite_pixel(i as u32, j as u32, &tile, &bg, None);
@@ -166,14 +185,17 @@ impl SplatKernels for CpuSplat {
         cam: &CameraConsts,
         tape: Option<&ImageBufs<Self>>,
         d_rgb: &Vec<f32>,
-    ) -> Result<Vec<ProjectedGrad<f32>>, Infallible> {
-        let [w, h] = cam.size;
-        let (w, h) = (w as usize, h as usize);
-        let [tiles_x, tiles_y] = cam.tiles.map(|t| t as usize);
+        d_proj: &mut Vec<ProjectedGrad<f32>>,
+    ) -> Result<(), Infallible> {
+        let w = cam.size[0] as usize;
+        let [r0, r1] = [cam.rows[0] as usize, cam.rows[1] as usize];
+        let tiles_x = cam.tiles[0] as usize;
+        let (ty0, ty1) = (r0 / 16, r1.div_ceil(16));
         let bg = cam.bg();
-        // A fixed number of accumulators (tile rows interleaved over them, summed in order):
-        // the gradients are bitwise the same whatever the thread count (1 thread runs the
-        // four in turn). Memory: four copies of the per-Gaussian gradients (36 B each).
+        // A fixed number of accumulators (tile rows interleaved over them, added to `d_proj`
+        // in order): the gradients are bitwise the same whatever the thread count (1 thread
+        // runs the four in turn). Memory: four copies of the per-Gaussian gradients (36 B
+        // each).
         let workers = VJP_ACCUMULATORS;
         let parts: Vec<Vec<ProjectedGrad<f32>>> = (0..workers)
             .into_par_iter()
@@ -181,21 +203,20 @@ impl SplatKernels for CpuSplat {
                 let mut acc = vec![ProjectedGrad::<f32>::default(); proj.len()];
                 let mut trace: Vec<Contribution<f32>> = Vec::new();
                 let mut tile = TileSplats::default();
-                for ty in (wk..tiles_y).step_by(workers) {
+                for ty in (ty0 + wk..ty1).step_by(workers) {
                     for tx in 0..tiles_x {
                         let t = ty * tiles_x + tx;
                         tile.gather(
                             &bins.ids[bins.offsets[t] as usize..bins.offsets[t + 1] as usize],
                             proj,
                         );
-                        for j in ty * 16..((ty + 1) * 16).min(h) {
+                        for j in (ty * 16).max(r0)..((ty + 1) * 16).min(r1) {
                             for i in tx * 16..((tx + 1) * 16).min(w) {
-                                let k = 3 * (j * w + i);
-                                let d = [d_rgb[k], d_rgb[k + 1], d_rgb[k + 2]];
+                                let p = (j - r0) * w + i;
+                                let d = [d_rgb[3 * p], d_rgb[3 * p + 1], d_rgb[3 * p + 2]];
                                 if d == [0.0; 3] {
                                     continue;
                                 }
-                                let p = j * w + i;
                                 let (i, j) = (i as u32, j as u32);
                                 let tf = match tape {
                                     Some(img) => {
@@ -232,14 +253,16 @@ impl SplatKernels for CpuSplat {
                 acc
             })
             .collect();
-        let mut it = parts.into_iter();
-        let mut out = it.next().unwrap_or_default();
-        for p in it {
-            out.par_iter_mut()
-                .zip(p.par_iter())
-                .for_each(|(a, b)| a.add(b));
-        }
-        Ok(out)
+        d_proj
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(4096)
+            .for_each(|(i, a)| {
+                for p in &parts {
+                    a.add(&p[i]);
+                }
+            });
+        Ok(())
     }
 
     fn project_vjp(

@@ -17,7 +17,9 @@
 //! * Kernel trait: [`SplatKernels`] (project, bin_tiles, rasterize, rasterize_vjp,
 //!   project_vjp over backend buffers); [`reference::ReferenceSplat`] is the single-threaded
 //!   reference, `r4d_backend_cpu::splat::CpuSplat` the parallel one.
-//! * [`Renderer`], implemented once by [`SplatRenderer`] for every backend.
+//! * [`Renderer`], implemented once by [`SplatRenderer`] for every backend; [`frame`]:
+//!   one frame projected, sorted and binned once, then rendered and differentiated in row
+//!   bands.
 //! * Inputs: [`ply`] (INRIA 3DGS PLY), [`camera_io`] (r4d/reference JSON, INRIA
 //!   `cameras.json`, nerfstudio `transforms.json`, COLMAP text).
 //!
@@ -45,6 +47,7 @@ pub mod camera;
 pub mod camera_io;
 pub mod covariance;
 pub mod error;
+pub mod frame;
 pub mod gaussians;
 pub mod kernels;
 pub mod link;
@@ -61,6 +64,7 @@ pub mod weights;
 pub use camera::{Camera, RasterizeMode, RenderSettings};
 pub use camera_io::{load_cameras, CameraSet};
 pub use error::{Error, Result};
+pub use frame::PreparedFrame;
 pub use gaussians::{Deformation, GaussianGrads, Gaussians};
 pub use kernels::{CameraConsts, SplatKernels};
 pub use link::SimLink;
