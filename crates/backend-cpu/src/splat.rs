@@ -7,14 +7,20 @@
 //!   pass and a fill pass that keep each tile's list front to back.
 //! * `rasterize`: parallel over the rows of tiles that cover the composited rows
 //!   (`CameraConsts::rows`); each job writes its own slices of the images; a tile's Gaussians
-//!   are gathered into contiguous arrays once for its pixels.
-//! * `rasterize_vjp`: rows of tiles are dealt round-robin to four workers, each with its own
+//!   are gathered into contiguous arrays once for its pixels, and each row of a tile is
+//!   composited at once (`r4d_splat::span`: the power of every Gaussian evaluated for the 16
+//!   pixels together, vectorised, with AVX2 where present; bitwise the pixel-by-pixel
+//!   results).
+//! * `rasterize_vjp`: each row of a tile is composited again at once keeping each pixel's
+//!   trace (or, with the forward's tape, each pixel walked back); rows of tiles are dealt
+//!   round-robin to four workers, each with its own
 //!   per-Gaussian accumulator (36 bytes per Gaussian); the accumulators are added to the
 //!   caller's gradient in a fixed order, so the result does not depend on scheduling.
 
 use r4d_splat::kernels::{ImageBufs, SceneBufs, SceneGradBufs, TileBufs};
 use r4d_splat::project::{self as pj, GaussianIn, Projected, ProjectedGrad};
-use r4d_splat::raster::{self, Contribution, TileSplats};
+use r4d_splat::raster::{self, Contribution, PixelOut, TileSplats};
+use r4d_splat::span::{composite_span_f32, SPAN};
 use r4d_splat::{CameraConsts, SplatKernels};
 use rayon::prelude::*;
 
@@ -149,21 +155,31 @@ impl SplatKernels for CpuSplat {
         jobs.into_par_iter()
             .for_each(|(ty, rows, rgb, alpha, depth, t_final, last)| {
                 let mut tile = TileSplats::default();
+                let mut out = [(PixelOut::default(), 0.0); SPAN];
                 for tx in 0..tiles_x {
                     let t = ty * tiles_x + tx;
                     tile.gather(
                         &bins.ids[bins.offsets[t] as usize..bins.offsets[t + 1] as usize],
                         proj,
                     );
+                    let i0 = tx * SPAN;
+                    let lanes = SPAN.min(w - i0);
                     for (r, j) in rows.clone().enumerate() {
-                        for i in tx * 16..((tx + 1) * 16).min(w) {
-                            let (px, tf) =
-                                raster::composite_pixel(i as u32, j as u32, &tile, &bg, None);
-                            let k = r * w + i;
+                        composite_span_f32(
+                            i0 as u32,
+                            j as u32,
+                            &[true; SPAN][..lanes],
+                            &tile,
+                            &bg,
+                            &mut out,
+                            None,
+                        );
+                        for (l, (px, tf)) in out[..lanes].iter().enumerate() {
+                            let k = r * w + i0 + l;
                             rgb[3 * k..3 * k + 3].copy_from_slice(&px.rgb);
                             alpha[k] = px.alpha;
                             depth[k] = px.depth;
-                            t_final[k] = tf;
+                            t_final[k] = *tf;
                             last[k] = px.last;
                         }
                     }
@@ -201,7 +217,9 @@ impl SplatKernels for CpuSplat {
             .into_par_iter()
             .map(|wk| {
                 let mut acc = vec![ProjectedGrad::<f32>::default(); proj.len()];
-                let mut trace: Vec<Contribution<f32>> = Vec::new();
+                let mut traces: [Vec<Contribution<f32>>; SPAN] =
+                    std::array::from_fn(|_| Vec::new());
+                let mut out = [(PixelOut::default(), 0.0); SPAN];
                 let mut tile = TileSplats::default();
                 for ty in (ty0 + wk..ty1).step_by(workers) {
                     for tx in 0..tiles_x {
@@ -210,42 +228,57 @@ impl SplatKernels for CpuSplat {
                             &bins.ids[bins.offsets[t] as usize..bins.offsets[t + 1] as usize],
                             proj,
                         );
+                        let i0 = tx * SPAN;
+                        let lanes = SPAN.min(w - i0);
                         for j in (ty * 16).max(r0)..((ty + 1) * 16).min(r1) {
-                            for i in tx * 16..((tx + 1) * 16).min(w) {
-                                let p = (j - r0) * w + i;
-                                let d = [d_rgb[3 * p], d_rgb[3 * p + 1], d_rgb[3 * p + 2]];
-                                if d == [0.0; 3] {
-                                    continue;
-                                }
-                                let (i, j) = (i as u32, j as u32);
-                                let tf = match tape {
-                                    Some(img) => {
+                            let row = (j - r0) * w + i0;
+                            let d = |l: usize| {
+                                let k = 3 * (row + l);
+                                [d_rgb[k], d_rgb[k + 1], d_rgb[k + 2]]
+                            };
+                            // Pixels with dL/drgb = 0 take no part.
+                            let mut live = [false; SPAN];
+                            for (l, on) in live[..lanes].iter_mut().enumerate() {
+                                *on = d(l) != [0.0; 3];
+                            }
+                            if !live.contains(&true) {
+                                continue;
+                            }
+                            match tape {
+                                Some(img) => {
+                                    for l in (0..lanes).filter(|&l| live[l]) {
+                                        let p = row + l;
                                         let tf = img.t_final[p];
                                         raster::trace_back(
-                                            i,
-                                            j,
+                                            (i0 + l) as u32,
+                                            j as u32,
                                             &tile,
                                             tf,
                                             img.last[p],
-                                            &mut trace,
+                                            &mut traces[l],
                                         );
-                                        tf
+                                        out[l].1 = tf;
                                     }
-                                    None => {
-                                        trace.clear();
-                                        let c = raster::composite_pixel(
-                                            i,
-                                            j,
-                                            &tile,
-                                            &bg,
-                                            Some(&mut trace),
-                                        );
-                                        c.1
-                                    }
-                                };
-                                raster::composite_pixel_vjp(&trace, tf, &tile, &bg, &d, |id, g| {
-                                    acc[id as usize].add(g)
-                                });
+                                }
+                                None => composite_span_f32(
+                                    i0 as u32,
+                                    j as u32,
+                                    &live[..lanes],
+                                    &tile,
+                                    &bg,
+                                    &mut out,
+                                    Some(&mut traces),
+                                ),
+                            }
+                            for l in (0..lanes).filter(|&l| live[l]) {
+                                raster::composite_pixel_vjp(
+                                    &traces[l],
+                                    out[l].1,
+                                    &tile,
+                                    &bg,
+                                    &d(l),
+                                    |id, g| acc[id as usize].add(g),
+                                );
                             }
                         }
                     }

@@ -12,7 +12,8 @@
 //!
 //! ## Layers
 //!
-//! * Math, once: [`project`] (per Gaussian), [`raster`] (binning, per pixel), [`sh`],
+//! * Math, once: [`project`] (per Gaussian), [`raster`] (binning, per pixel; [`span`]: a
+//!   row of a tile at once, bitwise the same), [`sh`],
 //!   [`covariance`] (and their VJPs), generic over `f32`/`f64`.
 //! * Kernel trait: [`SplatKernels`] (project, bin_tiles, rasterize, rasterize_vjp,
 //!   project_vjp over backend buffers); [`reference::ReferenceSplat`] is the single-threaded
@@ -47,6 +48,7 @@ pub mod camera;
 pub mod camera_io;
 pub mod covariance;
 pub mod error;
+pub mod falloff;
 pub mod frame;
 pub mod gaussians;
 pub mod kernels;
@@ -59,6 +61,7 @@ pub mod real;
 pub mod reference;
 pub mod renderer;
 pub mod sh;
+pub mod span;
 pub mod weights;
 
 pub use camera::{Camera, RasterizeMode, RenderSettings};

@@ -426,3 +426,78 @@ fn a_prepared_frame_renders_and_differentiates_bands_as_the_whole_image() {
     let zero = ren.frame_vjp(frame, &g, Some(&d)).unwrap();
     assert!(flat(&zero).iter().all(|&x| x == 0.0));
 }
+
+/// A row of a tile composited at once ([`crate::span::composite_span`], and its AVX2 f32
+/// instance) gives bitwise [`crate::raster::composite_pixel`] of each pixel, traces included,
+/// with pixels left out, capped alphas, early stops and Gaussians no pixel of the row touches.
+#[test]
+fn a_span_composites_bitwise_as_pixel_by_pixel() {
+    use crate::project::Projected;
+    use crate::raster::{composite_pixel, Contribution, PixelOut, TileSplats};
+    use crate::span::{composite_span, composite_span_f32, SPAN};
+    type Run<T> = fn(
+        u32,
+        u32,
+        &[bool],
+        &TileSplats<T>,
+        &[T; 3],
+        &mut [(PixelOut<T>, T); SPAN],
+        Option<&mut [Vec<Contribution<T>>; SPAN]>,
+    );
+    fn check<T: Real>(seed: u64, run: Run<T>) {
+        let mut r = Lcg(seed);
+        let proj: Vec<Projected<T>> = (0..400)
+            .map(|i| {
+                let a = r.range(0.01, 0.6);
+                let cc = r.range(0.01, 0.6);
+                let b = r.range(-0.9, 0.9) * (a * cc).sqrt();
+                Projected {
+                    mean2d: [T::c(r.range(-6.0, 40.0)), T::c(r.range(-6.0, 22.0))],
+                    conic: [T::c(a), T::c(b), T::c(cc)],
+                    depth: T::c(r.range(1.0, 5.0)),
+                    opacity: T::c(if i % 9 == 0 {
+                        0.9995
+                    } else {
+                        r.range(0.05, 0.99)
+                    }),
+                    color: [T::c(r.next()), T::c(r.next()), T::c(r.next())],
+                    radii: [3, 3],
+                }
+            })
+            .collect();
+        let ids: Vec<u32> = (0..proj.len() as u32).collect();
+        let mut tile = TileSplats::default();
+        tile.gather(&ids, &proj);
+        let bg = [T::c(0.2), T::c(0.5), T::c(0.9)];
+        for (i0, j) in [(16u32, 3u32), (0, 9), (16, 15)] {
+            let live: Vec<bool> = (0..13).map(|l| l != 4).collect();
+            let mut out = [(PixelOut::<T>::default(), T::zero()); SPAN];
+            let mut traces: [Vec<Contribution<T>>; SPAN] = std::array::from_fn(|_| Vec::new());
+            run(i0, j, &live, &tile, &bg, &mut out, Some(&mut traces));
+            let mut stopped = 0;
+            for (l, &on) in live.iter().enumerate() {
+                if !on {
+                    assert_eq!(out[l], (PixelOut::default(), T::zero()));
+                    continue;
+                }
+                let mut trace = Vec::new();
+                let want = composite_pixel(i0 + l as u32, j, &tile, &bg, Some(&mut trace));
+                assert_eq!(out[l], want, "pixel ({}, {j})", i0 + l as u32);
+                assert_eq!(traces[l].len(), trace.len());
+                for (a, b) in traces[l].iter().zip(&trace) {
+                    assert_eq!(
+                        (a.k, a.alpha, a.t, a.g, a.d, a.capped),
+                        (b.k, b.alpha, b.t, b.g, b.d, b.capped)
+                    );
+                }
+                stopped += ((want.0.last as usize) < tile.len()) as usize;
+            }
+            assert!(stopped > 0, "some pixel stops early");
+        }
+    }
+    for seed in 0..4 {
+        check::<f32>(seed, composite_span::<f32>);
+        check::<f32>(seed, composite_span_f32);
+        check::<f64>(seed, composite_span::<f64>);
+    }
+}
