@@ -595,8 +595,8 @@ fn nested_checkpointing_gives_the_per_frame_gradient() {
     }
 }
 
-/// The loss evaluated in row bands (cropped cameras, band-wise DMS) gives the whole-frame
-/// loss and gradient: 16-row bands against one band covering the 64-row frame.
+/// The loss evaluated in row bands (one projection per frame, band-wise DMS) gives the
+/// whole-frame loss and gradient: 16-row bands against one band covering the 64-row frame.
 #[test]
 fn row_bands_give_the_whole_frame_loss_and_gradient() {
     let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
@@ -624,7 +624,7 @@ fn row_bands_give_the_whole_frame_loss_and_gradient() {
             (g2[part].youngs_modulus, g[part].youngs_modulus),
             (g2[part].density, g[part].density),
         ] {
-            // f32 renders: the crops shift the principal point, so rounding differs.
+            // f32 sums: the bands add their gradients in another order.
             assert!(rel(x, y) < 1e-3, "part {part}: {x} vs {y}");
         }
     }

@@ -5,15 +5,22 @@
 //! * `project` / `project_vjp`: parallel over Gaussians.
 //! * `bin_tiles`: parallel depth sort (stable order: f32 depth, then index), then a counting
 //!   pass and a fill pass that keep each tile's list front to back.
-//! * `rasterize`: parallel over rows of tiles; each thread writes its own band of the image;
-//!   a tile's Gaussians are gathered into contiguous arrays once for its 256 pixels.
-//! * `rasterize_vjp`: rows of tiles are dealt round-robin to `min(threads, 8)` workers, each
-//!   with its own per-Gaussian accumulator (36 bytes per Gaussian); the accumulators are
-//!   summed in a fixed order, so the result does not depend on scheduling.
+//! * `rasterize`: parallel over the rows of tiles that cover the composited rows
+//!   (`CameraConsts::rows`); each job writes its own slices of the images; a tile's Gaussians
+//!   are gathered into contiguous arrays once for its pixels, and each row of a tile is
+//!   composited at once (`r4d_splat::span`: the power of every Gaussian evaluated for the 16
+//!   pixels together, vectorised, with AVX2 where present; bitwise the pixel-by-pixel
+//!   results).
+//! * `rasterize_vjp`: each row of a tile is composited again at once keeping each pixel's
+//!   trace (or, with the forward's tape, each pixel walked back); rows of tiles are dealt
+//!   round-robin to four workers, each with its own
+//!   per-Gaussian accumulator (36 bytes per Gaussian); the accumulators are added to the
+//!   caller's gradient in a fixed order, so the result does not depend on scheduling.
 
 use r4d_splat::kernels::{ImageBufs, SceneBufs, SceneGradBufs, TileBufs};
 use r4d_splat::project::{self as pj, GaussianIn, Projected, ProjectedGrad};
-use r4d_splat::raster::{self, Contribution, TileSplats};
+use r4d_splat::raster::{self, Contribution, PixelOut, TileSplats};
+use r4d_splat::span::{composite_span_f32, SPAN};
 use r4d_splat::{CameraConsts, SplatKernels};
 use rayon::prelude::*;
 
@@ -110,41 +117,69 @@ impl SplatKernels for CpuSplat {
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
     ) -> Result<ImageBufs<Self>, Infallible> {
-        let [w, h] = cam.size;
-        let (w, h) = (w as usize, h as usize);
+        let w = cam.size[0] as usize;
+        let [r0, r1] = [cam.rows[0] as usize, cam.rows[1] as usize];
+        let n = w * (r1 - r0);
         let tiles_x = cam.tiles[0] as usize;
         let bg = cam.bg();
-        let mut rgb = vec![0f32; w * h * 3];
-        let mut alpha = vec![0f32; w * h];
-        let mut depth = vec![0f32; w * h];
-        let mut t_final = vec![0f32; w * h];
-        let mut last = vec![0u32; w * h];
-        let band = 16 * w;
-        rgb.par_chunks_mut(band * 3)
-            .zip(alpha.par_chunks_mut(band))
-            .zip(depth.par_chunks_mut(band))
-            .zip(t_final.par_chunks_mut(band))
-            .zip(last.par_chunks_mut(band))
-            .enumerate()
-            .for_each(|(ty, ((((rgb, alpha), depth), t_final), last))| {
-                let rows = alpha.len() / w;
+        let mut rgb = vec![0f32; n * 3];
+        let mut alpha = vec![0f32; n];
+        let mut depth = vec![0f32; n];
+        let mut t_final = vec![0f32; n];
+        let mut last = vec![0u32; n];
+        // One job per row of tiles: the rows of the band it covers, each job writing its own
+        // slices of the images.
+        let mut jobs = Vec::new();
+        let (mut rgb_r, mut alpha_r, mut depth_r, mut t_r, mut last_r) = (
+            &mut rgb[..],
+            &mut alpha[..],
+            &mut depth[..],
+            &mut t_final[..],
+            &mut last[..],
+        );
+        for ty in r0 / 16..r1.div_ceil(16) {
+            let rows = (ty * 16).max(r0)..((ty + 1) * 16).min(r1);
+            let k = rows.len() * w;
+            let (a, rest) = std::mem::take(&mut rgb_r).split_at_mut(3 * k);
+            rgb_r = rest;
+            let (b, rest) = std::mem::take(&mut alpha_r).split_at_mut(k);
+            alpha_r = rest;
+            let (c, rest) = std::mem::take(&mut depth_r).split_at_mut(k);
+            depth_r = rest;
+            let (d, rest) = std::mem::take(&mut t_r).split_at_mut(k);
+            t_r = rest;
+            let (e, rest) = std::mem::take(&mut last_r).split_at_mut(k);
+            last_r = rest;
+            jobs.push((ty, rows, a, b, c, d, e));
+        }
+        jobs.into_par_iter()
+            .for_each(|(ty, rows, rgb, alpha, depth, t_final, last)| {
                 let mut tile = TileSplats::default();
+                let mut out = [(PixelOut::default(), 0.0); SPAN];
                 for tx in 0..tiles_x {
                     let t = ty * tiles_x + tx;
                     tile.gather(
                         &bins.ids[bins.offsets[t] as usize..bins.offsets[t + 1] as usize],
                         proj,
                     );
-                    for r in 0..rows {
-                        let j = ty * 16 + r;
-                        for i in tx * 16..((tx + 1) * 16).min(w) {
-                            let (px, tf) =
-                                raster::composite_pixel(i as u32, j as u32, &tile, &bg, None);
-                            let k = r * w + i;
+                    let i0 = tx * SPAN;
+                    let lanes = SPAN.min(w - i0);
+                    for (r, j) in rows.clone().enumerate() {
+                        composite_span_f32(
+                            i0 as u32,
+                            j as u32,
+                            &[true; SPAN][..lanes],
+                            &tile,
+                            &bg,
+                            &mut out,
+                            None,
+                        );
+                        for (l, (px, tf)) in out[..lanes].iter().enumerate() {
+                            let k = r * w + i0 + l;
                             rgb[3 * k..3 * k + 3].copy_from_slice(&px.rgb);
                             alpha[k] = px.alpha;
                             depth[k] = px.depth;
-                            t_final[k] = tf;
+                            t_final[k] = *tf;
                             last[k] = px.last;
                         }
                     }
@@ -166,65 +201,84 @@ impl SplatKernels for CpuSplat {
         cam: &CameraConsts,
         tape: Option<&ImageBufs<Self>>,
         d_rgb: &Vec<f32>,
-    ) -> Result<Vec<ProjectedGrad<f32>>, Infallible> {
-        let [w, h] = cam.size;
-        let (w, h) = (w as usize, h as usize);
-        let [tiles_x, tiles_y] = cam.tiles.map(|t| t as usize);
+        d_proj: &mut Vec<ProjectedGrad<f32>>,
+    ) -> Result<(), Infallible> {
+        let w = cam.size[0] as usize;
+        let [r0, r1] = [cam.rows[0] as usize, cam.rows[1] as usize];
+        let tiles_x = cam.tiles[0] as usize;
+        let (ty0, ty1) = (r0 / 16, r1.div_ceil(16));
         let bg = cam.bg();
-        // A fixed number of accumulators (tile rows interleaved over them, summed in order):
-        // the gradients are bitwise the same whatever the thread count (1 thread runs the
-        // four in turn). Memory: four copies of the per-Gaussian gradients (36 B each).
+        // A fixed number of accumulators (tile rows interleaved over them, added to `d_proj`
+        // in order): the gradients are bitwise the same whatever the thread count (1 thread
+        // runs the four in turn). Memory: four copies of the per-Gaussian gradients (36 B
+        // each).
         let workers = VJP_ACCUMULATORS;
         let parts: Vec<Vec<ProjectedGrad<f32>>> = (0..workers)
             .into_par_iter()
             .map(|wk| {
                 let mut acc = vec![ProjectedGrad::<f32>::default(); proj.len()];
-                let mut trace: Vec<Contribution<f32>> = Vec::new();
+                let mut traces: [Vec<Contribution<f32>>; SPAN] =
+                    std::array::from_fn(|_| Vec::new());
+                let mut out = [(PixelOut::default(), 0.0); SPAN];
                 let mut tile = TileSplats::default();
-                for ty in (wk..tiles_y).step_by(workers) {
+                for ty in (ty0 + wk..ty1).step_by(workers) {
                     for tx in 0..tiles_x {
                         let t = ty * tiles_x + tx;
                         tile.gather(
                             &bins.ids[bins.offsets[t] as usize..bins.offsets[t + 1] as usize],
                             proj,
                         );
-                        for j in ty * 16..((ty + 1) * 16).min(h) {
-                            for i in tx * 16..((tx + 1) * 16).min(w) {
-                                let k = 3 * (j * w + i);
-                                let d = [d_rgb[k], d_rgb[k + 1], d_rgb[k + 2]];
-                                if d == [0.0; 3] {
-                                    continue;
-                                }
-                                let p = j * w + i;
-                                let (i, j) = (i as u32, j as u32);
-                                let tf = match tape {
-                                    Some(img) => {
+                        let i0 = tx * SPAN;
+                        let lanes = SPAN.min(w - i0);
+                        for j in (ty * 16).max(r0)..((ty + 1) * 16).min(r1) {
+                            let row = (j - r0) * w + i0;
+                            let d = |l: usize| {
+                                let k = 3 * (row + l);
+                                [d_rgb[k], d_rgb[k + 1], d_rgb[k + 2]]
+                            };
+                            // Pixels with dL/drgb = 0 take no part.
+                            let mut live = [false; SPAN];
+                            for (l, on) in live[..lanes].iter_mut().enumerate() {
+                                *on = d(l) != [0.0; 3];
+                            }
+                            if !live.contains(&true) {
+                                continue;
+                            }
+                            match tape {
+                                Some(img) => {
+                                    for l in (0..lanes).filter(|&l| live[l]) {
+                                        let p = row + l;
                                         let tf = img.t_final[p];
                                         raster::trace_back(
-                                            i,
-                                            j,
+                                            (i0 + l) as u32,
+                                            j as u32,
                                             &tile,
                                             tf,
                                             img.last[p],
-                                            &mut trace,
+                                            &mut traces[l],
                                         );
-                                        tf
+                                        out[l].1 = tf;
                                     }
-                                    None => {
-                                        trace.clear();
-                                        let c = raster::composite_pixel(
-                                            i,
-                                            j,
-                                            &tile,
-                                            &bg,
-                                            Some(&mut trace),
-                                        );
-                                        c.1
-                                    }
-                                };
-                                raster::composite_pixel_vjp(&trace, tf, &tile, &bg, &d, |id, g| {
-                                    acc[id as usize].add(g)
-                                });
+                                }
+                                None => composite_span_f32(
+                                    i0 as u32,
+                                    j as u32,
+                                    &live[..lanes],
+                                    &tile,
+                                    &bg,
+                                    &mut out,
+                                    Some(&mut traces),
+                                ),
+                            }
+                            for l in (0..lanes).filter(|&l| live[l]) {
+                                raster::composite_pixel_vjp(
+                                    &traces[l],
+                                    out[l].1,
+                                    &tile,
+                                    &bg,
+                                    &d(l),
+                                    |id, g| acc[id as usize].add(g),
+                                );
                             }
                         }
                     }
@@ -232,14 +286,16 @@ impl SplatKernels for CpuSplat {
                 acc
             })
             .collect();
-        let mut it = parts.into_iter();
-        let mut out = it.next().unwrap_or_default();
-        for p in it {
-            out.par_iter_mut()
-                .zip(p.par_iter())
-                .for_each(|(a, b)| a.add(b));
-        }
-        Ok(out)
+        d_proj
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(4096)
+            .for_each(|(i, a)| {
+                for p in &parts {
+                    a.add(&p[i]);
+                }
+            });
+        Ok(())
     }
 
     fn project_vjp(

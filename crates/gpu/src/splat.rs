@@ -19,8 +19,9 @@
 //!   then index exactly as [`r4d_splat::raster::depth_order`] orders it; then `tile_ranges`
 //!   writes the ids and the `tiles + 1` offsets. The result equals
 //!   [`r4d_splat::raster::bin_tiles`] for the same projection, id for id.
-//! * `rasterize`: one workgroup per 16x16 tile, one thread per pixel, the tile's Gaussians
-//!   staged 256 at a time in workgroup memory (`rasterize.wgsl`).
+//! * `rasterize`: one workgroup per 16x16 tile of the rows of tiles covering the composited
+//!   rows (`CameraConsts::rows`), one thread per pixel, the tile's Gaussians staged 256 at a
+//!   time in workgroup memory (`rasterize.wgsl`).
 //!
 //! * `rasterize_vjp`: one workgroup per tile, one thread per pixel (`rasterize_vjp.wgsl`).
 //!   Each pixel reads the forward's tape (`ImageBufs::t_final`, `ImageBufs::last`: its final
@@ -29,8 +30,8 @@
 //!   and each pixel runs [`r4d_splat::raster::composite_pixel_vjp`]'s recursion back to front,
 //!   recovering the transmittance in front of each Gaussian as `T / (1 - alpha)`. Pixels add
 //!   their per-Gaussian gradients (mean2d, conic, opacity, colour) into workgroup memory
-//!   first (a compare-exchange on the f32 bits), and each batch's nonzero sums go to the
-//!   global `ProjectedGrad` array with one float atomic each: native `atomic<f32>` where the
+//!   first (a compare-exchange on the f32 bits), and each batch's nonzero sums are added to
+//!   the caller's `ProjectedGrad` array with one float atomic each: native `atomic<f32>` where the
 //!   adapter has `SHADER_FLOAT32_ATOMIC`, else the compare-exchange variant
 //!   (`splat_rasterize_vjp_cas`), so the sums are not bitwise reproducible run to run.
 //! * `project_vjp`: one thread per Gaussian (`project_vjp.wgsl`),
@@ -170,6 +171,16 @@ fn radix_sort<R>(
     src
 }
 
+/// The rows of tiles covering the composited rows (`CameraConsts::rows`): the y extent of the
+/// `rasterize` and `rasterize_vjp` dispatches.
+fn tile_rows(cam: &CameraConsts) -> u32 {
+    let t = r4d_splat::camera::consts::TILE;
+    if cam.rows[1] <= cam.rows[0] {
+        return 0;
+    }
+    cam.rows[1].div_ceil(t) - cam.rows[0] / t
+}
+
 impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
     type Buf<T: Pod + Send + Sync> = GpuBuf<E, T>;
     type Error = E::Error;
@@ -180,6 +191,10 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
 
     fn download<T: Pod + Send + Sync>(&self, buf: &GpuBuf<E, T>) -> Result<Vec<T>, E::Error> {
         buf.download(&self.engine)
+    }
+
+    fn zeros<T: Pod + Send + Sync>(&self, len: usize) -> Result<GpuBuf<E, T>, E::Error> {
+        self.zeros_bindable("splat_zeros", len)
     }
 
     fn project(
@@ -279,7 +294,8 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
     ) -> Result<ImageBufs<Self>, E::Error> {
-        let [w, h] = cam.size.map(|v| v as usize);
+        let w = cam.size[0] as usize;
+        let h = cam.band_height() as usize;
         let img = ImageBufs {
             rgb: self.zeros::<f32>("splat_rgb", w * h * 3)?,
             alpha: self.zeros::<f32>("splat_alpha", w * h)?,
@@ -287,7 +303,8 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
             t_final: self.zeros::<f32>("splat_t_final", w * h)?,
             last: self.zeros::<u32>("splat_last", w * h)?,
         };
-        let [tx, ty] = cam.tiles;
+        let tx = cam.tiles[0];
+        let ty = tile_rows(cam);
         if w == 0 || h == 0 || tx == 0 || ty == 0 {
             return Ok(img);
         }
@@ -315,8 +332,8 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
     }
 
     /// `rasterize_vjp.wgsl`: one workgroup per tile reads each pixel's tape (final T, last
-    /// position), walks it back to front and adds the per-Gaussian sums of each batch with
-    /// float atomics.
+    /// position), walks it back to front and adds the per-Gaussian sums of each batch to
+    /// `d_proj` with float atomics.
     fn rasterize_vjp(
         &self,
         proj: &GpuBuf<E, Projected<f32>>,
@@ -324,13 +341,19 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
         cam: &CameraConsts,
         tape: Option<&ImageBufs<Self>>,
         d_rgb: &GpuBuf<E, f32>,
-    ) -> Result<GpuBuf<E, ProjectedGrad<f32>>, E::Error> {
-        let out = self.zeros_bindable::<ProjectedGrad<f32>>("splat_d_projected", proj.len)?;
-        let [tx, ty] = cam.tiles;
+        d_proj: &mut GpuBuf<E, ProjectedGrad<f32>>,
+    ) -> Result<(), E::Error> {
+        assert_eq!(
+            d_proj.len, proj.len,
+            "rasterize_vjp: one projection gradient per Gaussian"
+        );
+        let tx = cam.tiles[0];
+        let ty = tile_rows(cam);
         if proj.len == 0 || bins.intersections == 0 || tx == 0 || ty == 0 {
-            return Ok(out);
+            return Ok(());
         }
-        let [w, h] = cam.size.map(|v| v as usize);
+        let w = cam.size[0] as usize;
+        let h = cam.band_height() as usize;
         assert_eq!(
             d_rgb.len,
             w * h * 3,
@@ -354,11 +377,11 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
             r.buf(&img.t_final.raw),
             r.buf(&img.last.raw),
             r.buf(&d_rgb.raw),
-            r.buf(&out.raw),
+            r.buf(&d_proj.raw),
         ];
         r.dispatch_groups(&k::RASTERIZE_VJP, [tx, ty, 1], &bind);
         self.engine.execute(r)?;
-        Ok(out)
+        Ok(())
     }
 
     /// `project_vjp.wgsl` (one thread per Gaussian, into one sectioned buffer), then

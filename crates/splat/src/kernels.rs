@@ -25,13 +25,13 @@ pub struct CameraConsts {
     pub campos: [f32; 4],
     /// Background colour (4th entry unused).
     pub background: [f32; 4],
-    /// fx, fy, cx, cy.
+    /// fx, fy, cx, cy (cy of the full image for a cropped camera).
     pub intrinsics: [f32; 4],
     /// Near and far planes.
     pub near_far: [f32; 2],
-    /// Image width and height.
+    /// Image width and height (the full image's for a cropped camera).
     pub size: [u32; 2],
-    /// Tiles along x and y.
+    /// Tiles along x and y (of the full image).
     pub tiles: [u32; 2],
     /// 1 for antialiased mode.
     pub antialiased: u32,
@@ -39,13 +39,19 @@ pub struct CameraConsts {
     pub sh_degree: u32,
     /// Frustum clamp `[x+, x-, y+, y-]` ([`CamParams::lims`]; the full image's for a crop).
     pub lims: [f32; 4],
+    /// The rows `rasterize` and `rasterize_vjp` composite, `rows[0] .. rows[1]` of the
+    /// `size[1]` rows ([`CamParams::rows`]); the images and dL/drgb hold those rows only.
+    /// `rows[2..]` are unused (they pad the record to 16 bytes, as a uniform needs).
+    pub rows: [u32; 4],
 }
 
 impl CameraConsts {
-    /// From a camera, settings and the SH degree.
+    /// From a camera, settings and the SH degree (a cropped camera: the full image's
+    /// projection, its band's rows).
     pub fn new(cam: &Camera, s: &RenderSettings, sh_degree: u32) -> Self {
         let p = CamParams::<f32>::new(cam, s.mode);
         let t = crate::camera::consts::TILE;
+        let (w, h) = (p.width, p.height);
         CameraConsts {
             rot: [0, 1, 2].map(|i| [p.rot[i][0], p.rot[i][1], p.rot[i][2], 0.0]),
             trans: [p.trans[0], p.trans[1], p.trans[2], 0.0],
@@ -53,12 +59,26 @@ impl CameraConsts {
             background: [s.background[0], s.background[1], s.background[2], 0.0],
             intrinsics: [p.fx, p.fy, p.cx, p.cy],
             near_far: [p.near, p.far],
-            size: [cam.width, cam.height],
-            tiles: [cam.width.div_ceil(t), cam.height.div_ceil(t)],
+            size: [w, h],
+            tiles: [w.div_ceil(t), h.div_ceil(t)],
             antialiased: (s.mode == RasterizeMode::Antialiased) as u32,
             sh_degree,
             lims: p.lims,
+            rows: [p.rows[0], p.rows[1], 0, 0],
         }
+    }
+
+    /// The same camera compositing rows `rows` of its full image.
+    pub fn with_rows(&self, rows: std::ops::Range<u32>) -> Self {
+        CameraConsts {
+            rows: [rows.start, rows.end, 0, 0],
+            ..*self
+        }
+    }
+
+    /// Number of rows composited.
+    pub fn band_height(&self) -> u32 {
+        self.rows[1].saturating_sub(self.rows[0])
     }
 
     /// The camera as the shared per-Gaussian math takes it.
@@ -77,6 +97,7 @@ impl CameraConsts {
             far: self.near_far[1],
             antialiased: self.antialiased != 0,
             lims: self.lims,
+            rows: [self.rows[0], self.rows[1]],
         }
     }
 
@@ -166,6 +187,10 @@ pub trait SplatKernels: Sized + Send + Sync + 'static {
     ) -> Result<Vec<T>, Self::Error> {
         self.download(&buf)
     }
+    /// A zero-filled buffer of `len` elements (the default uploads zeros).
+    fn zeros<T: Pod + Send + Sync>(&self, len: usize) -> Result<Self::Buf<T>, Self::Error> {
+        self.upload(&vec![T::zeroed(); len])
+    }
     /// Projects every Gaussian (culled ones get radii (0, 0)).
     fn project(
         &self,
@@ -178,17 +203,19 @@ pub trait SplatKernels: Sized + Send + Sync + 'static {
         proj: &Self::Buf<Projected<f32>>,
         cam: &CameraConsts,
     ) -> Result<TileBufs<Self>, Self::Error>;
-    /// Composites every pixel.
+    /// Composites every pixel of rows `cam.rows` (images of those rows only).
     fn rasterize(
         &self,
         proj: &Self::Buf<Projected<f32>>,
         bins: &TileBufs<Self>,
         cam: &CameraConsts,
     ) -> Result<ImageBufs<Self>, Self::Error>;
-    /// VJP of [`SplatKernels::rasterize`] for `dL/drgb`. With the forward's image (`tape`:
-    /// its `t_final` and `last`) each pixel is walked back to front without being composited
-    /// again; without it the backend composites what it needs itself (the CPU backends one
-    /// pass per pixel keeping the trace, a GPU backend its `rasterize`).
+    /// VJP of [`SplatKernels::rasterize`] for `dL/drgb` (rows `cam.rows`), **added** to
+    /// `d_proj` (one entry per Gaussian), so that the VJPs of several bands of rows of one
+    /// projection sum into one gradient. With the forward's image (`tape`: its `t_final` and
+    /// `last`) each pixel is walked back to front without being composited again; without it
+    /// the backend composites what it needs itself (the CPU backends one pass per pixel
+    /// keeping the trace, a GPU backend its `rasterize`).
     fn rasterize_vjp(
         &self,
         proj: &Self::Buf<Projected<f32>>,
@@ -196,7 +223,8 @@ pub trait SplatKernels: Sized + Send + Sync + 'static {
         cam: &CameraConsts,
         tape: Option<&ImageBufs<Self>>,
         d_rgb: &Self::Buf<f32>,
-    ) -> Result<Self::Buf<ProjectedGrad<f32>>, Self::Error>;
+        d_proj: &mut Self::Buf<ProjectedGrad<f32>>,
+    ) -> Result<(), Self::Error>;
     /// VJP of [`SplatKernels::project`].
     fn project_vjp(
         &self,

@@ -12,12 +12,15 @@
 //!
 //! ## Layers
 //!
-//! * Math, once: [`project`] (per Gaussian), [`raster`] (binning, per pixel), [`sh`],
+//! * Math, once: [`project`] (per Gaussian), [`raster`] (binning, per pixel; [`span`]: a
+//!   row of a tile at once, bitwise the same), [`sh`],
 //!   [`covariance`] (and their VJPs), generic over `f32`/`f64`.
 //! * Kernel trait: [`SplatKernels`] (project, bin_tiles, rasterize, rasterize_vjp,
 //!   project_vjp over backend buffers); [`reference::ReferenceSplat`] is the single-threaded
 //!   reference, `r4d_backend_cpu::splat::CpuSplat` the parallel one.
-//! * [`Renderer`], implemented once by [`SplatRenderer`] for every backend.
+//! * [`Renderer`], implemented once by [`SplatRenderer`] for every backend; [`frame`]:
+//!   one frame projected, sorted and binned once, then rendered and differentiated in row
+//!   bands.
 //! * Inputs: [`ply`] (INRIA 3DGS PLY), [`camera_io`] (r4d/reference JSON, INRIA
 //!   `cameras.json`, nerfstudio `transforms.json`, COLMAP text).
 //!
@@ -45,6 +48,8 @@ pub mod camera;
 pub mod camera_io;
 pub mod covariance;
 pub mod error;
+pub mod falloff;
+pub mod frame;
 pub mod gaussians;
 pub mod kernels;
 pub mod link;
@@ -56,11 +61,13 @@ pub mod real;
 pub mod reference;
 pub mod renderer;
 pub mod sh;
+pub mod span;
 pub mod weights;
 
 pub use camera::{Camera, RasterizeMode, RenderSettings};
 pub use camera_io::{load_cameras, CameraSet};
 pub use error::{Error, Result};
+pub use frame::PreparedFrame;
 pub use gaussians::{Deformation, GaussianGrads, Gaussians};
 pub use kernels::{CameraConsts, SplatKernels};
 pub use link::SimLink;

@@ -23,12 +23,16 @@ pub struct CamParams<T> {
     pub fy: T,
     /// Principal point x (px).
     pub cx: T,
-    /// Principal point y (px).
+    /// Principal point y (px), of the full image for a cropped camera.
     pub cy: T,
     /// Image width.
     pub width: u32,
-    /// Image height.
+    /// Image height (the full image's for a cropped camera).
     pub height: u32,
+    /// The rows composited, `rows[0] .. rows[1]` of the `height` rows: all of them, or the
+    /// band of a cropped camera ([`Camera::crop_rows`]). Projection and binning are those of
+    /// the full image either way, so a band's pixels are the full image's.
+    pub rows: [u32; 2],
     /// Near plane.
     pub near: T,
     /// Far plane.
@@ -42,11 +46,13 @@ pub struct CamParams<T> {
 }
 
 impl<T: Real> CamParams<T> {
-    /// Converts a [`Camera`] (f64) and the rasterize mode.
+    /// Converts a [`Camera`] (f64) and the rasterize mode. A cropped camera gives the full
+    /// image's projection with [`CamParams::rows`] its band.
     pub fn new(cam: &Camera, mode: RasterizeMode) -> Self {
         let c = T::c;
         let (w, fx, fy, cx) = (c(cam.width as f64), c(cam.fx), c(cam.fy), c(cam.cx));
         let (full_h, full_cy) = cam.full_frame_y();
+        let row0 = cam.crop.map_or(0, |r| r.row0);
         let (h, cy) = (c(full_h as f64), c(full_cy));
         let tan_x = c(0.5) * w / fx;
         let tan_y = c(0.5) * h / fy;
@@ -64,9 +70,10 @@ impl<T: Real> CamParams<T> {
             fx: T::c(cam.fx),
             fy: T::c(cam.fy),
             cx: T::c(cam.cx),
-            cy: T::c(cam.cy),
+            cy: T::c(full_cy),
             width: cam.width,
-            height: cam.height,
+            height: full_h,
+            rows: [row0, row0 + cam.height],
             near: T::c(cam.near),
             far: T::c(cam.far),
             antialiased: mode == RasterizeMode::Antialiased,

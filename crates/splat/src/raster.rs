@@ -257,7 +257,8 @@ struct Hit<T> {
 }
 
 /// The per-Gaussian rule of compositing, once for [`composite_pixel`] and [`trace_back`]
-/// (and mirrored by `r4d-shaders`' `lib/composite.wgsl`): skipped when the power is negative
+/// (evaluated for a row of pixels at once, with the same operations, by
+/// [`crate::span::composite_span`], and mirrored by `r4d-shaders`' `lib/composite.wgsl`): skipped when the power is negative
 /// or above the cut-off, or when the capped alpha is below 1/255.
 #[inline(always)]
 fn hit<T: Real>(tile: &TileSplats<T>, k: usize, px: T, py: T) -> Option<Hit<T>> {
@@ -270,7 +271,7 @@ fn hit<T: Real>(tile: &TileSplats<T>, k: usize, px: T, py: T) -> Option<Hit<T>> 
     if s < T::zero() || s > tile.s_cut[k] {
         return None;
     }
-    let g = (-s).exp();
+    let g = crate::falloff::falloff(s);
     let raw = tile.opacity[k] * g;
     let capped = raw > amax;
     let alpha = if capped { amax } else { raw };

@@ -155,14 +155,22 @@ pub fn bin_tiles<T: Real>(proj: &[Projected<T>], cam: &CamParams<T>) -> TileBins
     raster::bin_tiles(proj, &order, cam.width, cam.height)
 }
 
-/// Composites every pixel.
+/// The tile rows covering image rows `rows`.
+fn tile_rows(rows: [u32; 2]) -> std::ops::Range<u32> {
+    rows[0] / 16..rows[1].div_ceil(16)
+}
+
+/// Composites every pixel of rows `cam.rows` ([`CamParams::rows`]; the image holds those
+/// rows only).
 pub fn rasterize<T: Real>(
     proj: &[Projected<T>],
     bins: &TileBins,
     cam: &CamParams<T>,
     background: &[T; 3],
 ) -> Image<T> {
-    let (w, h) = (cam.width, cam.height);
+    let w = cam.width;
+    let [r0, r1] = cam.rows;
+    let h = r1 - r0;
     let mut img = Image {
         width: w,
         height: h,
@@ -173,13 +181,13 @@ pub fn rasterize<T: Real>(
         last: vec![0; (w * h) as usize],
     };
     let mut tile = TileSplats::default();
-    for ty in 0..bins.tiles_y {
+    for ty in tile_rows(cam.rows) {
         for tx in 0..bins.tiles_x {
             tile.gather(bins.tile((ty * bins.tiles_x + tx) as usize), proj);
-            for j in ty * 16..((ty + 1) * 16).min(h) {
+            for j in (ty * 16).max(r0)..((ty + 1) * 16).min(r1) {
                 for i in tx * 16..((tx + 1) * 16).min(w) {
                     let (px, t) = raster::composite_pixel(i, j, &tile, background, None);
-                    let k = (j * w + i) as usize;
+                    let k = ((j - r0) * w + i) as usize;
                     img.rgb[3 * k..3 * k + 3].copy_from_slice(&px.rgb);
                     img.alpha[k] = px.alpha;
                     img.depth[k] = px.depth;
@@ -192,10 +200,11 @@ pub fn rasterize<T: Real>(
     img
 }
 
-/// VJP of [`rasterize`] for `dL/drgb` (`[H][W][3]`): per-Gaussian gradients of the projection.
-/// `tape` is the forward's per-pixel `(t_final, last)` ([`Image::t_final`], [`Image::last`]):
-/// with it each pixel is walked back to front ([`raster::trace_back`]), without it each pixel
-/// is composited once more keeping its trace.
+/// VJP of [`rasterize`] for `dL/drgb` (`[rows][W][3]`, the rows of `cam.rows`):
+/// per-Gaussian gradients of the projection. `tape` is the forward's per-pixel
+/// `(t_final, last)` ([`Image::t_final`], [`Image::last`]): with it each pixel is walked back
+/// to front ([`raster::trace_back`]), without it each pixel is composited once more keeping
+/// its trace.
 pub fn rasterize_vjp<T: Real>(
     proj: &[Projected<T>],
     bins: &TileBins,
@@ -205,15 +214,30 @@ pub fn rasterize_vjp<T: Real>(
     d_rgb: &[T],
 ) -> Vec<ProjectedGrad<T>> {
     let mut out = vec![ProjectedGrad::default(); proj.len()];
+    rasterize_vjp_into(proj, bins, cam, background, tape, d_rgb, &mut out);
+    out
+}
+
+/// [`rasterize_vjp`], adding into `out` (one entry per Gaussian), tile by tile in order.
+pub fn rasterize_vjp_into<T: Real>(
+    proj: &[Projected<T>],
+    bins: &TileBins,
+    cam: &CamParams<T>,
+    background: &[T; 3],
+    tape: Option<(&[T], &[u32])>,
+    d_rgb: &[T],
+    out: &mut [ProjectedGrad<T>],
+) {
     let mut trace: Vec<Contribution<T>> = Vec::new();
-    let (w, h) = (cam.width, cam.height);
+    let w = cam.width;
+    let [r0, r1] = cam.rows;
     let mut tile = TileSplats::default();
-    for ty in 0..bins.tiles_y {
+    for ty in tile_rows(cam.rows) {
         for tx in 0..bins.tiles_x {
             tile.gather(bins.tile((ty * bins.tiles_x + tx) as usize), proj);
-            for j in ty * 16..((ty + 1) * 16).min(h) {
+            for j in (ty * 16).max(r0)..((ty + 1) * 16).min(r1) {
                 for i in tx * 16..((tx + 1) * 16).min(w) {
-                    let k = (j * w + i) as usize;
+                    let k = ((j - r0) * w + i) as usize;
                     let tf = match tape {
                         Some((t_final, last)) => {
                             raster::trace_back(i, j, &tile, t_final[k], last[k], &mut trace);
@@ -234,7 +258,6 @@ pub fn rasterize_vjp<T: Real>(
             }
         }
     }
-    out
 }
 
 /// VJP of [`project`]: raw-parameter gradients from the projection gradients.
@@ -384,21 +407,24 @@ impl crate::SplatKernels for ReferenceSplat {
         cam: &crate::CameraConsts,
         tape: Option<&crate::kernels::ImageBufs<Self>>,
         d_rgb: &Vec<f32>,
-    ) -> Result<Vec<ProjectedGrad<f32>>, Self::Error> {
+        d_proj: &mut Vec<ProjectedGrad<f32>>,
+    ) -> Result<(), Self::Error> {
         let tb = TileBins {
             tiles_x: cam.tiles[0],
             tiles_y: cam.tiles[1],
             offsets: bins.offsets.clone(),
             ids: bins.ids.clone(),
         };
-        Ok(rasterize_vjp(
+        rasterize_vjp_into(
             proj,
             &tb,
             &cam.params(),
             &cam.bg(),
             tape.map(|i| (&i.t_final[..], &i.last[..])),
             d_rgb,
-        ))
+            d_proj,
+        );
+        Ok(())
     }
     fn project_vjp(
         &self,

@@ -3,9 +3,11 @@
 
 use crate::camera::{Camera, RenderSettings};
 use crate::error::{Error, Result};
+use crate::frame::PreparedFrame;
 use crate::gaussians::{Deformation, GaussianGrads, Gaussians};
-use crate::kernels::{CameraConsts, ImageBufs, SceneBufs, SplatKernels, TileBufs};
+use crate::kernels::{CameraConsts, ImageBufs, SceneBufs, SceneGradBufs, SplatKernels, TileBufs};
 use crate::project::Projected;
+use std::ops::Range;
 
 /// A rendered image, row 0 at the top.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -52,6 +54,41 @@ pub trait Renderer {
         settings: &RenderSettings,
         d_rgb: &[f32],
     ) -> Result<GaussianGrads>;
+
+    /// Projects, depth-sorts and bins `scene` (deformed by `deform` when given) once for the
+    /// whole image of `cam` (the full image of a cropped camera), for rendering and
+    /// differentiating any rows of it ([`Renderer::render_rows`],
+    /// [`Renderer::render_rows_vjp`]; see [`crate::frame`]).
+    fn prepare_frame(
+        &mut self,
+        scene: &Gaussians,
+        deform: Option<&Deformation>,
+        cam: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<PreparedFrame>;
+
+    /// Rows `rows` of a prepared frame's image: the whole image's rows, the same values as
+    /// [`Renderer::render`] from the camera cropped to them ([`Camera::crop_rows`]).
+    fn render_rows(&mut self, frame: &PreparedFrame, rows: Range<u32>) -> Result<Image>;
+
+    /// Adds the VJP of rows `rows` for `d_rgb` (`rows.len() x W x 3` values) to the frame's
+    /// projection gradient; [`Renderer::frame_vjp`] gives the scene gradient of the sum.
+    fn render_rows_vjp(
+        &mut self,
+        frame: &mut PreparedFrame,
+        rows: Range<u32>,
+        d_rgb: &[f32],
+    ) -> Result<()>;
+
+    /// The gradient of the sum over the rows VJPs added to `frame` with respect to the raw
+    /// parameters of its scene, as [`Renderer::render_vjp`] gives it; `scene` and `deform`
+    /// must be the ones the frame was prepared from (only their sizes are checked).
+    fn frame_vjp(
+        &mut self,
+        frame: PreparedFrame,
+        scene: &Gaussians,
+        deform: Option<&Deformation>,
+    ) -> Result<GaussianGrads>;
 }
 
 /// [`Renderer`] over any kernel backend.
@@ -71,7 +108,11 @@ impl<B: SplatKernels> SplatRenderer<B> {
         }
     }
 
-    fn upload(&self, g: &Gaussians, deform: Option<&Deformation>) -> Result<SceneBufs<B>> {
+    pub(crate) fn upload(
+        &self,
+        g: &Gaussians,
+        deform: Option<&Deformation>,
+    ) -> Result<SceneBufs<B>> {
         g.validate("scene")?;
         if let Some(d) = deform {
             d.validate(g.len(), "deformation")?;
@@ -149,11 +190,21 @@ impl<B: SplatKernels> SplatRenderer<B> {
 
     /// Records the statistics of a render (reads the projection back).
     fn record_stats(&mut self, tape: &RenderTape<B>) -> Result<()> {
+        self.record(&tape.proj, &tape.bins)
+    }
+
+    /// Records the statistics of a projection and its tile lists (reads the projection
+    /// back).
+    pub(crate) fn record(
+        &mut self,
+        proj: &B::Buf<Projected<f32>>,
+        bins: &TileBufs<B>,
+    ) -> Result<()> {
         let be = |e: B::Error| Error::Backend(Box::new(e));
-        self.stats.intersections = tape.bins.intersections;
+        self.stats.intersections = bins.intersections;
         self.stats.visible = self
             .backend
-            .download(&tape.proj)
+            .download(proj)
             .map_err(be)?
             .iter()
             .filter(|p| p.radii != [0, 0])
@@ -224,13 +275,20 @@ impl<B: SplatKernels> SplatRenderer<B> {
         let be = |e: B::Error| Error::Backend(Box::new(e));
         let b = &self.backend;
         let d = b.upload(d_rgb).map_err(be)?;
-        let d_proj = b
-            .rasterize_vjp(&proj, &bins, &cc, img.as_ref(), &d)
+        let mut d_proj = b.zeros(bufs.n).map_err(be)?;
+        b.rasterize_vjp(&proj, &bins, &cc, img.as_ref(), &d, &mut d_proj)
             .map_err(be)?;
         drop((img, bins, d));
         let g = b.project_vjp(&bufs, &cc, &proj, &d_proj).map_err(be)?;
         // The scene's buffers and the intermediates are freed before the gradients come back.
         drop((bufs, proj, d_proj));
+        self.download_grads(g)
+    }
+
+    /// Brings scene gradients back to the host, freeing each buffer as it comes.
+    pub(crate) fn download_grads(&self, g: SceneGradBufs<B>) -> Result<GaussianGrads> {
+        let be = |e: B::Error| Error::Backend(Box::new(e));
+        let b = &self.backend;
         Ok(GaussianGrads {
             means: b.download_owned(g.means).map_err(be)?,
             log_scales: b.download_owned(g.log_scales).map_err(be)?,
@@ -291,5 +349,37 @@ impl<B: SplatKernels> Renderer for SplatRenderer<B> {
         let proj = self.backend.project(&bufs, &cc).map_err(be)?;
         let bins = self.backend.bin_tiles(&proj, &cc).map_err(be)?;
         self.backward(bufs, cc, proj, bins, None, d_rgb)
+    }
+
+    fn prepare_frame(
+        &mut self,
+        scene: &Gaussians,
+        deform: Option<&Deformation>,
+        cam: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<PreparedFrame> {
+        SplatRenderer::prepare_frame(self, scene, deform, cam, settings)
+    }
+
+    fn render_rows(&mut self, frame: &PreparedFrame, rows: Range<u32>) -> Result<Image> {
+        SplatRenderer::render_rows(self, frame, rows)
+    }
+
+    fn render_rows_vjp(
+        &mut self,
+        frame: &mut PreparedFrame,
+        rows: Range<u32>,
+        d_rgb: &[f32],
+    ) -> Result<()> {
+        SplatRenderer::render_rows_vjp(self, frame, rows, d_rgb)
+    }
+
+    fn frame_vjp(
+        &mut self,
+        frame: PreparedFrame,
+        scene: &Gaussians,
+        deform: Option<&Deformation>,
+    ) -> Result<GaussianGrads> {
+        SplatRenderer::frame_vjp(self, frame, scene, deform)
     }
 }

@@ -18,9 +18,10 @@ use r4d_mpm::adjoint::engine::{KernelAdjoint, MpmAdjointKernels, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::math::Real;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
-use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SimLink};
+use r4d_splat::{Camera, Deformation, Gaussians, PreparedFrame, RenderSettings, Renderer, SimLink};
 use serde::Serialize;
 use std::cell::RefCell;
+use std::ops::Range;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -219,11 +220,15 @@ pub const DEFAULT_BAND_ROWS: usize = 128;
 /// # Memory
 /// The forward pass keeps only the simulated frames' positions and deformation gradients
 /// (`12` floats per particle per frame). The loss is then evaluated in row bands of every
-/// view ([`BandedLoss`]; the paper's DMS by default, [`r4d_loss::bands::BandedDms`]): each
-/// band of every frame is rendered with a
-/// cropped camera, its loss and gradient evaluated, and the gradient pulled back through the
-/// renderer at once, so no whole rendered video, video gradient or f32 reference is held;
-/// 8-bit references stay bytes. The result equals the whole-frame loss up to rounding.
+/// view ([`BandedLoss`]; the paper's DMS by default, [`r4d_loss::bands::BandedDms`]): every
+/// frame is projected, depth-sorted and binned once per view ([`Renderer::prepare_frame`]:
+/// 48 bytes per Gaussian and 4 per tile intersection, plus 36 per Gaussian for its projection
+/// gradient when differentiating), each band of every frame only composited, its loss and
+/// gradient evaluated, and the gradient pulled back through the band's compositing at once
+/// (the projection's VJP once per frame after the last band), so no whole rendered video,
+/// video gradient or f32 reference is held; 8-bit references stay bytes. The bands' pixels
+/// are the whole frame's, so the result equals the whole-frame loss up to the rounding of the
+/// sums.
 pub struct Objective<'a> {
     problem: &'a VideoProblem,
     sim: HostSim,
@@ -324,8 +329,9 @@ impl<'a> Objective<'a> {
     }
 
     /// Evaluates the loss in bands of about `rows` rows (rounded up to a multiple of the
-    /// 16-px patch and tile size). Smaller bands hold less memory and re-project the
-    /// Gaussians more often; the value does not change (up to rounding).
+    /// 16-px patch and tile size). Smaller bands hold less memory (the rendered band video,
+    /// its gradient and the loss's buffers) and composite the same pixels; the value does not
+    /// change (up to rounding).
     pub fn set_band_rows(&mut self, rows: usize) -> Result<(), FitError> {
         self.band_rows = rows.max(1).div_ceil(16) * 16;
         // Each view's loss is made once here to refuse a bad reference or configuration
@@ -531,25 +537,53 @@ impl<'a> Objective<'a> {
             .deformation(&self.problem.scene, &s.x, Some(&f), what)?)
     }
 
-    /// Adds the gradient of `sum(d_rgb * render(s, cam))` with respect to the particles'
-    /// positions and deformation gradients (simulation space) to `out`.
-    fn render_vjp_into(
+    /// Projects, sorts and bins one simulated frame for the whole image of `cam`
+    /// ([`Renderer::prepare_frame`]).
+    fn prepare_frame(
         &self,
         s: &Frame,
         cam: &Camera,
+        what: &str,
+    ) -> Result<PreparedFrame, FitError> {
+        let d = self.deformation(s, what)?;
+        self.with_renderer(|r| {
+            r.prepare_frame(&self.problem.scene, Some(&d), cam, &self.problem.settings)
+                .map_err(FitError::from)
+        })
+    }
+
+    /// Rows `rows` of a prepared frame's colour image.
+    fn render_rows(&self, p: &PreparedFrame, rows: Range<u32>) -> Result<Vec<f32>, FitError> {
+        self.with_renderer(|r| {
+            r.render_rows(p, rows)
+                .map(|img| img.rgb)
+                .map_err(FitError::from)
+        })
+    }
+
+    /// Adds the VJP of rows `rows` of a prepared frame for `d_rgb` to its projection
+    /// gradient.
+    fn render_rows_vjp(
+        &self,
+        p: &mut PreparedFrame,
+        rows: Range<u32>,
         d_rgb: &[f32],
+    ) -> Result<(), FitError> {
+        self.with_renderer(|r| r.render_rows_vjp(p, rows, d_rgb).map_err(FitError::from))
+    }
+
+    /// Adds the gradient of the rows VJPs added to `p` (frame `s`'s) with respect to the
+    /// particles' positions and deformation gradients (simulation space) to `out`.
+    fn frame_vjp_into(
+        &self,
+        s: &Frame,
+        p: PreparedFrame,
         out: &mut FrameGrad,
     ) -> Result<(), FitError> {
         let d = self.deformation(s, "reverse sweep")?;
         let gr = self.with_renderer(|r| {
-            r.render_vjp(
-                &self.problem.scene,
-                Some(&d),
-                cam,
-                &self.problem.settings,
-                d_rgb,
-            )
-            .map_err(FitError::from)
+            r.frame_vjp(p, &self.problem.scene, Some(&d))
+                .map_err(FitError::from)
         })?;
         drop(d);
         Ok(self
@@ -648,10 +682,14 @@ impl<'a> Objective<'a> {
         Ok(out)
     }
 
-    /// The DMS of every view, band by band: each band of every needed frame is rendered with
-    /// a cropped camera (or cut out of `videos` when given), its terms evaluated and, with
-    /// `grads`, its gradient pulled back through the time map and the renderer into the
-    /// per-frame gradients. Returns the sum over views.
+    /// The DMS of every view, band by band. Per view, every needed frame is projected, sorted
+    /// and binned once ([`Renderer::prepare_frame`]); each band of every frame is then only
+    /// composited ([`Renderer::render_rows`]; or cut out of `videos` when given), its terms
+    /// evaluated and, with `grads`, its gradient pulled back through the time map and the
+    /// band's compositing into the frame's projection gradient
+    /// ([`Renderer::render_rows_vjp`]); after the last band the projection's VJP runs once per
+    /// frame ([`Renderer::frame_vjp`]) into the per-frame gradients. Returns the sum over
+    /// views.
     fn banded_loss(
         &self,
         frames: &[Option<Frame>],
@@ -669,9 +707,27 @@ impl<'a> Objective<'a> {
             prof.bands = prof.bands.max(band_rows.len());
             let w = view.video.width();
             let mut terms = DmsTerms::default();
+            let t0 = Instant::now();
+            let mut prepared: Vec<Option<PreparedFrame>> = match videos {
+                Some(_) => Vec::new(),
+                None => frames
+                    .iter()
+                    .enumerate()
+                    .map(|(j, f)| {
+                        f.as_ref()
+                            .map(|f| {
+                                self.prepare_frame(f, &view.camera, &format!("simulated frame {j}"))
+                            })
+                            .transpose()
+                    })
+                    .collect::<Result<_, _>>()?,
+            };
+            prof.render_s += t0.elapsed().as_secs_f64();
+            // Frames whose projection gradient received a band's VJP.
+            let mut pulled = vec![false; frames.len()];
             for (b, rows) in band_rows.into_iter().enumerate() {
                 let len = rows.len() * w * 3;
-                let cam = view.camera.crop_rows(rows.start as u32..rows.end as u32);
+                let rows32 = rows.start as u32..rows.end as u32;
                 let t0 = Instant::now();
                 let data = match videos {
                     Some(vs) => {
@@ -684,14 +740,11 @@ impl<'a> Objective<'a> {
                         d
                     }
                     None => {
-                        let mut renders: Vec<Option<Vec<f32>>> = frames
+                        let mut renders: Vec<Option<Vec<f32>>> = prepared
                             .iter()
-                            .enumerate()
-                            .map(|(j, f)| {
-                                f.as_ref()
-                                    .map(|f| {
-                                        self.render_frame(f, &cam, &format!("simulated frame {j}"))
-                                    })
+                            .map(|p| {
+                                p.as_ref()
+                                    .map(|p| self.render_rows(p, rows32.clone()))
                                     .transpose()
                             })
                             .collect::<Result<_, _>>()?;
@@ -708,7 +761,7 @@ impl<'a> Objective<'a> {
                         prof.loss_s += t1.elapsed().as_secs_f64();
                         terms.add(&t);
                     }
-                    Some(gs) => {
+                    Some(_) => {
                         let mut g = vec![0.0f32; video.data().len()];
                         let t = dms.band_terms_and_grad_into(b, &video, &mut g)?;
                         drop(video);
@@ -716,20 +769,32 @@ impl<'a> Objective<'a> {
                         let t2 = Instant::now();
                         prof.loss_s += (t2 - t1).as_secs_f64();
                         let mut buf = vec![0.0f32; len];
-                        for (j, f) in frames.iter().enumerate() {
-                            let Some(f) = f else { continue };
+                        for (j, p) in prepared.iter_mut().enumerate() {
+                            let Some(p) = p else { continue };
                             if !self.frame_grad(&g, j, &mut buf) || buf.iter().all(|&x| x == 0.0) {
                                 continue;
                             }
-                            let acc = gs[j].get_or_insert_with(|| FrameGrad {
-                                x: vec![[0.0; 3]; n],
-                                f: vec![[0.0; 9]; n],
-                            });
-                            self.render_vjp_into(f, &cam, &buf, acc)?;
+                            self.render_rows_vjp(p, rows32.clone(), &buf)?;
+                            pulled[j] = true;
                         }
                         prof.render_vjp_s += t2.elapsed().as_secs_f64();
                     }
                 }
+            }
+            if let Some(gs) = grads.as_deref_mut() {
+                let t0 = Instant::now();
+                for (j, p) in prepared.iter_mut().enumerate() {
+                    let (Some(f), true) = (&frames[j], pulled[j]) else {
+                        continue;
+                    };
+                    let p = p.take().expect("a prepared frame for every stored frame");
+                    let acc = gs[j].get_or_insert_with(|| FrameGrad {
+                        x: vec![[0.0; 3]; n],
+                        f: vec![[0.0; 9]; n],
+                    });
+                    self.frame_vjp_into(f, p, acc)?;
+                }
+                prof.render_vjp_s += t0.elapsed().as_secs_f64();
             }
             ev.total += terms.total;
             ev.views.push(terms);

@@ -15,7 +15,7 @@ struct CameraConsts {
     trans: vec4<f32>,
     campos: vec4<f32>,
     background: vec4<f32>,
-    // fx, fy, cx, cy.
+    // fx, fy, cx, cy (cy of the full image for a cropped camera).
     intrinsics: vec4<f32>,
     near_far: vec2<f32>,
     size: vec2<u32>,
@@ -25,6 +25,14 @@ struct CameraConsts {
     // Frustum clamp of x/z and y/z: (x+, x-, y+, y-), the full image's for a cropped camera
     // (computed on the host, `CamParams::lims`).
     lims: vec4<f32>,
+    // The rows `rasterize` and `rasterize_vjp` composite: rows.x .. rows.y of the `size.y`
+    // rows (their images and dL/drgb hold those rows only); z, w unused.
+    rows: vec4<u32>,
+}
+
+// The first row of tiles covering the composited rows (the dispatch's y = 0).
+fn splat_first_tile_row(cam: CameraConsts) -> u32 {
+    return cam.rows.x / SPLAT_TILE;
 }
 
 struct Projected {

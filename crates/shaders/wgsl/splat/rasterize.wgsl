@@ -1,6 +1,7 @@
-// Composites every pixel: one workgroup per 16x16 tile, one thread per pixel, the tile's
-// Gaussians (front to back) loaded 256 at a time into workgroup memory; per pixel exactly
-// `r4d_splat::raster::composite_pixel` (the per-Gaussian rule is lib/composite.wgsl, shared
+// Composites every pixel of rows `cam.rows` (the image holds those rows): one workgroup per
+// 16x16 tile of the rows of tiles covering them (the dispatch's y counts from the first),
+// one thread per pixel, the tile's Gaussians (front to back) loaded 256 at a time into
+// workgroup memory; per pixel exactly `r4d_splat::raster::composite_pixel` (the per-Gaussian rule is lib/composite.wgsl, shared
 // with the VJP); rgb + T * background, alpha = 1 - T, depth = D / max(1 - T, 1e-10), and the
 // VJP's tape: the final T and one past the tile-list position of the last Gaussian
 // composited (`PixelOut::last`).
@@ -34,15 +35,16 @@ fn main(
     @builtin(local_invocation_id) lid3: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let tile = wid.x + wid.y * cam.tiles.x;
+    let ty = wid.y + splat_first_tile_row(cam);
+    let tile = wid.x + ty * cam.tiles.x;
     if lid == 0u {
         s_range = vec2<u32>(offsets[tile], offsets[tile + 1u]);
         atomicStore(&s_done, 0u);
     }
     let range = workgroupUniformLoad(&s_range);
     let i = wid.x * SPLAT_TILE + lid3.x;
-    let j = wid.y * SPLAT_TILE + lid3.y;
-    let inside = i < cam.size.x && j < cam.size.y;
+    let j = ty * SPLAT_TILE + lid3.y;
+    let inside = i < cam.size.x && j >= cam.rows.x && j < cam.rows.y;
     var done = !inside;
     if done {
         atomicAdd(&s_done, 1u);
@@ -101,7 +103,7 @@ fn main(
         }
     }
     if inside {
-        let pix = j * cam.size.x + i;
+        let pix = (j - cam.rows.x) * cam.size.x + i;
         out_rgb[3u * pix] = rgb.x + t * cam.background.x;
         out_rgb[3u * pix + 1u] = rgb.y + t * cam.background.y;
         out_rgb[3u * pix + 2u] = rgb.z + t * cam.background.z;

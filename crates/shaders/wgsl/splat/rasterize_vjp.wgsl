@@ -1,10 +1,12 @@
-// VJP of `rasterize.wgsl` for dL/drgb: one workgroup per 16x16 tile, one thread per pixel,
-// per pixel exactly `r4d_splat::raster::trace_back` then `composite_pixel_vjp` (the
-// per-Gaussian rule is lib/composite.wgsl, shared with the forward).
+// VJP of `rasterize.wgsl` for dL/drgb of rows `cam.rows` (laid out as those rows), added to
+// the gradients in `grid_atomic`: one workgroup per 16x16 tile of the rows of tiles covering
+// them, one thread per pixel, per pixel exactly `r4d_splat::raster::trace_back` then
+// `composite_pixel_vjp` (the per-Gaussian rule is lib/composite.wgsl, shared with the
+// forward).
 //
 // 1. The forward's tape: each pixel reads its final transmittance T and `last`, one past the
 //    tile-list position of the last Gaussian it composited (written by `rasterize.wgsl`), so
-//    nothing is composited again. Pixels outside the image or with dL/drgb = 0 take no part.
+//    nothing is composited again. Pixels outside the rows or with dL/drgb = 0 take no part.
 // 2. Back to front: from the workgroup's largest `last` down, the tile's Gaussians are staged
 //    BATCH at a time in workgroup memory; each pixel walks them in reverse, skips those past
 //    its `last` or that fail the same tests as the forward, recovers the transmittance in front
@@ -27,7 +29,8 @@
 @group(0) @binding(4) var<storage, read> t_final: array<f32>;
 @group(0) @binding(5) var<storage, read> last_of: array<u32>;
 @group(0) @binding(6) var<storage, read> d_rgb: array<f32>;
-// `ProjectedGrad` records as 9 f32 each, zeroed by the host.
+// `ProjectedGrad` records as 9 f32 each: the kernel adds to them (the host zeroes them once
+// per projection, so that several bands of rows sum into them).
 @group(0) @binding(7) var<storage, read_write> grid_atomic: array<AtomicF32>;
 
 const BATCH: u32 = 128u;
@@ -76,7 +79,8 @@ fn main(
     @builtin(local_invocation_id) lid3: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let tile = wid.x + wid.y * cam.tiles.x;
+    let ty = wid.y + splat_first_tile_row(cam);
+    let tile = wid.x + ty * cam.tiles.x;
     if lid == 0u {
         s_range = vec2<u32>(offsets[tile], offsets[tile + 1u]);
         atomicStore(&s_last, 0u);
@@ -87,18 +91,18 @@ fn main(
     let range = workgroupUniformLoad(&s_range);
     let total = select(0u, range.y - range.x, range.y > range.x);
     let i = wid.x * SPLAT_TILE + lid3.x;
-    let j = wid.y * SPLAT_TILE + lid3.y;
-    let inside = i < cam.size.x && j < cam.size.y;
+    let j = ty * SPLAT_TILE + lid3.y;
+    let inside = i < cam.size.x && j >= cam.rows.x && j < cam.rows.y;
     var d = vec3<f32>(0.0);
     if inside {
-        let pix = j * cam.size.x + i;
+        let pix = (j - cam.rows.x) * cam.size.x + i;
         d = vec3<f32>(d_rgb[3u * pix], d_rgb[3u * pix + 1u], d_rgb[3u * pix + 2u]);
     }
     // 1. The forward's tape.
     var t = 1.0;
     var last = 0u;
     if inside && any(d != vec3<f32>(0.0)) {
-        let pix = j * cam.size.x + i;
+        let pix = (j - cam.rows.x) * cam.size.x + i;
         t = t_final[pix];
         last = min(last_of[pix], total);
     }
