@@ -632,6 +632,37 @@ fn row_bands_give_the_whole_frame_loss_and_gradient() {
     assert!(rel(v.total, ev.total) < 1e-5);
 }
 
+/// With no room to keep prepared frames (`frame_cache_bytes = 0`) every band projects its
+/// frames again and pulls its VJP through the projection at once: the same loss, the same
+/// gradient up to the order of the f32 sums; with room for one frame, a mix of both.
+#[test]
+fn frames_prepared_per_band_give_the_kept_frames_loss_and_gradient() {
+    let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
+    let p = small_problem(&truth, 3);
+    let start = [jelly(1.4e4, 1000.0), jelly(1.1e4, 1200.0)];
+    let loss = fit_config(0).loss;
+    let mut a = Objective::new(&p, None, &loss, false).unwrap();
+    a.set_band_rows(16).unwrap();
+    let (ev, g) = a.value_and_grad(&start).unwrap();
+    let rel = |x: f64, y: f64| (x - y).abs() / y.abs().max(1e-30);
+    for budget in [0, 1] {
+        a.frame_cache_bytes = Some(budget);
+        let (ev2, g2) = a.value_and_grad(&start).unwrap();
+        assert_eq!(
+            ev2.total, ev.total,
+            "budget {budget}: the forward is unchanged"
+        );
+        for part in 0..2 {
+            for (x, y) in [
+                (g2[part].youngs_modulus, g[part].youngs_modulus),
+                (g2[part].density, g[part].density),
+            ] {
+                assert!(rel(x, y) < 1e-4, "budget {budget}, part {part}: {x} vs {y}");
+            }
+        }
+    }
+}
+
 /// A parts file may name a part no particle belongs to (the last one empty: `r4d segment`
 /// can write such a file): that part is a parameter slot with a zero gradient, and a fit runs
 /// (it used to index past the gradient).

@@ -30,6 +30,7 @@ pub struct PreparedFrame {
     gaussians: usize,
     sh_degree: u32,
     deformed: bool,
+    bytes: usize,
 }
 
 impl std::fmt::Debug for PreparedFrame {
@@ -52,6 +53,12 @@ impl PreparedFrame {
     /// Number of Gaussians projected.
     pub fn gaussians(&self) -> usize {
         self.gaussians
+    }
+
+    /// Bytes the frame holds once its VJP has started: the projection and its gradient per
+    /// Gaussian and the tile lists (on the backend's memory: the heap for host backends).
+    pub fn bytes(&self) -> usize {
+        self.bytes
     }
 
     /// The checked rows `rows` of the image.
@@ -115,6 +122,10 @@ impl<B: SplatKernels> SplatRenderer<B> {
         drop(bufs);
         let bins = self.backend.bin_tiles(&proj, &cc).map_err(backend)?;
         self.record(&proj, &bins)?;
+        let tiles = cc.tiles[0] as usize * cc.tiles[1] as usize;
+        let bytes = scene.len()
+            * (std::mem::size_of::<Projected<f32>>() + std::mem::size_of::<ProjectedGrad<f32>>())
+            + 4 * (bins.intersections + tiles + 1);
         Ok(PreparedFrame {
             state: Box::new(FrameState::<B> {
                 cc,
@@ -127,6 +138,7 @@ impl<B: SplatKernels> SplatRenderer<B> {
             gaussians: scene.len(),
             sh_degree: scene.sh_degree,
             deformed: deform.is_some(),
+            bytes,
         })
     }
 

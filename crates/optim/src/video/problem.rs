@@ -212,6 +212,11 @@ pub const MAX_SIMULATED_FRAMES: usize = 100_000;
 /// The most substeps one evaluation may run ([`MAX_SIMULATED_FRAMES`]'s companion).
 pub const MAX_SUBSTEPS: u64 = 10_000_000;
 
+/// Prepared frames a view keeps for all its bands on a host backend by default
+/// ([`Objective::frame_cache_bytes`]): at the paper's scale (300 000 Gaussians at 1080p,
+/// about 37 MB a frame) 3 of 17 frames, which keeps the iteration under 1 GB of heap.
+pub const DEFAULT_FRAME_CACHE_BYTES: usize = 128 << 20;
+
 /// Row bands of the loss by default ([`Objective::set_band_rows`]).
 pub const DEFAULT_BAND_ROWS: usize = 128;
 
@@ -245,6 +250,11 @@ pub struct Objective<'a> {
     pub precision: Precision,
     /// Where it simulates and renders (from [`VideoProblem::compute`]).
     pub compute: Arc<dyn Compute>,
+    /// Most bytes of prepared frames (projections, tile lists, projection gradients) a view
+    /// keeps for all its bands; frames beyond it are projected again for each band that
+    /// needs them (slower, the same values). `None`: [`DEFAULT_FRAME_CACHE_BYTES`] on a
+    /// host backend (the frames are heap), no limit on a device backend (device memory).
+    pub frame_cache_bytes: Option<usize>,
     profile: Mutex<StageProfile>,
     /// Measures the heap peaks of [`Objective::profile`] (`None`: peaks are 0). The caller
     /// supplies it (the `r4d` binary: its counting allocator); the objective never touches a
@@ -321,6 +331,7 @@ impl<'a> Objective<'a> {
             checkpointing: Checkpointing::PerFrame,
             precision: Precision::F64,
             compute: problem.compute.clone(),
+            frame_cache_bytes: None,
             profile: Mutex::new(StageProfile::default()),
             heap: None,
         };
@@ -480,6 +491,15 @@ impl<'a> Objective<'a> {
     }
 
     /// Runs `f` with the renderer of this objective's backend.
+    /// The prepared-frame budget in force ([`Objective::frame_cache_bytes`]).
+    fn frame_cache_budget(&self) -> usize {
+        match (self.frame_cache_bytes, self.compute.device_peak_bytes()) {
+            (Some(b), _) => b,
+            (None, Some(_)) => usize::MAX,
+            (None, None) => DEFAULT_FRAME_CACHE_BYTES,
+        }
+    }
+
     fn with_renderer<R>(
         &self,
         f: impl FnOnce(&mut dyn Renderer) -> Result<R, FitError>,
@@ -708,20 +728,25 @@ impl<'a> Objective<'a> {
             let w = view.video.width();
             let mut terms = DmsTerms::default();
             let t0 = Instant::now();
-            let mut prepared: Vec<Option<PreparedFrame>> = match videos {
-                Some(_) => Vec::new(),
-                None => frames
-                    .iter()
-                    .enumerate()
-                    .map(|(j, f)| {
-                        f.as_ref()
-                            .map(|f| {
-                                self.prepare_frame(f, &view.camera, &format!("simulated frame {j}"))
-                            })
-                            .transpose()
-                    })
-                    .collect::<Result<_, _>>()?,
-            };
+            // Frames prepared once for every band, in order while they fit the budget (each
+            // frame's size estimated by the one before it); the others are prepared again
+            // for each band that needs them.
+            let mut prepared: Vec<Option<PreparedFrame>> =
+                (0..frames.len()).map(|_| None).collect();
+            if videos.is_none() {
+                let budget = self.frame_cache_budget();
+                let (mut used, mut next) = (0usize, 0usize);
+                for (j, f) in frames.iter().enumerate() {
+                    let Some(f) = f else { continue };
+                    if used.saturating_add(next) > budget {
+                        break;
+                    }
+                    let p = self.prepare_frame(f, &view.camera, &format!("simulated frame {j}"))?;
+                    next = p.bytes();
+                    used = used.saturating_add(next);
+                    prepared[j] = Some(p);
+                }
+            }
             prof.render_s += t0.elapsed().as_secs_f64();
             // Frames whose projection gradient received a band's VJP.
             let mut pulled = vec![false; frames.len()];
@@ -742,10 +767,16 @@ impl<'a> Objective<'a> {
                     None => {
                         let mut renders: Vec<Option<Vec<f32>>> = prepared
                             .iter()
-                            .map(|p| {
-                                p.as_ref()
-                                    .map(|p| self.render_rows(p, rows32.clone()))
-                                    .transpose()
+                            .zip(frames)
+                            .enumerate()
+                            .map(|(j, (p, f))| match (p, f) {
+                                (Some(p), _) => self.render_rows(p, rows32.clone()).map(Some),
+                                (None, Some(f)) => {
+                                    let what = format!("simulated frame {j}");
+                                    let p = self.prepare_frame(f, &view.camera, &what)?;
+                                    self.render_rows(&p, rows32.clone()).map(Some)
+                                }
+                                (None, None) => Ok(None),
                             })
                             .collect::<Result<_, _>>()?;
                         self.assemble(&mut renders, len)
@@ -770,12 +801,29 @@ impl<'a> Objective<'a> {
                         prof.loss_s += (t2 - t1).as_secs_f64();
                         let mut buf = vec![0.0f32; len];
                         for (j, p) in prepared.iter_mut().enumerate() {
-                            let Some(p) = p else { continue };
+                            let Some(f) = &frames[j] else { continue };
                             if !self.frame_grad(&g, j, &mut buf) || buf.iter().all(|&x| x == 0.0) {
                                 continue;
                             }
-                            self.render_rows_vjp(p, rows32.clone(), &buf)?;
-                            pulled[j] = true;
+                            match p {
+                                Some(p) => {
+                                    self.render_rows_vjp(p, rows32.clone(), &buf)?;
+                                    pulled[j] = true;
+                                }
+                                None => {
+                                    // Not kept: prepared again, this band's VJP pulled
+                                    // through its projection at once.
+                                    let what = format!("simulated frame {j}");
+                                    let mut q = self.prepare_frame(f, &view.camera, &what)?;
+                                    self.render_rows_vjp(&mut q, rows32.clone(), &buf)?;
+                                    let gs = grads.as_deref_mut().expect("in the gradient branch");
+                                    let acc = gs[j].get_or_insert_with(|| FrameGrad {
+                                        x: vec![[0.0; 3]; n],
+                                        f: vec![[0.0; 9]; n],
+                                    });
+                                    self.frame_vjp_into(f, q, acc)?;
+                                }
+                            }
                         }
                         prof.render_vjp_s += t2.elapsed().as_secs_f64();
                     }
@@ -787,7 +835,7 @@ impl<'a> Objective<'a> {
                     let (Some(f), true) = (&frames[j], pulled[j]) else {
                         continue;
                     };
-                    let p = p.take().expect("a prepared frame for every stored frame");
+                    let p = p.take().expect("pulled frames are kept");
                     let acc = gs[j].get_or_insert_with(|| FrameGrad {
                         x: vec![[0.0; 3]; n],
                         f: vec![[0.0; 9]; n],
