@@ -203,6 +203,24 @@ fn fixed_corotated_jacobian<T: Real>(
     }
 }
 
+/// The scalar model's inputs as dual numbers, one direction each (the order of [`DIRS`]).
+fn dual_inputs<T: Real>(
+    s: [T; 3],
+    state: PlasticState<T>,
+    p: MaterialParams<T>,
+) -> ModelIn<Dual<T, DIRS>> {
+    let var = |v: T, i: usize| Dual::<T, DIRS>::var(v, i);
+    ModelIn {
+        sigma: [var(s[0], 0), var(s[1], 1), var(s[2], 2)],
+        state: [var(state[0], 3), var(state[1], 4)],
+        mu: var(p.mu, 5),
+        lambda: var(p.lambda, 6),
+        eta: var(p.eta, 7),
+        alpha: var(p.alpha, 8),
+        h: var(p.h, 9),
+    }
+}
+
 /// Stable divided difference `(g_i - g_j) / (s_i - s_j)` (see the module docs).
 fn divided<T: Real>(g: &[Dual<T, DIRS>; 3], s: [T; 3], i: usize, j: usize, eps: T) -> T {
     let gap = s[i] - s[j];
@@ -318,20 +336,10 @@ fn stress_update_vjp_inner<T: Real>(
         "the fluid model is not differentiated yet"
     );
     let s = svd.sigma;
-    let var = |v: T, i: usize| Dual::<T, DIRS>::var(v, i);
-    let input = ModelIn {
-        sigma: [var(s[0], 0), var(s[1], 1), var(s[2], 2)],
-        state: [var(state[0], 3), var(state[1], 4)],
-        mu: var(p.mu, 5),
-        lambda: var(p.lambda, 6),
-        eta: var(p.eta, 7),
-        alpha: var(p.alpha, 8),
-        h: var(p.h, 9),
-    };
     let out = if pc.material == 0 {
         fixed_corotated_jacobian(s, state, p)
     } else {
-        scalar_model(pc, input, dt.f64())
+        scalar_model(pc, dual_inputs(s, state, p), dt.f64())
     };
     let (u, v) = (svd.u, svd.v);
     let g_hat = u.transpose() * fe_bar * v;
@@ -421,17 +429,7 @@ mod tests {
                 alpha: rnd(),
                 h: rnd(),
             };
-            let var = |v: f64, i: usize| Dual::<f64, DIRS>::var(v, i);
-            let input = ModelIn {
-                sigma: [var(s[0], 0), var(s[1], 1), var(s[2], 2)],
-                state: [var(state[0], 3), var(state[1], 4)],
-                mu: var(p.mu, 5),
-                lambda: var(p.lambda, 6),
-                eta: var(p.eta, 7),
-                alpha: var(p.alpha, 8),
-                h: var(p.h, 9),
-            };
-            let want = scalar_model(&pc, input, 1e-4);
+            let want = scalar_model(&pc, dual_inputs(s, state, p), 1e-4);
             let got = fixed_corotated_jacobian(s, state, p);
             assert_eq!(want.unchanged, got.unchanged);
             let pairs = want
