@@ -50,7 +50,7 @@ pub fn svd3<T: Real>(f: Mat3<T>) -> Svd3<T> {
 pub fn svd3_lanes<T: Real, const L: usize>(f: &[Mat3<T>; L]) -> [Svd3<T>; L] {
     let ata: [M3<T>; L] = std::array::from_fn(|l| (f[l].transpose() * f[l]).0);
     let (_, v) = sym_eigen_lanes(&ata);
-    std::array::from_fn(|l| from_right_vectors(f[l], Mat3(v[l])))
+    from_right_vectors_lanes(f, &v)
 }
 
 /// Number of matrices [`svd3_batch`] decomposes at once.
@@ -95,34 +95,74 @@ pub fn svd3_many<T: Real>(f: &[Mat3<T>], out: &mut [Svd3<T>]) {
 /// descending singular value): `U` and the singular values by Gram-Schmidt QR of `F V`.
 #[inline(always)]
 fn from_right_vectors<T: Real>(f: Mat3<T>, vm: Mat3<T>) -> Svd3<T> {
+    from_right_vectors_lanes(&[f], &[vm.0])[0]
+}
+
+/// [`from_right_vectors`] of `L` matrices side by side, lane by lane in structure-of-arrays
+/// form so that the compiler vectorises the lane loops (the products, the square roots and
+/// the divisions of every lane run together). Each lane's arithmetic is exactly the one-lane
+/// arithmetic; the rare fallback for a rank-deficient `F` runs lane by lane afterwards.
+#[inline(always)]
+fn from_right_vectors_lanes<T: Real, const L: usize>(
+    f: &[Mat3<T>; L],
+    vm: &[M3<T>; L],
+) -> [Svd3<T>; L] {
+    let (zero, one) = (T::zero(), T::one());
     let tiny = T::min_positive_value();
     let eps = T::epsilon();
-    // B = F V; QR by Gram-Schmidt: U = Q (a rotation), sigma = diag(R).
-    let b = f * vm;
-    let b0 = b.col(0);
-    let b1 = b.col(1);
-    let b2 = b.col(2);
-    let n0 = norm(b0);
-    let u0 = if n0 > tiny {
-        scale(b0, T::one() / n0)
-    } else {
-        [T::one(), T::zero(), T::zero()]
-    };
-    let r01 = dot(u0, b1);
-    let w1 = sub(b1, scale(u0, r01));
-    let n1 = norm(w1);
-    let u1 = if n1 > eps * n0.max(T::one()) * T::c(1e-3) && n1 > tiny {
-        scale(w1, T::one() / n1)
-    } else {
-        any_orthogonal(u0)
-    };
-    let u2 = cross(u0, u1);
-    let s2 = dot(u2, b2);
-    Svd3 {
-        u: Mat3::from_cols(u0, u1, u2),
-        sigma: [n0, dot(u1, b1), s2],
-        v: vm,
+    // B = F V (b[row][col][lane]); QR by Gram-Schmidt: U = Q (a rotation), sigma = diag(R).
+    let mut b = [[[zero; L]; 3]; 3];
+    for (r, br) in b.iter_mut().enumerate() {
+        for (c, brc) in br.iter_mut().enumerate() {
+            for (l, x) in brc.iter_mut().enumerate() {
+                let (fr, v) = (&f[l].0[r], &vm[l]);
+                *x = fr[0] * v[0][c] + fr[1] * v[1][c] + fr[2] * v[2][c];
+            }
+        }
     }
+    let col = |c: usize, l: usize| [b[0][c][l], b[1][c][l], b[2][c][l]];
+    let mut n0 = [zero; L];
+    let mut u0 = [[zero; L]; 3];
+    let mut n1 = [zero; L];
+    let mut u1 = [[zero; L]; 3];
+    let mut regular = [true; L];
+    for l in 0..L {
+        let (b0, b1) = (col(0, l), col(1, l));
+        n0[l] = norm(b0);
+        let inv0 = one / n0[l];
+        let u = if n0[l] > tiny {
+            scale(b0, inv0)
+        } else {
+            [one, zero, zero]
+        };
+        let w = sub(b1, scale(u, dot(u, b1)));
+        n1[l] = norm(w);
+        regular[l] = n1[l] > eps * n0[l].max(one) * T::c(1e-3) && n1[l] > tiny;
+        let inv1 = one / n1[l];
+        for a in 0..3 {
+            u0[a][l] = u[a];
+            u1[a][l] = w[a] * inv1;
+        }
+    }
+    for l in 0..L {
+        if !regular[l] {
+            let o = any_orthogonal([u0[0][l], u0[1][l], u0[2][l]]);
+            for a in 0..3 {
+                u1[a][l] = o[a];
+            }
+        }
+    }
+    std::array::from_fn(|l| {
+        let u0 = [u0[0][l], u0[1][l], u0[2][l]];
+        let u1 = [u1[0][l], u1[1][l], u1[2][l]];
+        let u2 = cross(u0, u1);
+        let s2 = dot(u2, col(2, l));
+        Svd3 {
+            u: Mat3::from_cols(u0, u1, u2),
+            sigma: [n0[l], dot(u1, col(1, l)), s2],
+            v: Mat3(vm[l]),
+        }
+    })
 }
 
 /// A unit vector orthogonal to the unit vector `a`.
