@@ -44,6 +44,9 @@ pub use slabs::SLAB;
 /// ([`r4d_mpm::math::svd3_many`]).
 const STRESS_CHUNK: usize = 8 * r4d_mpm::math::SVD_BATCH;
 
+/// Particles per work item of G2P.
+const G2P_CHUNK: usize = 256;
+
 /// Parallelism of the CPU backend.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Par {
@@ -354,46 +357,42 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
     ) -> Result<(), Infallible> {
         let n = g.n;
         let nodes = &g.nodes;
-        let inv_dx = k::<T>(c.inv_dx);
-        type Item<'a, T> = (
+        let chunk = |(ci, (((x, v), cm), f)): ChunkItem<'_, T>| -> Problem {
+            G2pChunk {
+                first: ci * G2P_CHUNK,
+                x,
+                v,
+                cm,
+                f,
+                nodes,
+                n,
+                c,
+            }
+            .run()
+        };
+        type ChunkItem<'a, T> = (
             usize,
             (
-                ((&'a mut [T; 3], &'a mut [T; 3]), &'a mut [T; 9]),
-                &'a mut [T; 9],
+                ((&'a mut [[T; 3]], &'a mut [[T; 3]]), &'a mut [[T; 9]]),
+                &'a mut [[T; 9]],
             ),
         );
-        type Problem = Option<(u32, u32, f32)>;
-        let earliest = |a: Problem, b: Problem| match (a, b) {
-            (Some(a), Some(b)) => Some(if a.1 <= b.1 { a } else { b }),
-            (a, None) => a,
-            (None, b) => b,
-        };
-        let one = |(i, (((x, v), cm), f)): Item<'_, T>| -> Problem {
-            if !in_domain(*x, inv_dx, n) {
-                let worst = out_of_domain_coordinate(*x, inv_dx, n);
-                return Some((HEALTH_OUT_OF_DOMAIN, i as u32, worst));
-            }
-            let st = stencil(*x, inv_dx);
-            let gathered = gather(nodes, n, &st, c);
-            let (code, val) = g2p_finish(&gathered, x, v, cm, f, c);
-            (code != 0).then_some((code, i as u32, val))
-        };
         let worst = if self.sequential(p.count) {
-            p.x.iter_mut()
-                .zip(p.v.iter_mut())
-                .zip(p.c.iter_mut())
-                .zip(p.f.iter_mut())
+            p.x.chunks_mut(G2P_CHUNK)
+                .zip(p.v.chunks_mut(G2P_CHUNK))
+                .zip(p.c.chunks_mut(G2P_CHUNK))
+                .zip(p.f.chunks_mut(G2P_CHUNK))
                 .enumerate()
-                .map(one)
+                .map(chunk)
                 .fold(None, earliest)
         } else {
             self.run(|| {
-                p.x.par_iter_mut()
-                    .zip(p.v.par_iter_mut())
-                    .zip(p.c.par_iter_mut())
-                    .zip(p.f.par_iter_mut())
+                p.x.par_chunks_mut(G2P_CHUNK)
+                    .zip(p.v.par_chunks_mut(G2P_CHUNK))
+                    .zip(p.c.par_chunks_mut(G2P_CHUNK))
+                    .zip(p.f.par_chunks_mut(G2P_CHUNK))
                     .enumerate()
-                    .map(one)
+                    .map(chunk)
                     .reduce(|| None, earliest)
             })
         };
@@ -405,5 +404,56 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
 
     fn memory_usage(&self) -> MemoryUsage {
         MemoryUsage::default()
+    }
+}
+
+/// A health problem of G2P: code, particle, value.
+type Problem = Option<(u32, u32, f32)>;
+
+/// The earlier problem: the one of the lower particle index.
+fn earliest(a: Problem, b: Problem) -> Problem {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(if a.1 <= b.1 { a } else { b }),
+        (a, None) => a,
+        (None, b) => b,
+    }
+}
+
+/// G2P of a run of particles (the first has index `first`).
+struct G2pChunk<'a, T> {
+    first: usize,
+    x: &'a mut [[T; 3]],
+    v: &'a mut [[T; 3]],
+    cm: &'a mut [[T; 9]],
+    f: &'a mut [[T; 9]],
+    nodes: &'a [[T; 4]],
+    n: usize,
+    c: &'a StepConsts,
+}
+
+impl<T: Real> G2pChunk<'_, T> {
+    /// Runs G2P on the chunk's particles; returns its earliest health problem.
+    #[inline(always)]
+    fn run(self) -> Problem {
+        let (n, c) = (self.n, self.c);
+        let inv_dx = k::<T>(c.inv_dx);
+        let mut worst = None;
+        let particles = self.x.iter_mut().zip(self.v.iter_mut());
+        let particles = particles.zip(self.cm.iter_mut()).zip(self.f.iter_mut());
+        for (j, (((x, v), cm), f)) in particles.enumerate() {
+            let i = (self.first + j) as u32;
+            if !in_domain(*x, inv_dx, n) {
+                let value = out_of_domain_coordinate(*x, inv_dx, n);
+                worst = earliest(worst, Some((HEALTH_OUT_OF_DOMAIN, i, value)));
+                continue;
+            }
+            let st = stencil(*x, inv_dx);
+            let gathered = gather(self.nodes, n, &st, c);
+            let (code, value) = g2p_finish(&gathered, x, v, cm, f, c);
+            if code != 0 {
+                worst = earliest(worst, Some((code, i, value)));
+            }
+        }
+        worst
     }
 }

@@ -60,6 +60,21 @@ pub fn forward<B: MpmKernels>(
     g: &mut Grid<B>,
     t: &SubstepTables<B>,
     c: &StepConsts,
+    tape: Option<&mut Tape<B>>,
+) -> Result<(), B::Error> {
+    forward_to_grid(b, p, g, t, c, tape)?;
+    b.g2p(p, g, c)
+}
+
+/// The forward substep up to the updated grid (stages 1-3, without G2P): what [`reverse`]
+/// needs besides the state before the substep and the tape (the particle stage's stress in
+/// `p`, the updated grid and its active blocks in `g`).
+pub fn forward_to_grid<B: MpmKernels>(
+    b: &B,
+    p: &mut Particles<B>,
+    g: &mut Grid<B>,
+    t: &SubstepTables<B>,
+    c: &StepConsts,
     mut tape: Option<&mut Tape<B>>,
 ) -> Result<(), B::Error> {
     if c.n_particle_bcs > 0 {
@@ -73,12 +88,11 @@ pub fn forward<B: MpmKernels>(
         b.copy(&p.f, &mut tp.f_elastic)?;
         b.copy(&g.nodes, &mut tp.grid_in)?;
     }
-    b.grid_update(g, t.grid_bcs, c)?;
-    b.g2p(p, g, c)
+    b.grid_update(g, t.grid_bcs, c)
 }
 
 /// Runs the reverse sweep of one substep whose forward pass (from `before`, with `tape`) just
-/// ran on `p` and `g`: replaces `adj` (the adjoint after the substep) with the adjoint before
+/// ran on `p` and `g` ([`forward_to_grid`] is enough): replaces `adj` (the adjoint after the substep) with the adjoint before
 /// it and leaves each particle's parameter adjoints in `s.pgrad`.
 #[allow(clippy::too_many_arguments)]
 pub fn reverse<B: MpmAdjointKernels>(

@@ -230,8 +230,14 @@ pub fn scatter<T: Real>(
 }
 
 /// [`scatter`] for one force form (`MLS`: the stress folds into the affine matrix; classic:
-/// it enters through the weight gradients). Each node's four entries (momentum, mass) are
-/// updated as one 4-lane operation so that the compiler vectorises them.
+/// it enters through the weight gradients).
+///
+/// A node's share is `w0_i w1_j w2_k (P + Q0 d0_i + Q1 d1_j + Q2 d2_k)` with `P = [m v, m]`,
+/// `Qa` the column `a` of `m C` (plus the stress term in the MLS form) and `d` the offsets in
+/// metres; the classic form adds the stress columns times the weight gradients. The weights are
+/// products of one factor per axis, so the factors are applied axis by axis: once per `i`, once
+/// per column `(i, j)`, and per node only the last axis. Every quantity is a 4-lane
+/// `[momentum (3), mass]` vector so that the compiler vectorises it.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn scatter_form<T: Real, const MLS: bool>(
@@ -247,7 +253,6 @@ fn scatter_form<T: Real, const MLS: bool>(
 ) {
     let z = T::zero();
     let dx = k::<T>(c.dx);
-    // Momentum of node offsets (i, j, k): w (m v + m C dpos) + stress term.
     let mut mc = [z; 9];
     for e in 0..9 {
         mc[e] = mass * cm[e];
@@ -258,58 +263,65 @@ fn scatter_form<T: Real, const MLS: bool>(
             mc[e] += s[e];
         }
     }
-    let mv = [mass * v[0], mass * v[1], mass * v[2]];
+    let col = |m: &[T; 9], a: usize| [m[a], m[3 + a], m[6 + a], z];
+    let p = [mass * v[0], mass * v[1], mass * v[2], mass];
+    let q = [col(&mc, 0), col(&mc, 1), col(&mc, 2)];
+    let sc = [col(s, 0), col(s, 1), col(s, 2)];
     let dp: [[T; 3]; 3] =
         std::array::from_fn(|a| std::array::from_fn(|o| (T::c(o as f64) - st.fx[a]) * dx));
     let (w0, w1, w2) = (st.w[0], st.w[1], st.w[2]);
     let (d0, d1, d2) = (st.dw[0], st.dw[1], st.dw[2]);
     let bz = st.base[2] as usize;
     for i in 0..3 {
-        // a_i = m v + mC[:,0] dpx_i
-        let ai = [
-            mv[0] + mc[0] * dp[0][i],
-            mv[1] + mc[3] * dp[0][i],
-            mv[2] + mc[6] * dp[0][i],
-        ];
+        // Shares of the x layer i: A (all but the y and z terms), B (y), C (z) and, in the
+        // classic form, E and F (the stress through the y and z weight gradients).
+        let mut ai = scale4(w0[i], &axpy4(dp[0][i], &q[0], &p));
+        let bi = scale4(w0[i], &q[1]);
+        let ci = scale4(w0[i], &q[2]);
+        let (mut ei, mut fi) = ([z; 4], [z; 4]);
+        if !MLS {
+            ai = axpy4(d0[i], &sc[0], &ai);
+            ei = scale4(w0[i], &sc[1]);
+            fi = scale4(w0[i], &sc[2]);
+        }
         let row_i = (st.base[0] as usize + i - x_lo) * n;
         for j in 0..3 {
-            let wij = w0[i] * w1[j];
-            let aij = [
-                ai[0] + mc[1] * dp[1][j],
-                ai[1] + mc[4] * dp[1][j],
-                ai[2] + mc[7] * dp[1][j],
-            ];
-            // Per (i, j): A = w_ij a_ij (and the mass), B = w_ij mC[:,2], Q from the stress
-            // (classic form).
-            let mut a = [wij * aij[0], wij * aij[1], wij * aij[2], wij * mass];
-            let b = [wij * mc[2], wij * mc[5], wij * mc[8], z];
-            let mut q = [z; 4];
+            let mut aij = scale4(w1[j], &axpy4(dp[1][j], &bi, &ai));
+            let cij = scale4(w1[j], &ci);
+            let mut dij = [z; 4];
             if !MLS {
-                let gx = d0[i] * w1[j];
-                let gy = w0[i] * d1[j];
-                a[0] += s[0] * gx + s[1] * gy;
-                a[1] += s[3] * gx + s[4] * gy;
-                a[2] += s[6] * gx + s[7] * gy;
-                q = [s[2] * wij, s[5] * wij, s[8] * wij, z];
+                aij = axpy4(d1[j], &ei, &aij);
+                dij = scale4(w1[j], &fi);
             }
             let base = (row_i + st.base[1] as usize + j) * n + bz;
             let cell = &mut nodes[base..base + 3];
             for (o, node) in cell.iter_mut().enumerate() {
-                let wk = w2[o];
-                let wdk = w2[o] * dp[2][o];
-                let dk = d2[o];
+                let (wk, wdk) = (w2[o], w2[o] * dp[2][o]);
                 if MLS {
                     for l in 0..4 {
-                        node[l] += wk * a[l] + wdk * b[l];
+                        node[l] += wk * aij[l] + wdk * cij[l];
                     }
                 } else {
+                    let dk = d2[o];
                     for l in 0..4 {
-                        node[l] += wk * a[l] + wdk * b[l] + dk * q[l];
+                        node[l] += wk * aij[l] + wdk * cij[l] + dk * dij[l];
                     }
                 }
             }
         }
     }
+}
+
+/// `k x` on four lanes.
+#[inline(always)]
+fn scale4<T: Real>(k: T, x: &[T; 4]) -> [T; 4] {
+    std::array::from_fn(|l| k * x[l])
+}
+
+/// `k x + y` on four lanes.
+#[inline(always)]
+fn axpy4<T: Real>(k: T, x: &[T; 4], y: &[T; 4]) -> [T; 4] {
+    std::array::from_fn(|l| k * x[l] + y[l])
 }
 
 /// Updates one grid node: momentum to velocity plus gravity, damping, then the boundary
@@ -459,8 +471,16 @@ pub fn gather<T: Real>(nodes: &[[T; 4]], n: usize, st: &Stencil<T>, c: &StepCons
 }
 
 /// [`gather`] for one force form (`MLS`: the velocity gradient is C, so the weight-gradient
-/// sums are skipped). Sums run over all four entries of a node (the fourth, the mass, is
-/// dropped at the end) so that the compiler vectorises them.
+/// sums are skipped).
+///
+/// The weights are products of one factor per axis, so the sums run axis by axis: over the
+/// three nodes of a column (`k`, contiguous in memory), then over the columns of an x layer
+/// (`j`), then over the layers (`i`); the first moments `sum w d v` (d = o - f, the offset of
+/// the node in cells) that make up C reuse the products `w v` of the velocity sum. (They are
+/// summed with the offsets from the particle, not about a node and shifted afterwards: for a
+/// nearly uniform velocity that shift would cancel most of the digits of C.) Sums run over
+/// all four entries of a node (the fourth, the mass, is dropped at the end) so that the
+/// compiler vectorises them.
 #[inline(always)]
 fn gather_form<T: Real, const MLS: bool>(
     nodes: &[[T; 4]],
@@ -470,60 +490,61 @@ fn gather_form<T: Real, const MLS: bool>(
 ) -> Gathered<T> {
     let (w0, w1, w2) = (st.w[0], st.w[1], st.w[2]);
     let (d0, d1, d2) = (st.dw[0], st.dw[1], st.dw[2]);
+    let z = T::zero();
     let dp: [[T; 3]; 3] =
         std::array::from_fn(|a| std::array::from_fn(|o| T::c(o as f64) - st.fx[a]));
-    let z = T::zero();
-    // v, the columns of C (C[a][b] = col[b][a]) and of the velocity gradient, as 4 lanes.
-    let mut v = [z; 4];
-    let mut cc = [[z; 4]; 3];
-    let mut gc = [[z; 4]; 3];
     let bz = st.base[2] as usize;
+    // Layer sums: t[0] = sum w1 w2 v, t[1] = sum w1 d1 w2 v, t[2] = sum w1 w2 d2 v and, in
+    // the classic form, t[3] = sum dw1 w2 v, t[4] = sum w1 dw2 v.
+    let mut v = [z; 4];
+    let mut m = [[z; 4]; 3];
+    let mut g = [[z; 4]; 3];
     for i in 0..3 {
+        let mut t = [[z; 4]; 5];
         for j in 0..3 {
             let base = ((st.base[0] as usize + i) * n + st.base[1] as usize + j) * n + bz;
-            let cell = &nodes[base..base + 3];
-            // Sums over k: s0 = sum w_k v, s1 = sum w_k dpz_k v, s2 = sum dw_k v.
-            let mut s0 = [z; 4];
-            let mut s1 = [z; 4];
-            let mut s2 = [z; 4];
-            for (o, node) in cell.iter().enumerate() {
-                let (wk, wdk) = (w2[o], w2[o] * dp[2][o]);
-                for l in 0..4 {
-                    s0[l] += wk * node[l];
-                    s1[l] += wdk * node[l];
-                }
-                if !MLS {
-                    for l in 0..4 {
-                        s2[l] += d2[o] * node[l];
-                    }
-                }
-            }
-            let wij = w0[i] * w1[j];
-            let (cx, cy) = (wij * dp[0][i], wij * dp[1][j]);
+            let cell: &[[T; 4]; 3] = nodes[base..base + 3].try_into().expect("three nodes");
+            let p0 = scale4(w2[0], &cell[0]);
+            let p1 = scale4(w2[1], &cell[1]);
+            let p2 = scale4(w2[2], &cell[2]);
+            // Column sums: s0 = sum w2 v, s1 = sum w2 d2 v (and s2 = sum dw2 v).
+            let s0: [T; 4] = std::array::from_fn(|l| p0[l] + p1[l] + p2[l]);
+            let s1: [T; 4] =
+                std::array::from_fn(|l| dp[2][0] * p0[l] + dp[2][1] * p1[l] + dp[2][2] * p2[l]);
+            let q = scale4(w1[j], &s0);
             for l in 0..4 {
-                v[l] += wij * s0[l];
-                cc[0][l] += cx * s0[l];
-                cc[1][l] += cy * s0[l];
-                cc[2][l] += wij * s1[l];
+                t[0][l] += q[l];
             }
+            t[1] = axpy4(dp[1][j], &q, &t[1]);
+            t[2] = axpy4(w1[j], &s1, &t[2]);
             if !MLS {
-                let gx = d0[i] * w1[j];
-                let gy = w0[i] * d1[j];
-                for l in 0..4 {
-                    gc[0][l] += gx * s0[l];
-                    gc[1][l] += gy * s0[l];
-                    gc[2][l] += wij * s2[l];
-                }
+                let s2: [T; 4] = std::array::from_fn(|l| {
+                    d2[0] * cell[0][l] + d2[1] * cell[1][l] + d2[2] * cell[2][l]
+                });
+                t[3] = axpy4(d1[j], &s0, &t[3]);
+                t[4] = axpy4(w1[j], &s2, &t[4]);
             }
+        }
+        let r = scale4(w0[i], &t[0]);
+        for l in 0..4 {
+            v[l] += r[l];
+        }
+        m[0] = axpy4(dp[0][i], &r, &m[0]);
+        m[1] = axpy4(w0[i], &t[1], &m[1]);
+        m[2] = axpy4(w0[i], &t[2], &m[2]);
+        if !MLS {
+            g[0] = axpy4(d0[i], &t[0], &g[0]);
+            g[1] = axpy4(w0[i], &t[3], &g[1]);
+            g[2] = axpy4(w0[i], &t[4], &g[2]);
         }
     }
     let inv_dx = k::<T>(c.inv_dx);
     let kc = T::c(4.0) * inv_dx;
-    let cm: [T; 9] = std::array::from_fn(|e| cc[e % 3][e / 3] * kc);
+    let cm: [T; 9] = std::array::from_fn(|e| m[e % 3][e / 3] * kc);
     let gv = if MLS {
         cm
     } else {
-        std::array::from_fn(|e| gc[e % 3][e / 3] * inv_dx)
+        std::array::from_fn(|e| g[e % 3][e / 3] * inv_dx)
     };
     Gathered {
         v: [v[0], v[1], v[2]],

@@ -406,7 +406,7 @@ impl<B: MpmAdjointKernels> Differentiable for KernelAdjoint<'_, B> {
         };
         let (tape, scratch) = w.reverse.as_mut().expect("allocated above");
         before.copy_into(&self.b, &mut w.p)?;
-        substep::forward(&self.b, &mut w.p, &mut w.g, &t, &c, Some(tape))?;
+        substep::forward_to_grid(&self.b, &mut w.p, &mut w.g, &t, &c, Some(tape))?;
         substep::reverse(&self.b, &w.p, &w.g, &t, &c, before, tape, scratch, adj)?;
         self.b
             .reduce_slots(&scratch.pgrad, &w.p.part, &mut grad.acc)
