@@ -198,6 +198,15 @@ fn read_json(path: &Path) -> Result<Value> {
     serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))
 }
 
+/// The file beside a variant's run folder `dir` with this suffix (`DIR.variant.json`,
+/// `DIR.fit.toml`): the variant's settings live outside the fit's run folder, which holds
+/// only what `r4d fit` and `r4d eval` write.
+fn beside(dir: &Path, suffix: &str) -> PathBuf {
+    let mut name = dir.file_name().unwrap_or_default().to_os_string();
+    name.push(suffix);
+    dir.with_file_name(name)
+}
+
 /// Fits and evaluates one variant in `dir` (reusing what a previous run finished), and
 /// returns its row.
 fn run_variant(
@@ -207,19 +216,19 @@ fn run_variant(
     v: &Variant,
     dir: &Path,
 ) -> Result<Value> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    if let Some(parent) = dir.parent() {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("creating {}", parent.display()))?;
+    }
     let settings = json!({ "variant": v.slug, "dataset": dataset, "sim": a.sim, "camera": a.camera, "config": v.cfg });
-    let marker = dir.join("variant.json");
+    let marker = beside(dir, ".variant.json");
     let same = marker.is_file() && read_json(&marker)? == settings;
     if !same {
-        // Another variant's or older settings: start this folder afresh.
-        for f in [
-            "eval.json",
-            "params.json",
-            "checkpoint.json",
-            "invocation.json",
-        ] {
-            let _ = std::fs::remove_file(dir.join(f));
+        // Another variant's or older settings: start this variant afresh (its run folder
+        // lies inside the ablation's output folder and holds only the earlier fit).
+        if dir.exists() {
+            std::fs::remove_dir_all(dir)
+                .with_context(|| format!("removing the earlier run {}", dir.display()))?;
         }
         write_json(&marker, &settings)?;
     }
@@ -233,7 +242,12 @@ fn run_variant(
                 eprintln!("ablate: {} resumes", v.label);
                 r4d(&["fit".into(), "--resume".into(), d(dir)])?;
             } else {
-                let toml_path = dir.join("fit.toml");
+                // A fit killed before its first checkpoint starts over in an empty folder.
+                if dir.exists() {
+                    std::fs::remove_dir_all(dir)
+                        .with_context(|| format!("removing {}", dir.display()))?;
+                }
+                let toml_path = beside(dir, ".fit.toml");
                 let text = toml::to_string(&v.cfg).context("writing the variant's FIT.toml")?;
                 r4d_fsio::write_atomic(&toml_path, text.as_bytes())
                     .with_context(|| format!("writing {}", toml_path.display()))?;

@@ -20,6 +20,10 @@ pub struct DemoArgs {
     /// summary.json). Default: out/demo for the plant, out/demo-SCENE otherwise.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// --out holds an earlier demo run: remove its files first (without this a non-empty
+    /// --out is refused; the default folder is always replaced when it holds a demo run).
+    #[arg(long)]
+    overwrite: bool,
     /// A smoke-test run: 4 candidates, 2 iterations, coarse profiles (seconds to a minute,
     /// not minutes; no accuracy).
     #[arg(long)]
@@ -81,7 +85,19 @@ pub fn run(a: DemoArgs) -> Result<()> {
         DemoScene::Plant => PathBuf::from("out/demo"),
         s => PathBuf::from(format!("out/demo-{}", s.name())),
     });
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    super::paths::Io::new()
+        .inputs("--lpips-weights", &a.lpips_weights)
+        .output("--out", &out)
+        .check()?;
+    // The default folder belongs to the demo: an earlier demo run there is replaced.
+    let replace = a.overwrite || a.out.is_none();
+    super::paths::claim_dir(
+        "--out",
+        &out,
+        "demo",
+        &["summary.json", "log.jsonl"],
+        super::paths::Existing::from_flags(false, replace),
+    )?;
     let size = if a.small { Size::Small } else { Size::Full };
     let spec = scene.spec(size);
     let cfg = spec.fit_config(&opts);

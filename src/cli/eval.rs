@@ -130,6 +130,18 @@ fn mean(vals: impl Iterator<Item = Option<f64>>) -> Option<f64> {
 /// Runs `r4d eval`.
 pub fn run(a: EvalArgs) -> Result<()> {
     let dir = &a.run_dir;
+    let run_file = |name: &str| dir.join(name);
+    super::paths::Io::new()
+        .input(
+            "RUN_DIR (the fit's arguments)",
+            &run_file("invocation.json"),
+        )
+        .input("RUN_DIR (the fit's settings)", &run_file("fit_config.json"))
+        .input("RUN_DIR (the fitted parameters)", &run_file("params.json"))
+        .input("RUN_DIR (the fit's log)", &run_file("log.jsonl"))
+        .inputs("--lpips-weights", &a.lpips_weights)
+        .output_opt("--json", a.json.as_deref())
+        .check()?;
     if !(a.fps.is_finite() && a.fps > 0.0 && a.fps <= r4d_video::MAX_FPS) {
         bail!("--fps {}: must be in (0, {}]", a.fps, r4d_video::MAX_FPS);
     }

@@ -95,6 +95,11 @@ pub struct FitArgs {
     #[arg(long)]
     #[serde(skip)]
     shard: Option<String>,
+    /// OUT holds an earlier run of `r4d fit`: remove its files first, then fit from the
+    /// start (without this a non-empty OUT is refused; `--resume OUT` continues it).
+    #[arg(long, conflicts_with = "resume")]
+    #[serde(skip)]
+    overwrite: bool,
 }
 
 /// Reads a value or a list of values (invocation.json of runs made before a flag became
@@ -373,6 +378,7 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
         bail!("--shard cannot be combined with --resume (merge the shards, then resume)");
     }
     let out = need(&a.out, "--out")?.clone();
+    io(a, &out).check()?;
     let cfg = match &a.config {
         Some(p) => FitConfig::load(p)?,
         None => FitConfig::default(),
@@ -426,12 +432,29 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
     Ok(())
 }
 
+/// The files and folders a fit reads, and its run folder.
+fn io(a: &FitArgs, out: &Path) -> super::paths::Io {
+    super::paths::Io::new()
+        .input_opt("--scene", a.scene.as_deref())
+        .input_opt("--sim", a.sim.as_deref())
+        .input_opt("--parts", a.parts.as_deref())
+        .input_opt("--cameras", a.cameras.as_deref())
+        .input_opt("--dataset", a.dataset.as_deref())
+        .inputs("--video", &a.video)
+        .input_opt("--config", a.config.as_deref())
+        .input_opt("--particles", a.particles.as_deref())
+        .input_opt("--link", a.link.as_deref())
+        .inputs("--lpips-weights", &a.lpips_weights)
+        .output("--out", out)
+}
+
 /// Runs the command.
 pub fn run(a: FitArgs) -> Result<()> {
     if let Some(spec) = a.shard.clone() {
         return run_init_shard(&a, &spec);
     }
     let resuming = a.resume.is_some();
+    let overwrite = a.overwrite;
     let (a, out, resume) = match &a.resume {
         Some(dir) => {
             let inv = dir.join("invocation.json");
@@ -451,6 +474,7 @@ pub fn run(a: FitArgs) -> Result<()> {
             (a, out, None)
         }
     };
+    io(&a, &out).check()?;
     let backend = a.backend.compute()?;
     let _profile = super::profile::Profile::on_compute(&backend, a.profile)?;
     // Loaded (and checked) before the fit, used by its final report.
@@ -510,7 +534,17 @@ pub fn run(a: FitArgs) -> Result<()> {
             bail!("--row {row}: the views are {h} rows high (rows 0..{h})");
         }
     }
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    super::paths::claim_dir(
+        if resuming { "--resume" } else { "--out" },
+        &out,
+        "fit",
+        &["invocation.json", "checkpoint.json"],
+        if resuming {
+            super::paths::Existing::Resume
+        } else {
+            super::paths::Existing::from_flags(false, overwrite)
+        },
+    )?;
     write_json(&out.join("invocation.json"), &a)?;
     write_json(&out.join("fit_config.json"), &cfg)?;
     if let Some(s) = &resume {

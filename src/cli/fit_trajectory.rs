@@ -60,6 +60,10 @@ pub struct FitTrajectoryArgs {
     /// Continue a killed run from OUT/checkpoint.json (written after every iteration).
     #[arg(long)]
     resume: bool,
+    /// OUT holds an earlier run of `r4d fit-trajectory`: remove its files first, then fit
+    /// from the start (without this or --resume a non-empty OUT is refused).
+    #[arg(long, conflicts_with = "resume")]
+    overwrite: bool,
     /// Where the simulation and its reverse sweep run: cpu (f64, all cores), wgpu (f32 on a
     /// GPU; `R4D_WGPU_ADAPTER=name` picks the adapter) or reference (f64, one core, the
     /// gradient oracle; slow).
@@ -97,6 +101,11 @@ fn read_targets(dir: &Path, max: usize) -> Result<Vec<Vec<[f32; 3]>>> {
 
 /// Runs the command.
 pub fn run(a: FitTrajectoryArgs) -> Result<()> {
+    a.scene
+        .inputs(super::paths::Io::new())
+        .input("--target", &a.target)
+        .output("--out", &a.out)
+        .check()?;
     let loaded = a.scene.load()?;
     let mut config = loaded.config;
     if let Some(f) = a.frames {
@@ -136,7 +145,13 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     let backend = a.backend.compute()?;
     let _profile = super::profile::Profile::on_compute(&backend, a.profile)?;
     let targets = read_targets(&a.target, config.time.frames)?;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    super::paths::claim_dir(
+        "--out",
+        &a.out,
+        "fit-trajectory",
+        &["checkpoint.json", "params.json", "log.jsonl"],
+        super::paths::Existing::from_flags(a.resume, a.overwrite),
+    )?;
     let log_path = a.out.join("log.jsonl");
     let ck_path = a.out.join("checkpoint.json");
     let resume: Option<FitState> = if a.resume {

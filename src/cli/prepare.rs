@@ -22,10 +22,19 @@ pub struct PrepareArgs {
     /// Output folder.
     #[arg(long)]
     out: PathBuf,
+    /// OUT holds an earlier `r4d prepare` output: remove its files first (without this a
+    /// non-empty OUT is refused).
+    #[arg(long)]
+    overwrite: bool,
 }
 
 /// Runs the command.
 pub fn run(a: PrepareArgs) -> Result<()> {
+    super::paths::Io::new()
+        .input("--scene", &a.scene)
+        .input("--config", &a.config)
+        .output("--out", &a.out)
+        .check()?;
     let input = r4d_splat::ply::read_gaussians(&a.scene)?;
     let text = std::fs::read_to_string(&a.config)
         .with_context(|| format!("reading {}", a.config.display()))?;
@@ -35,7 +44,13 @@ pub fn run(a: PrepareArgs) -> Result<()> {
     for w in &p.warnings {
         eprintln!("warning: {}: {w}", a.config.display());
     }
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    super::paths::claim_dir(
+        "--out",
+        &a.out,
+        "prepare",
+        &["link.json"],
+        super::paths::Existing::from_flags(false, a.overwrite),
+    )?;
     r4d_splat::ply::write_gaussians(&a.out.join("scene.ply"), &p.scene)?;
     let cols: Vec<Vec<f32>> = (0..3)
         .map(|ax| p.particles.iter().map(|x| x[ax]).collect())

@@ -43,6 +43,10 @@ pub struct RenderArgs {
     /// Also write the colour as float32 H x W x 3 .npy (row 0 at the top).
     #[arg(long)]
     out_raw: Option<PathBuf>,
+    /// With --frames: OUT holds an earlier `r4d render --frames` output; remove its files
+    /// first (without this a non-empty OUT is refused).
+    #[arg(long, requires = "frames")]
+    overwrite: bool,
     /// Deform the scene by one simulated frame (`r4d simulate --write-f` PLY).
     #[arg(long, conflicts_with = "frames")]
     frame: Option<PathBuf>,
@@ -75,6 +79,15 @@ pub struct RenderArgs {
 
 /// Runs the command.
 pub fn run(a: RenderArgs) -> Result<()> {
+    super::paths::Io::new()
+        .input("--scene", &a.scene)
+        .input("--camera", &a.camera)
+        .input_opt("--frame", a.frame.as_deref())
+        .input_opt("--frames", a.frames.as_deref())
+        .input_opt("--link", a.link.as_deref())
+        .output("--out", &a.out)
+        .output_opt("--out-raw", a.out_raw.as_deref())
+        .check()?;
     let scene = r4d_splat::ply::read_gaussians(&a.scene)?;
     let set = load_cameras(&a.camera)?;
     let Some(cam) = set.cameras.get(a.camera_index).cloned() else {
@@ -219,7 +232,13 @@ fn render_sequence(
     if frames.is_empty() {
         bail!("{}: no frame_NNNN.ply files", dir.display());
     }
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    super::paths::claim_dir(
+        "--out",
+        &a.out,
+        "render",
+        &["animation.gif", "animation.mp4"],
+        super::paths::Existing::from_flags(false, a.overwrite),
+    )?;
     let bar = ProgressBar::new(frames.len() as u64);
     if !std::io::stderr().is_terminal() {
         bar.set_draw_target(ProgressDrawTarget::hidden());

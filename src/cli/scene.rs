@@ -20,6 +20,11 @@ pub struct SceneArgs {
 }
 
 impl SceneArgs {
+    /// Declares the scene's files as inputs of a command.
+    pub fn inputs(&self, io: super::paths::Io) -> super::paths::Io {
+        io.input("--config", &self.config)
+            .input_opt("--particles", self.particles.as_deref())
+    }
     /// Loads the scene.
     pub fn load(&self) -> Result<Loaded> {
         load(&self.config, self.physgaussian, self.particles.as_ref())

@@ -135,6 +135,24 @@ pub fn run(a: SegmentArgs) -> Result<()> {
             a.out.display()
         );
     }
+    let views_stem = a
+        .out
+        .file_stem()
+        .map_or("parts".into(), |s| s.to_string_lossy().into_owned());
+    super::paths::Io::new()
+        .input("--scene", &a.scene)
+        .input("--cameras", &a.cameras)
+        .input("--masks", &a.masks)
+        .output("--out", &a.out)
+        .output(
+            "--out (its labelled scene copy)",
+            &a.out.with_extension("ply"),
+        )
+        .output(
+            "--out (its label renders)",
+            &a.out.with_file_name(format!("{views_stem}_views")),
+        )
+        .check()?;
     let t0 = Instant::now();
     let g = r4d_splat::ply::read_gaussians(&a.scene)?;
     let set = load_cameras(&a.cameras)?;

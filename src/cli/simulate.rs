@@ -1,5 +1,6 @@
 //! `r4d simulate`: run a simulation from a config and write frames.
 
+use super::paths::{claim_dir, Existing, Io};
 use super::BackendKind;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -39,10 +40,15 @@ pub struct SimulateArgs {
     /// saved after every frame); frames already on disk are kept.
     #[arg(long)]
     resume: bool,
+    /// OUT holds an earlier run of `r4d simulate`: remove its files first, then simulate
+    /// from the start (without this or --resume a non-empty OUT is refused).
+    #[arg(long, conflicts_with = "resume")]
+    overwrite: bool,
 }
 
 /// Runs the command.
 pub fn run(a: SimulateArgs) -> Result<()> {
+    a.scene.inputs(Io::new()).output("--out", &a.out).check()?;
     let loaded = a.scene.load()?;
     let mut config = loaded.config;
     if let Some(f) = a.frames {
@@ -120,7 +126,13 @@ fn simulate<B: MpmKernels>(
     source: &str,
     warnings: &[String],
 ) -> Result<()> {
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    claim_dir(
+        "--out",
+        &a.out,
+        "simulate",
+        &["state.r4d", "summary.json", "frame_0000.ply"],
+        Existing::from_flags(a.resume, a.overwrite),
+    )?;
     let n = scene.len();
     let backend_name = backend.name();
     let mut sim = MpmSim::new(backend, &config, scene, source)?;
