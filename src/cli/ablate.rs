@@ -130,10 +130,18 @@ pub(crate) fn parse_shard(s: &str) -> Result<Shard> {
         i.trim().parse().map_err(|_| bad())?,
         n.trim().parse().map_err(|_| bad())?,
     );
-    if n == 0 || i >= n || n > 100_000 {
+    if !shard_ok(i, n) {
         return Err(bad());
     }
     Ok(Shard { i, n })
+}
+
+/// The most shards a run is split into.
+const MAX_SHARDS: usize = 100_000;
+
+/// The rule of `--shard I/N` and of the `shard-I-of-N` folders: `0 <= I < N <= 100000`.
+fn shard_ok(i: usize, n: usize) -> bool {
+    n >= 1 && i < n && n <= MAX_SHARDS
 }
 
 fn shard_dir(out: &Path, s: Shard) -> PathBuf {
@@ -394,6 +402,12 @@ fn collect_shards(out: &Path) -> Result<Vec<(Shard, PathBuf, Value)>> {
             continue;
         };
         if let (Ok(i), Ok(n)) = (i.parse::<usize>(), n.parse::<usize>()) {
+            if !shard_ok(i, n) {
+                bail!(
+                    "{}: not a shard of a split: shard folders are shard-I-of-N with 0 <= I < N <= {MAX_SHARDS} (the rule of --shard I/N)",
+                    e.path().display()
+                );
+            }
             shards.push((Shard { i, n }, e.path()));
         }
     }
