@@ -130,10 +130,18 @@ pub(crate) fn parse_shard(s: &str) -> Result<Shard> {
         i.trim().parse().map_err(|_| bad())?,
         n.trim().parse().map_err(|_| bad())?,
     );
-    if n == 0 || i >= n || n > 100_000 {
+    if !shard_ok(i, n) {
         return Err(bad());
     }
     Ok(Shard { i, n })
+}
+
+/// The most shards a run is split into.
+const MAX_SHARDS: usize = 100_000;
+
+/// The rule of `--shard I/N` and of the `shard-I-of-N` folders: `0 <= I < N <= 100000`.
+fn shard_ok(i: usize, n: usize) -> bool {
+    n >= 1 && i < n && n <= MAX_SHARDS
 }
 
 fn shard_dir(out: &Path, s: Shard) -> PathBuf {
@@ -280,20 +288,90 @@ fn run_variant(
     let params = read_json(&dir.join("params.json"))?;
     let mut row =
         json!({ "scene": scene, "variant": v.label, "slug": v.slug, "params": params["parts"] });
-    for k in [
-        "ms_ssim",
-        "ms_ssim_small_window",
-        "psnr",
-        "psnr_video",
-        "lpips_alex",
-        "lpips_vgg",
-        "chamfer",
-        "hd95",
-        "f_score",
-    ] {
-        row[k] = ev[k].clone();
+    for (k, _) in METRICS {
+        row[*k] = ev[*k].clone();
     }
+    // Written by an earlier process (possibly an earlier run): checked like a shard's rows.
+    check_row(&row).with_context(|| {
+        format!(
+            "{} or {}: not what `r4d eval` and `r4d fit` write",
+            dir.join("eval.json").display(),
+            dir.join("params.json").display()
+        )
+    })?;
     Ok(row)
+}
+
+/// The range a metric of a row may take.
+#[derive(Clone, Copy)]
+enum Range {
+    /// `[0, 1]` (MS-SSIM, F-score).
+    Unit,
+    /// Finite and `>= 0` (distances).
+    NonNegative,
+    /// Finite (PSNR, LPIPS).
+    Finite,
+}
+
+/// The metrics of a row (as `eval.json` names them) and their ranges; each may also be
+/// null (not measured, or PSNR of identical frames: +inf).
+const METRICS: &[(&str, Range)] = &[
+    ("ms_ssim", Range::Unit),
+    ("ms_ssim_small_window", Range::Unit),
+    ("psnr", Range::Finite),
+    ("psnr_video", Range::Finite),
+    ("lpips_alex", Range::Finite),
+    ("lpips_vgg", Range::Finite),
+    ("chamfer", Range::NonNegative),
+    ("hd95", Range::NonNegative),
+    ("f_score", Range::Unit),
+];
+
+/// Checks a row of an ablation table: names are strings, every metric null or a number in
+/// its range, every part's parameters those of a valid material (finite, physical).
+fn check_row(row: &Value) -> Result<()> {
+    for k in ["scene", "variant", "slug"] {
+        if !row[k].is_string() {
+            bail!("'{k}' is {}, not a name", row[k]);
+        }
+    }
+    for (k, range) in METRICS {
+        let v = &row[*k];
+        if v.is_null() {
+            continue;
+        }
+        let x = v
+            .as_f64()
+            .with_context(|| format!("'{k}' is {v}, not a number"))?;
+        let ok = match range {
+            Range::Unit => (0.0..=1.0).contains(&x),
+            Range::NonNegative => x.is_finite() && x >= 0.0,
+            Range::Finite => x.is_finite(),
+        };
+        if !ok {
+            bail!(
+                "'{k}' = {x} is outside {}",
+                match range {
+                    Range::Unit => "[0, 1]",
+                    Range::NonNegative => "[0, inf) (finite)",
+                    Range::Finite => "the finite numbers",
+                }
+            );
+        }
+    }
+    let parts = row["params"]
+        .as_array()
+        .with_context(|| format!("'params' is {}, not a list of parts", row["params"]))?;
+    for (i, p) in parts.iter().enumerate() {
+        let rec: resonance4d::fit_trajectory::PartRecord = serde_json::from_value(p.clone())
+            .with_context(|| format!("params[{i}]: not a part's parameters"))?;
+        let material: r4d_mpm::Material =
+            serde_json::from_value(Value::String(rec.material.clone()))
+                .with_context(|| format!("params[{i}]: unknown material '{}'", rec.material))?;
+        rec.apply_to(&r4d_mpm::PartParams::new(material))
+            .validate(&format!("params[{i}]"))?;
+    }
+    Ok(())
 }
 
 /// Free parameter names per part of the dataset's config under `cfg`.
@@ -408,6 +486,12 @@ fn collect_shards(out: &Path) -> Result<Vec<(Shard, PathBuf, Value)>> {
             continue;
         };
         if let (Ok(i), Ok(n)) = (i.parse::<usize>(), n.parse::<usize>()) {
+            if !shard_ok(i, n) {
+                bail!(
+                    "{}: not a shard of a split: shard folders are shard-I-of-N with 0 <= I < N <= {MAX_SHARDS} (the rule of --shard I/N)",
+                    e.path().display()
+                );
+            }
             shards.push((Shard { i, n }, e.path()));
         }
     }
@@ -494,7 +578,11 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
                 rec["scenes"]
             );
         }
-        for row in rec["rows"].as_array().into_iter().flatten() {
+        let rows = rec["rows"]
+            .as_array()
+            .with_context(|| format!("{}: 'rows' is not a list", path.display()))?;
+        for (j, row) in rows.iter().enumerate() {
+            check_row(row).with_context(|| format!("{}: rows[{j}]", path.display()))?;
             let key = format!(
                 "{}/{}",
                 row["scene"].as_str().unwrap_or_default(),
@@ -613,10 +701,30 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
         );
     }
     let candidates: Vec<Candidate> = slots.into_iter().flatten().collect();
-    let top_k = first["top_k"].as_u64().unwrap_or(1) as usize;
+    let names: Vec<String> = serde_json::from_value(first["names"].clone())
+        .with_context(|| format!("{}: 'names' is not a list of names", recs[0].1.display()))?;
+    let cfg: FitConfig =
+        serde_json::from_value(first["fit_config"].clone()).with_context(|| {
+            format!(
+                "{}: 'fit_config' is not a fit configuration",
+                recs[0].1.display()
+            )
+        })?;
+    for c in &candidates {
+        let path = &recs[c.index % n].1;
+        check_candidate(c, &names, &cfg)
+            .with_context(|| format!("{}: candidate #{}", path.display(), c.index))?;
+    }
+    let top_k = match first["top_k"].as_u64() {
+        Some(k) if k >= 1 => k as usize,
+        _ => bail!(
+            "{}: 'top_k' is {}, not a count >= 1",
+            recs[0].1.display(),
+            first["top_k"]
+        ),
+    };
     let outcome = InitOutcome::from_candidates(candidates, top_k)
         .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
-    let names: Vec<String> = serde_json::from_value(first["names"].clone())?;
     write_json(
         &out.join("init.json"),
         &json!({ "names": names, "outcome": outcome }),
@@ -639,6 +747,44 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
         vals.join(" "),
         out.display()
     );
+    Ok(())
+}
+
+/// Checks an initialisation candidate of a shard: its MS-SSIM score in [0, 1] (or none: a
+/// failed evaluation), one value per name, each finite and within the bounds the fit
+/// settings give the parameter it names (`part{P}.{kind}` or `object.{kind}`).
+fn check_candidate(c: &r4d_optim::Candidate, names: &[String], cfg: &FitConfig) -> Result<()> {
+    if let Some(s) = c.score {
+        if !(0.0..=1.0).contains(&s) {
+            bail!("score (MS-SSIM) {s} is outside [0, 1]");
+        }
+    }
+    if c.theta.len() != names.len() {
+        bail!(
+            "{} values for the {} parameters ({})",
+            c.theta.len(),
+            names.len(),
+            names.join(", ")
+        );
+    }
+    for (name, &v) in names.iter().zip(&c.theta) {
+        let (part, kind) = match name.split_once('.') {
+            Some(("object", k)) => (None, k),
+            Some((p, k)) => match p.strip_prefix("part").map(str::parse::<usize>) {
+                Some(Ok(p)) => (Some(p), k),
+                _ => bail!("'{name}' is not a parameter name (partP.KIND or object.KIND)"),
+            },
+            None => bail!("'{name}' is not a parameter name (partP.KIND or object.KIND)"),
+        };
+        let kind =
+            r4d_optim::ParamKind::parse(kind).map_err(|e| anyhow::anyhow!("'{name}': {e}"))?;
+        let (lo, hi) = cfg.bounds(part, kind);
+        // The candidates are sampled in log space: allow the rounding of exp(ln x).
+        let slack = 1e-9;
+        if !(v.is_finite() && v >= lo * (1.0 - slack) && v <= hi * (1.0 + slack)) {
+            bail!("{name} = {v} is outside its bounds [{lo}, {hi}]");
+        }
+    }
     Ok(())
 }
 

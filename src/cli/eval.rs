@@ -43,9 +43,23 @@ fn read_text(path: &Path, what: &str) -> Result<String> {
     })
 }
 
+/// The fitted parameters of a run folder.
+struct Fitted {
+    /// One parameter set per part, or per particle.
+    slots: Vec<PartParams>,
+    /// Whether `slots` holds one set per particle (`params_particles.json`).
+    per_particle: bool,
+    /// The file they were read from.
+    path: PathBuf,
+    /// The fingerprint the file carries (`None`: written before parameter files carried one).
+    fingerprint: Option<String>,
+}
+
 /// The fitted parameters of `params.json` (or per particle, `params_particles.json`) checked
-/// against the parts of the problem the run folder's invocation loads.
-fn fitted_slots(dir: &Path, problem: &VideoProblem) -> Result<(Vec<PartParams>, bool)> {
+/// against the parts of the problem the run folder's invocation loads: as many as it has
+/// parts (particles), of their materials, physical, and every free parameter within the
+/// bounds of the fit settings `cfg`.
+fn fitted_slots(dir: &Path, problem: &VideoProblem, cfg: &FitConfig) -> Result<Fitted> {
     let particles = dir.join("params_particles.json");
     let (path, per_particle) = if particles.is_file() {
         (particles, true)
@@ -55,6 +69,8 @@ fn fitted_slots(dir: &Path, problem: &VideoProblem) -> Result<(Vec<PartParams>, 
     #[derive(serde::Deserialize)]
     struct Params {
         parts: Vec<PartRecord>,
+        #[serde(default)]
+        fingerprint: Option<String>,
     }
     let p: Params = serde_json::from_str(&read_text(&path, "the fitted parameters")?)
         .with_context(|| format!("{}: not a params.json of `r4d fit`", path.display()))?;
@@ -93,7 +109,82 @@ fn fitted_slots(dir: &Path, problem: &VideoProblem) -> Result<(Vec<PartParams>, 
         q.validate(&format!("{} entry {i}", path.display()))?;
         slots.push(q);
     }
-    Ok((slots, per_particle))
+    // The free parameters lie within the bounds the fit searched (up to the rounding of the
+    // log domain it searched in).
+    let free = cfg.free_kinds(parts)?;
+    let slot_parts: Vec<u32> = if per_particle {
+        problem.particles.part.clone()
+    } else {
+        (0..parts.len() as u32).collect()
+    };
+    let space = r4d_optim::space::ParamSpace::new(cfg.granularity, &free, &slot_parts, |p, k| {
+        cfg.bounds(p, k)
+    });
+    let slack = 1e-9;
+    for ((name, v), (lo, hi)) in space
+        .names()
+        .iter()
+        .zip(space.values(&slots))
+        .zip(space.bounds())
+    {
+        if !(v >= lo * (1.0 - slack) && v <= hi * (1.0 + slack)) {
+            bail!(
+                "{}: {name} = {v} lies outside the bounds [{lo}, {hi}] of the fit's settings: not a result of this fit",
+                path.display()
+            );
+        }
+    }
+    Ok(Fitted {
+        slots,
+        per_particle,
+        path,
+        fingerprint: p.fingerprint,
+    })
+}
+
+/// Checks that the run folder's files belong to one fit: the inputs `invocation.json` names
+/// and the settings of `fit_config.json` have the fingerprint of the checksummed
+/// `checkpoint.json` and of the parameter file. A file of another run is an error naming it;
+/// a parameter file without a fingerprint (written before they carried one) is accepted with
+/// a note.
+fn verify_run(dir: &Path, problem: &VideoProblem, cfg: &FitConfig, fitted: &Fitted) -> Result<()> {
+    let now = resonance4d::video_fit::fingerprint(problem, cfg);
+    let ck_path = dir.join("checkpoint.json");
+    let ck = super::checkpoint::read(&ck_path)
+        .with_context(|| format!("{}: the fit's checkpoint", ck_path.display()))?
+        .map(|s| s.fingerprint);
+    let (inv, cfg_path) = (dir.join("invocation.json"), dir.join("fit_config.json"));
+    let inputs_differ = || {
+        anyhow::anyhow!(
+            "{} and {}: the inputs and settings they name (fingerprint {now}) are not those the run was fitted on (fingerprint {}, recorded in {}): one of them names other files or was replaced",
+            inv.display(),
+            cfg_path.display(),
+            ck.as_deref().or(fitted.fingerprint.as_deref()).unwrap_or("none"),
+            if ck.is_some() { ck_path.display() } else { fitted.path.display() }
+        )
+    };
+    match (&fitted.fingerprint, &ck) {
+        (Some(p), _) if *p == now => {
+            if ck.as_ref().is_some_and(|c| *c != now) {
+                bail!(
+                    "{}: written for other inputs or settings than this run's (fingerprint {}, the run {now}): a checkpoint of another run",
+                    ck_path.display(),
+                    ck.as_deref().unwrap_or_default()
+                );
+            }
+        }
+        (Some(p), Some(c)) if *c == now => bail!(
+            "{}: written by another fit (fingerprint {p}, this run folder's inputs and settings {now})",
+            fitted.path.display()
+        ),
+        (Some(_), _) => return Err(inputs_differ()),
+        (None, Some(c)) if *c != now => return Err(inputs_differ()),
+        (None, _) => eprintln!(
+            "note: {} carries no fingerprint (written before parameter files carried one): checked against the scene's parts and the fit's bounds only",
+            fitted.path.display()
+        ),
+    }
+    Ok(())
 }
 
 /// The largest `peak_host_bytes` of `log.jsonl` (`None` without a log or a counting
@@ -147,14 +238,17 @@ pub fn run(a: EvalArgs) -> Result<()> {
     }
     let lpips = r4d_loss::lpips::load_all(&a.lpips_weights).context("--lpips-weights")?;
     let inv = dir.join("invocation.json");
-    let fit: FitArgs = serde_json::from_str(&read_text(&inv, "the fit's invocation")?)
+    let mut fit: FitArgs = serde_json::from_str(&read_text(&inv, "the fit's invocation")?)
         .with_context(|| format!("{}: not an r4d fit invocation", inv.display()))?;
+    fit.resolve_saved_paths(&inv)?;
     let cfg_path = dir.join("fit_config.json");
     let cfg: FitConfig = serde_json::from_str(&read_text(&cfg_path, "the fit's settings")?)
         .with_context(|| format!("{}: not a fit_config.json", cfg_path.display()))?;
     let (problem, _) = super::fit::load_problem(&fit)
         .with_context(|| format!("loading the inputs {} names", inv.display()))?;
-    let (slots, per_particle) = fitted_slots(dir, &problem)?;
+    let fitted = fitted_slots(dir, &problem, &cfg)?;
+    verify_run(dir, &problem, &cfg, &fitted)?;
+    let (slots, per_particle) = (fitted.slots, fitted.per_particle);
     let peak = peak_memory(dir)?;
     let gt = match fit.dataset_dir() {
         Some(d) => r4d_datasets::GroundTruth::from_pcd(d)?.point_clouds,

@@ -184,6 +184,76 @@ impl FitArgs {
     pub(crate) fn dataset_dir(&self) -> Option<&Path> {
         self.dataset.as_deref()
     }
+
+    /// Every input path with its flag, and `--out` (`None` for it: not an input).
+    fn paths_mut(&mut self) -> Vec<(Option<&'static str>, &mut PathBuf)> {
+        let mut v = Vec::new();
+        for (flag, p) in [
+            ("--scene", &mut self.scene),
+            ("--sim", &mut self.sim),
+            ("--parts", &mut self.parts),
+            ("--cameras", &mut self.cameras),
+            ("--dataset", &mut self.dataset),
+            ("--config", &mut self.config),
+            ("--particles", &mut self.particles),
+            ("--link", &mut self.link),
+        ] {
+            if let Some(p) = p.as_mut() {
+                v.push((Some(flag), p));
+            }
+        }
+        v.extend(self.video.iter_mut().map(|p| (Some("--video"), p)));
+        v.extend(
+            self.lpips_weights
+                .iter_mut()
+                .map(|p| (Some("--lpips-weights"), p)),
+        );
+        if let Some(p) = self.out.as_mut() {
+            v.push((None, p));
+        }
+        v
+    }
+
+    /// The arguments as a run folder's `invocation.json` stores them: every path absolute,
+    /// so that the run resumes and evaluates from any working directory.
+    fn with_absolute_paths(&self) -> Result<FitArgs> {
+        let mut a = self.clone();
+        for (flag, p) in a.paths_mut() {
+            *p = std::path::absolute(&*p).with_context(|| {
+                format!(
+                    "{} {}: no absolute path",
+                    flag.unwrap_or("--out"),
+                    p.display()
+                )
+            })?;
+        }
+        Ok(a)
+    }
+
+    /// Resolves the paths of arguments read from `inv` (a run folder's `invocation.json`):
+    /// absolute paths stay; a relative one (written by an older r4d, relative to the
+    /// directory that fit ran in) is taken from the working directory where it exists there,
+    /// else from the run folder; one found in neither is an error naming the file and flag.
+    pub(crate) fn resolve_saved_paths(&mut self, inv: &Path) -> Result<()> {
+        let run_dir = inv.parent().unwrap_or(Path::new(".")).to_path_buf();
+        for (flag, p) in self.paths_mut() {
+            let Some(flag) = flag else { continue };
+            if p.is_absolute() || p.exists() {
+                continue;
+            }
+            let in_run = run_dir.join(&*p);
+            if !in_run.exists() {
+                bail!(
+                    "{}: {flag} {}: found neither from the working directory nor from the run folder {} (the fit that wrote it ran elsewhere: run from that directory)",
+                    inv.display(),
+                    p.display(),
+                    run_dir.display()
+                );
+            }
+            *p = in_run;
+        }
+        Ok(())
+    }
 }
 
 /// The common frame rate of the MP4s among `videos` (`None` when there are none); MP4s at
@@ -391,7 +461,7 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
     let dir = out.join(format!("shard-{}-of-{}", shard.i, shard.n));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     // The run the merged shards continue: these arguments without --shard.
-    let mut whole = a.clone();
+    let mut whole = a.with_absolute_paths()?;
     whole.shard = None;
     write_json(&out.join("invocation.json"), &whole)?;
     write_json(&out.join("fit_config.json"), &cfg)?;
@@ -460,8 +530,10 @@ pub fn run(a: FitArgs) -> Result<()> {
             let inv = dir.join("invocation.json");
             let text = std::fs::read_to_string(&inv)
                 .with_context(|| format!("--resume: reading {}", inv.display()))?;
-            let saved: FitArgs = serde_json::from_str(&text)
+            let mut saved: FitArgs = serde_json::from_str(&text)
                 .with_context(|| format!("{}: not an r4d fit invocation", inv.display()))?;
+            saved.resolve_saved_paths(&inv)?;
+            saved.out = Some(dir.clone());
             let ck = dir.join("checkpoint.json");
             // No checkpoint yet (killed during the initialisation) starts over; an unreadable
             // one (damaged, not UTF-8, no permission) is an error, never a silent restart
@@ -545,7 +617,7 @@ pub fn run(a: FitArgs) -> Result<()> {
             super::paths::Existing::from_flags(false, overwrite)
         },
     )?;
-    write_json(&out.join("invocation.json"), &a)?;
+    write_json(&out.join("invocation.json"), &a.with_absolute_paths()?)?;
     write_json(&out.join("fit_config.json"), &cfg)?;
     if let Some(s) = &resume {
         eprintln!(

@@ -272,3 +272,247 @@ fn sharded_initialisation_merges_and_resumes_to_the_unsharded_fit() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("different fits"));
 }
+
+/// `r4d` in the working directory `cwd`.
+fn r4d_in(cwd: &Path, args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_r4d"))
+        .current_dir(cwd)
+        .args(args)
+        .output()
+        .expect("run r4d")
+}
+
+/// Expects `out` to be a refusal (no panic) whose message contains every needle.
+fn refused(out: &std::process::Output, needles: &[&str]) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "accepted: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    for n in needles {
+        assert!(err.contains(n), "'{n}' not in: {err}");
+    }
+}
+
+/// Files another run (or a hand) wrote are checked before use: `eval` verifies a run
+/// folder's parameters, invocation and settings against the fit's fingerprint and bounds;
+/// `merge` refuses non-numeric and out-of-range metrics, non-physical parameters and forged
+/// initialisation candidates; run folders store absolute paths, so that `fit --resume` and
+/// `eval` work from any working directory (and older folders with relative paths still
+/// resolve).
+#[test]
+fn runs_trust_nothing_another_run_wrote() {
+    let base = tmp("foreign");
+    let ds_a = base.join("data/toyball");
+    common::copy_dir(&common::fixture("datasets").join("pacnerf/toyball"), &ds_a);
+    // Another scene: the same ball, stiffer at the start.
+    let ds_b = base.join("data/other");
+    common::copy_dir(&ds_a, &ds_b);
+    let text = std::fs::read_to_string(ds_b.join("toyball_config.json")).unwrap();
+    std::fs::remove_file(ds_b.join("toyball_config.json")).unwrap();
+    std::fs::write(
+        ds_b.join("other_config.json"),
+        text.replace("\"E\": 0.005", "\"E\": 0.007"),
+    )
+    .unwrap();
+    std::fs::write(
+        base.join("fit.toml"),
+        "iters = 1\nlr = 0.1\n[init]\ncandidates = 2\nframes = 2\n",
+    )
+    .unwrap();
+    // Fits run from `base` with paths relative to it.
+    let fit = |ds: &str, out: &str| {
+        let o = r4d_in(
+            &base,
+            &["fit", "--dataset", ds, "--config", "fit.toml", "--out", out],
+        );
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    fit("data/toyball", "runs/a");
+    fit("data/other", "runs/b");
+    let (run_a, run_b) = (base.join("runs/a"), base.join("runs/b"));
+    let inv = json(&run_a.join("invocation.json"));
+    for k in ["dataset", "config", "out"] {
+        assert!(
+            Path::new(inv[k].as_str().unwrap()).is_absolute(),
+            "invocation.json {k}: {}",
+            inv[k]
+        );
+    }
+    assert!(json(&run_a.join("params.json"))["fingerprint"].is_string());
+    // From another working directory.
+    let elsewhere = base.join("elsewhere");
+    std::fs::create_dir_all(&elsewhere).unwrap();
+    let ok_in = |cwd: &Path, args: &[&str]| {
+        let o = r4d_in(cwd, args);
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    };
+    ok_in(&elsewhere, &["eval", run_a.to_str().unwrap()]);
+
+    // A copy of run a with one file replaced by `edit`, evaluated.
+    let copy_with = |name: &str, edit: &dyn Fn(&Path)| {
+        let d = base.join("forged").join(name);
+        common::copy_dir(&run_a, &d);
+        edit(&d);
+        r4d_in(&elsewhere, &["eval", d.to_str().unwrap()])
+    };
+    // params.json of another scene's fit (same parts, same material).
+    let o = copy_with("params_b", &|d| {
+        std::fs::copy(run_b.join("params.json"), d.join("params.json")).unwrap();
+    });
+    refused(&o, &["params.json", "another fit"]);
+    // invocation.json naming another scene; fit_config.json of other settings.
+    let o = copy_with("inv_b", &|d| {
+        let mut v = json(&d.join("invocation.json"));
+        v["dataset"] = serde_json::json!(ds_b);
+        std::fs::write(d.join("invocation.json"), v.to_string()).unwrap();
+    });
+    refused(&o, &["invocation.json", "not those the run was fitted on"]);
+    let o = copy_with("cfg_b", &|d| {
+        let mut v = json(&d.join("fit_config.json"));
+        v["lr"] = serde_json::json!(0.3);
+        std::fs::write(d.join("fit_config.json"), v.to_string()).unwrap();
+    });
+    refused(&o, &["fit_config.json", "not those the run was fitted on"]);
+    // Parameter values: non-physical, outside the fit's bounds, not numbers.
+    for (name, e, needle) in [
+        ("e_neg", serde_json::json!(-1.0), "youngs_modulus_pa"),
+        ("e_huge", serde_json::json!(1e12), "bounds"),
+        ("e_text", serde_json::json!("banana"), "params.json"),
+    ] {
+        let o = copy_with(name, &|d| {
+            let mut v = json(&d.join("params.json"));
+            v["parts"][0]["E"] = e.clone();
+            std::fs::write(d.join("params.json"), v.to_string()).unwrap();
+        });
+        refused(&o, &["params.json", needle]);
+    }
+
+    // Resume from another working directory: a run folder of today (absolute paths), and
+    // one of an older r4d (paths relative to the directory its fit ran in), which resolves
+    // from that directory and, where its paths lead there from the run folder, from any.
+    ok_in(&elsewhere, &["fit", "--resume", run_a.to_str().unwrap()]);
+    let old = base.join("runs/old");
+    common::copy_dir(&run_a, &old);
+    let relative_inv = |dataset: &str, config: &str| {
+        let mut v = json(&old.join("invocation.json"));
+        v["dataset"] = serde_json::json!(dataset);
+        v["config"] = serde_json::json!(config);
+        v["out"] = serde_json::json!("runs/old");
+        std::fs::write(old.join("invocation.json"), v.to_string()).unwrap();
+    };
+    relative_inv("data/toyball", "fit.toml");
+    let o = r4d_in(&elsewhere, &["fit", "--resume", old.to_str().unwrap()]);
+    refused(&o, &["invocation.json", "--dataset data/toyball"]);
+    ok_in(&base, &["fit", "--resume", "runs/old"]);
+    // Rewritten with absolute paths by the resume.
+    let v = json(&old.join("invocation.json"));
+    assert_eq!(
+        v["dataset"],
+        serde_json::json!(std::path::absolute(&ds_a).unwrap())
+    );
+    relative_inv("../../data/toyball", "../../fit.toml");
+    ok_in(&elsewhere, &["fit", "--resume", old.to_str().unwrap()]);
+    ok_in(&elsewhere, &["eval", old.to_str().unwrap()]);
+
+    // merge: forged rows of an ablation shard.
+    let row = serde_json::json!({
+        "scene": "toyball", "variant": "Resonance4D", "slug": "main",
+        "params": json(&run_a.join("params.json"))["parts"],
+        "ms_ssim": 0.9, "ms_ssim_small_window": null, "psnr": 30.0, "psnr_video": null,
+        "lpips_alex": null, "lpips_vgg": null, "chamfer": null, "hd95": null, "f_score": null,
+    });
+    let merge_rows = |name: &str, edit: &dyn Fn(&mut serde_json::Value)| {
+        let out = base.join("merge").join(name);
+        let mut r = row.clone();
+        edit(&mut r);
+        let shard = serde_json::json!({
+            "study": "main", "shard": 0, "of": 1, "scenes": ["toyball"],
+            "items": ["toyball/main"], "rows": [r],
+        });
+        std::fs::create_dir_all(out.join("shard-0-of-1")).unwrap();
+        std::fs::write(out.join("shard-0-of-1/shard.json"), shard.to_string()).unwrap();
+        (r4d(&["merge", out.to_str().unwrap()]), out)
+    };
+    let (o, out) = merge_rows("valid", &|_| {});
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("ablation.json").is_file());
+    for (name, key, value, needle) in [
+        (
+            "banana",
+            "psnr",
+            serde_json::json!("banana"),
+            "not a number",
+        ),
+        (
+            "ms_ssim_5",
+            "ms_ssim",
+            serde_json::json!(5.0),
+            "outside [0, 1]",
+        ),
+        ("chamfer_neg", "chamfer", serde_json::json!(-1.0), "chamfer"),
+    ] {
+        let (o, out) = merge_rows(name, &|r| r[key] = value.clone());
+        refused(&o, &["shard-0-of-1", "rows[0]", key, needle]);
+        assert!(!out.join("ablation.json").exists());
+    }
+    let (o, _) = merge_rows("e_neg", &|r| r["params"][0]["E"] = serde_json::json!(-1.0));
+    refused(&o, &["rows[0]", "youngs_modulus_pa"]);
+
+    // merge: forged candidates of an initialisation shard.
+    let sh = base.join("init_shards");
+    let s = sh.to_str().unwrap();
+    let shard_args = [
+        "fit",
+        "--dataset",
+        "data/toyball",
+        "--config",
+        "fit.toml",
+        "--out",
+        s,
+    ];
+    ok_in(&base, &[&shard_args[..], &["--shard", "0/1"]].concat());
+    let shard_json = sh.join("shard-0-of-1/shard.json");
+    let good = json(&shard_json);
+    let names: Vec<String> = serde_json::from_value(good["names"].clone()).unwrap();
+    let e = names
+        .iter()
+        .position(|n| n.ends_with(".E"))
+        .expect("E is free");
+    type Edit = Box<dyn Fn(&mut serde_json::Value, usize)>;
+    let forgeries: Vec<(&str, Edit, &str)> = vec![
+        (
+            "score 5",
+            Box::new(|c, _| c["score"] = serde_json::json!(5.0)),
+            "outside [0, 1]",
+        ),
+        (
+            "E = -1",
+            Box::new(|c, e| c["theta"][e] = serde_json::json!(-1.0)),
+            "outside its bounds",
+        ),
+        (
+            "a value short",
+            Box::new(|c, _| {
+                c["theta"].as_array_mut().unwrap().pop();
+            }),
+            "values for the",
+        ),
+    ];
+    for (what, edit, needle) in forgeries {
+        let mut v = good.clone();
+        edit(&mut v["candidates"][1], e);
+        std::fs::write(&shard_json, v.to_string()).unwrap();
+        let o = r4d(&["merge", s]);
+        refused(&o, &["shard-0-of-1", "candidate #1", needle]);
+        assert!(
+            !sh.join("checkpoint.json").exists(),
+            "{what}: a checkpoint was written"
+        );
+    }
+    std::fs::write(&shard_json, good.to_string()).unwrap();
+    ok_in(&base, &["merge", s]);
+    ok_in(&elsewhere, &["fit", "--resume", s]);
+}

@@ -194,3 +194,65 @@ fn malformed_configs_name_the_file_and_field() {
     let e = SimConfig::load(&f).err().unwrap().to_string();
     assert!(e.contains("foo"), "{e}");
 }
+
+/// A user-given index or count that the code indexes or divides by (a cylinder's axis, the
+/// I and N of a `shard-I-of-N` folder) is checked first: a typed error naming the file, the
+/// field and the rule, never a panic.
+#[test]
+fn user_given_axes_and_shard_counts_are_checked_before_use() {
+    let f = tmp("axis5.toml");
+    for axis in [3, 5, 1usize << 40] {
+        std::fs::write(
+            &f,
+            format!("[time]\nsubstep_dt = 1e-4\nframes = 2\n[[parts]]\nmaterial = \"jelly\"\n[[shapes]]\nkind = \"cylinder\"\nbase = [0.5, 0.5, 0.3]\naxis = {axis}\nradius = 0.1\nlength = 0.2\n"),
+        )
+        .unwrap();
+        let e = SimConfig::load(&f).err().unwrap().to_string();
+        assert!(
+            e.contains("axis5.toml")
+                && e.contains("shapes[0]")
+                && e.contains(&format!("axis = {axis}")),
+            "{e}"
+        );
+        // Through the command too (its own validation path).
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_r4d"))
+            .args(["simulate", "--config", f.to_str().unwrap(), "--out"])
+            .arg(tmp("axis5_out"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && !err.contains("panicked"), "{err}");
+        assert!(err.contains("shapes[0]") && err.contains("axis"), "{err}");
+    }
+    // Sampled without validation, the shape gives no particle (no panic).
+    let s: r4d_mpm::Shape = toml::from_str(
+        "kind = \"cylinder\"\nbase = [0.5, 0.5, 0.3]\naxis = 5\nradius = 0.1\nlength = 0.2\n",
+    )
+    .unwrap();
+    assert!(ParticleSet::from_shapes(&[s], 1.0 / 32.0).is_empty());
+
+    // Shard folders whose numbers break the rule of --shard I/N.
+    for name in ["shard-0-of-0", "shard-3-of-2", "shard-0-of-100001"] {
+        let out = tmp(&format!("merge_{name}"));
+        let _ = std::fs::remove_dir_all(&out);
+        std::fs::create_dir_all(out.join(name)).unwrap();
+        std::fs::write(
+            out.join(name).join("shard.json"),
+            r#"{"kind": "init", "shard": 0, "of": 0, "total": 0, "candidates": []}"#,
+        )
+        .unwrap();
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_r4d"))
+            .args(["merge", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !o.status.success() && !err.contains("panicked"),
+            "{name}: {err}"
+        );
+        assert!(
+            err.contains(name) && err.contains("0 <= I < N"),
+            "{name}: {err}"
+        );
+    }
+}

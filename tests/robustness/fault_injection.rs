@@ -500,3 +500,76 @@ fn a_full_disk_is_a_typed_error_and_leaves_no_torn_file() {
     ]));
     ok(&o);
 }
+
+/// Every file name under `dir` that is an atomic write's temporary file.
+fn temporaries(dir: &Path) -> Vec<String> {
+    files(dir, &|_| false)
+        .into_iter()
+        .map(|f| f.0)
+        .filter(|n| n.ends_with(".r4d-tmp"))
+        .collect()
+}
+
+/// Writes that fail (a file size limit reached mid-write, as on a full disk; an output whose
+/// name is taken by a folder) are typed errors naming the file, and leave no temporary file
+/// and no torn or changed file. Unlike the tmpfs test this needs no privilege: the limit is
+/// the shell's `ulimit -f`, with SIGXFSZ ignored so that the write fails with EFBIG.
+#[cfg(unix)]
+#[test]
+fn failed_writes_leave_no_temporary_file_and_no_changed_file() {
+    let root = tmp("failed_writes");
+    // dash counts `ulimit -f` in 512-byte blocks (bash in KiB): 8 KiB at most, less than a
+    // frame of 2 592 particles.
+    let out = root.join("sim");
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg("trap '' XFSZ; ulimit -f 16 && exec \"$0\" \"$@\"")
+        .arg(env!("CARGO_BIN_EXE_r4d"))
+        .args([
+            "simulate",
+            "--config",
+            &repo("configs/jelly_drop.toml"),
+            "--frames",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .expect("sh runs r4d");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success(),
+        "a write past the file size limit went unnoticed"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(
+        err.contains("File too large") && (err.contains(".ply") || err.contains("state.r4d")),
+        "the error names neither the cause nor the file: {err}"
+    );
+    assert_eq!(temporaries(&out), Vec::<String>::new());
+    for (n, _) in files(&out, &|_| false) {
+        if n.ends_with(".ply") {
+            r4d_mpm::ply::read_ply(&out.join(&n))
+                .unwrap_or_else(|e| panic!("{n}: torn by the failed write: {e}"));
+        }
+    }
+
+    // An output file whose name is taken by a folder of the user's: refused, the folder
+    // untouched.
+    let inputs = root.join("inputs");
+    std::fs::create_dir_all(&inputs).unwrap();
+    segment_inputs(&inputs);
+    let seg = root.join("seg");
+    std::fs::create_dir_all(seg.join("parts.json")).unwrap();
+    std::fs::write(seg.join("parts.json/notes.txt"), b"user data").unwrap();
+    let o = r4d(&segment_args(&inputs, &seg));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && !err.contains("panicked"), "{err}");
+    assert!(err.contains("parts.json"), "{err}");
+    assert_eq!(
+        std::fs::read(seg.join("parts.json/notes.txt")).unwrap(),
+        b"user data"
+    );
+    assert_eq!(temporaries(&seg), Vec::<String>::new());
+    assert_eq!(temporaries(&inputs), Vec::<String>::new());
+}

@@ -145,7 +145,7 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), FitE
 }
 
 /// Writes the results of `outcome` into `dir`: `params.json` (and `params_particles.json`
-/// for per-particle fits), the fitted video of every view over all reference frames with its
+/// for per-particle fits; both with the fit's `fingerprint`, [`r4d_optim::video::fingerprint`]), the fitted video of every view over all reference frames with its
 /// diagnostics (`row`: the w-t slice row, default the reference's busiest row),
 /// `metrics.json` (the evaluation metrics of every view against its reference, LPIPS with
 /// the given metrics; [`video_metrics`]), and `loss_curve.png` from `log`.
@@ -159,12 +159,19 @@ pub fn write_results(
     lpips: &[Lpips],
 ) -> Result<ResultFiles, FitError> {
     std::fs::create_dir_all(dir).map_err(|e| FitError::Input(format!("{}: {e}", dir.display())))?;
+    // Both parameter files carry the fit's fingerprint (that of its checkpoint), so that
+    // `r4d eval` can tell them from another run's.
+    let print = r4d_optim::video::fingerprint(problem, cfg);
+    let with_print = |mut v: serde_json::Value| {
+        v["fingerprint"] = json!(print);
+        v
+    };
     let params = dir.join("params.json");
-    write_json(&params, &params_json(&outcome.parts))?;
+    write_json(&params, &with_print(params_json(&outcome.parts)))?;
     if outcome.slots.len() != outcome.parts.len() {
         write_json(
             &dir.join("params_particles.json"),
-            &params_json(&outcome.slots),
+            &with_print(params_json(&outcome.slots)),
         )?;
     }
     // The fitted parameters over the whole video (part slots: per-particle values are

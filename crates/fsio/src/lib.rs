@@ -36,11 +36,6 @@ pub fn temp_path(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
-/// An I/O error that names `path`.
-fn named(path: &Path, e: io::Error) -> io::Error {
-    io::Error::new(e.kind(), format!("{}: {e}", path.display()))
-}
-
 /// Reads a whole file of at most `max` bytes: a larger one is refused from its size before
 /// anything is read (an `InvalidData` error giving its size and the limit), so a file cannot
 /// make a reader allocate without bound. The errors do not repeat the path: callers' error
@@ -59,40 +54,71 @@ pub fn read_bounded(path: &Path, max: u64) -> io::Result<Vec<u8>> {
 /// Writes `bytes` to `path` atomically (see the crate docs).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     let mut f = AtomicFile::create(path)?;
-    f.write_all(bytes).map_err(|e| named(path, e))?;
+    f.write_all(bytes)
+        .map_err(|e| write_error(path, Some(&f.tmp), e))?;
     f.commit()
 }
 
-/// A file written atomically: write through it (buffered), then [`AtomicFile::commit`]. Dropped
-/// without a commit (an error on the way), it removes its temporary file and leaves the
-/// target as it was.
+/// An error about writing `target`, naming it (and, where it was the temporary file that
+/// failed, that file too).
+fn write_error(target: &Path, tmp: Option<&Path>, e: io::Error) -> io::Error {
+    let msg = match tmp {
+        Some(t) => format!("{}: temporary file {}: {e}", target.display(), t.display()),
+        None => format!("{}: {e}", target.display()),
+    };
+    io::Error::new(e.kind(), msg)
+}
+
+/// A file written atomically: write through it (buffered), then [`AtomicFile::commit`].
+/// Its `Write` errors are the plain I/O errors (callers name the file).
+///
+/// Every failure removes the temporary file and leaves the target as it was: a failed
+/// write or flush (a full disk, a file size limit), a failed sync, a failed rename (the
+/// target became a folder, a permission), and a writer dropped without a commit (an error
+/// on the way). The errors name the target.
 #[derive(Debug)]
 pub struct AtomicFile {
     target: PathBuf,
     tmp: PathBuf,
     out: Option<BufWriter<File>>,
+    /// Set once the rename has succeeded: the temporary file is the target now.
+    committed: bool,
 }
 
 impl AtomicFile {
-    /// Starts writing `path` (creates the temporary file, replacing a stale one).
+    /// Starts writing `path` (creates the temporary file, replacing a stale one). A target
+    /// that is a folder is refused here, before anything is written.
     pub fn create(path: &Path) -> io::Result<AtomicFile> {
+        if path.is_dir() {
+            return Err(write_error(
+                path,
+                None,
+                io::Error::new(
+                    io::ErrorKind::IsADirectory,
+                    "is a folder, not a file: give a file name",
+                ),
+            ));
+        }
         let tmp = temp_path(path);
         // A stale temporary file (a killed earlier write) or a link put there is replaced,
         // never written through.
         match std::fs::remove_file(&tmp) {
             Ok(()) => {}
             Err(e) if e.kind() == io::ErrorKind::NotFound => {}
-            Err(e) => return Err(named(&tmp, e)),
+            Err(e) => return Err(write_error(path, Some(&tmp), e)),
         }
+        // `create_new`: nothing exists at `tmp` unless this call made it, so a failure here
+        // leaves nothing behind.
         let f = File::options()
             .write(true)
             .create_new(true)
             .open(&tmp)
-            .map_err(|e| named(&tmp, e))?;
+            .map_err(|e| write_error(path, Some(&tmp), e))?;
         Ok(AtomicFile {
             target: path.to_path_buf(),
             tmp,
             out: Some(BufWriter::with_capacity(1 << 16, f)),
+            committed: false,
         })
     }
 
@@ -101,23 +127,36 @@ impl AtomicFile {
         &self.target
     }
 
-    /// Flushes, syncs and renames the temporary file over the target.
+    /// Flushes, syncs and renames the temporary file over the target. On an error the
+    /// temporary file is removed (the target keeps its old content) and the error names the
+    /// target.
     pub fn commit(mut self) -> io::Result<()> {
-        let target = self.target.clone();
-        let out = self.out.take().expect("an AtomicFile is committed once");
-        let f = out
-            .into_inner()
-            .map_err(|e| named(&target, e.into_error()))?;
-        f.sync_all().map_err(|e| named(&target, e))?;
-        drop(f);
-        std::fs::rename(&self.tmp, &target).map_err(|e| named(&target, e))?;
+        // `self` is dropped on every return below: [`Drop`] removes the temporary file
+        // unless the rename succeeded.
+        self.finish()
+            .map_err(|e| write_error(&self.target, None, e))?;
         // The rename is durable once the directory is synced (best effort: not every
         // platform can open a directory).
-        if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if let Some(dir) = self.target.parent().filter(|d| !d.as_os_str().is_empty()) {
             if let Ok(d) = File::open(dir) {
                 let _ = d.sync_all();
             }
         }
+        Ok(())
+    }
+
+    /// Flush, sync, close, rename; `committed` once the rename succeeded.
+    fn finish(&mut self) -> io::Result<()> {
+        let out = self
+            .out
+            .as_mut()
+            .ok_or_else(|| io::Error::other("committed twice"))?;
+        out.flush()?;
+        out.get_ref().sync_all()?;
+        // Closed before the rename (some platforms cannot rename an open file).
+        self.out = None;
+        std::fs::rename(&self.tmp, &self.target)?;
+        self.committed = true;
         Ok(())
     }
 }
@@ -147,7 +186,13 @@ impl Write for AtomicFile {
 
 impl Drop for AtomicFile {
     fn drop(&mut self) {
-        if self.out.take().is_some() {
+        if let Some(out) = self.out.take() {
+            // Abandoned: the buffered bytes are discarded, not flushed into a file that is
+            // about to be removed.
+            let (file, _unflushed) = out.into_parts();
+            drop(file);
+        }
+        if !self.committed {
             let _ = std::fs::remove_file(&self.tmp);
         }
     }
@@ -307,6 +352,178 @@ mod tests {
         write_atomic(&p, b"new").unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"new");
         assert!(!temp_path(&p).exists());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// The files in `d` (names), sorted.
+    fn listing(d: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn a_folder_target_is_refused_before_writing_and_leaves_nothing() {
+        let d = dir("folder");
+        let p = d.join("out.json");
+        std::fs::create_dir(&p).unwrap();
+        std::fs::write(p.join("inside.txt"), b"user data").unwrap();
+        let e = write_atomic(&p, b"x").unwrap_err();
+        assert!(e.to_string().contains("out.json"), "{e}");
+        assert_eq!(e.kind(), io::ErrorKind::IsADirectory, "{e}");
+        assert!(AtomicFile::create(&p).is_err());
+        assert_eq!(listing(&d), ["out.json"]);
+        assert_eq!(std::fs::read(p.join("inside.txt")).unwrap(), b"user data");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn a_failed_rename_removes_the_temporary_file() {
+        let d = dir("rename");
+        let p = d.join("params.json");
+        let mut f = AtomicFile::create(&p).unwrap();
+        f.write_all(b"new").unwrap();
+        // The target turns into a non-empty folder between create and commit: the rename
+        // fails.
+        std::fs::create_dir(&p).unwrap();
+        std::fs::write(p.join("keep"), b"user data").unwrap();
+        let e = f.commit().unwrap_err();
+        assert!(e.to_string().contains("params.json"), "{e}");
+        assert_eq!(listing(&d), ["params.json"]);
+        assert_eq!(std::fs::read(p.join("keep")).unwrap(), b"user data");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn a_parent_that_is_a_file_is_an_error_that_leaves_it_unchanged() {
+        let d = dir("parent_file");
+        let parent = d.join("frames");
+        std::fs::write(&parent, b"a file").unwrap();
+        let e = write_atomic(&parent.join("f.ply"), b"x").unwrap_err();
+        assert!(e.to_string().contains("f.ply"), "{e}");
+        assert_eq!(std::fs::read(&parent).unwrap(), b"a file");
+        assert_eq!(listing(&d), ["frames"]);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// Runs the test `name` of this binary again in a child process through `sh -c PRELUDE`
+    /// (with `R4D_FSIO_CHILD` set to `arg`), prefixed by `wrapper`; `None` where the child
+    /// cannot be started.
+    #[cfg(unix)]
+    fn child(
+        name: &str,
+        arg: &Path,
+        prelude: &str,
+        wrapper: &[&str],
+    ) -> Option<std::process::Output> {
+        let exe = std::env::current_exe().ok()?;
+        let mut cmd = std::process::Command::new(wrapper.first().copied().unwrap_or("sh"));
+        if !wrapper.is_empty() {
+            cmd.args(&wrapper[1..]).arg("sh");
+        }
+        cmd.arg("-c")
+            .arg(format!("{prelude} exec \"$0\" \"$@\""))
+            .arg(exe)
+            .args(["--exact", name, "--nocapture", "--test-threads=1"])
+            .env("R4D_FSIO_CHILD", arg);
+        cmd.output().ok()
+    }
+
+    /// In the child of `a_full_disk_mid_write_leaves_the_old_file_and_no_temporary_file`
+    /// (a file size limit of 4 KiB, SIGXFSZ ignored: writes past it fail with EFBIG, as on a
+    /// full disk): a write that fails inside `write_all`, and one that fails only in the
+    /// flush of `commit`.
+    fn write_past_the_limit(d: &Path) {
+        let big = d.join("big.bin");
+        let e = write_atomic(&big, &vec![1u8; 1 << 20]).unwrap_err();
+        assert!(e.to_string().contains("big.bin"), "{e}");
+        let small = d.join("small.bin");
+        let mut f = AtomicFile::create(&small).unwrap();
+        // Below the buffer's capacity: it all fails at the flush.
+        f.write_all(&[2u8; 10_000]).unwrap();
+        let e = f.commit().unwrap_err();
+        assert!(e.to_string().contains("small.bin"), "{e}");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_full_disk_mid_write_leaves_the_old_file_and_no_temporary_file() {
+        const NAME: &str = "tests::a_full_disk_mid_write_leaves_the_old_file_and_no_temporary_file";
+        if let Some(d) = std::env::var_os("R4D_FSIO_CHILD") {
+            write_past_the_limit(Path::new(&d));
+            return;
+        }
+        let d = dir("efbig");
+        write_atomic(&d.join("big.bin"), b"old big").unwrap();
+        write_atomic(&d.join("small.bin"), b"old small").unwrap();
+        // dash and bash in POSIX mode count `ulimit -f` in 512-byte blocks, bash otherwise in
+        // KiB: 8 is 4 or 8 KiB, below both writes.
+        let o = child(NAME, &d, "trap '' XFSZ; ulimit -f 8 &&", &[]).expect("sh runs the child");
+        assert!(
+            o.status.success(),
+            "the child failed: {}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(String::from_utf8_lossy(&o.stdout).contains("1 passed"));
+        assert_eq!(std::fs::read(d.join("big.bin")).unwrap(), b"old big");
+        assert_eq!(std::fs::read(d.join("small.bin")).unwrap(), b"old small");
+        assert_eq!(listing(&d), ["big.bin", "small.bin"]);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// In the child of `a_read_only_folder_is_an_error_naming_the_target`: the write into the
+    /// folder is refused.
+    fn write_into_read_only(d: &Path) {
+        let e = write_atomic(&d.join("a.json"), b"new").unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::PermissionDenied, "{e}");
+        assert!(e.to_string().contains("a.json"), "{e}");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_read_only_folder_is_an_error_naming_the_target() {
+        use std::os::unix::fs::PermissionsExt;
+        const NAME: &str = "tests::a_read_only_folder_is_an_error_naming_the_target";
+        if let Some(d) = std::env::var_os("R4D_FSIO_CHILD") {
+            write_into_read_only(Path::new(&d));
+            return;
+        }
+        let d = dir("read_only");
+        write_atomic(&d.join("a.json"), b"old").unwrap();
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o555)).unwrap();
+        // A privileged user (root) writes into read-only folders: the write then runs as
+        // `nobody`, for whom the folder (not theirs, 0555) is read-only too.
+        let privileged = File::create(d.join("probe")).is_ok();
+        let _ = std::fs::remove_file(d.join("probe"));
+        if privileged {
+            let o = child(
+                NAME,
+                &d,
+                "",
+                &[
+                    "setpriv",
+                    "--reuid=65534",
+                    "--regid=65534",
+                    "--clear-groups",
+                ],
+            )
+            .expect("setpriv runs the child as nobody (util-linux)");
+            assert!(
+                o.status.success() && String::from_utf8_lossy(&o.stdout).contains("1 passed"),
+                "the child failed: {}{}",
+                String::from_utf8_lossy(&o.stdout),
+                String::from_utf8_lossy(&o.stderr)
+            );
+        } else {
+            write_into_read_only(&d);
+        }
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o755)).unwrap();
+        assert_eq!(std::fs::read(d.join("a.json")).unwrap(), b"old");
+        assert_eq!(listing(&d), ["a.json"]);
         std::fs::remove_dir_all(&d).unwrap();
     }
 

@@ -118,8 +118,14 @@ impl Shape {
             } => {
                 let mut lo = base.map(|b| b - radius);
                 let mut hi = base.map(|b| b + radius);
-                lo[axis] = base[axis];
-                hi[axis] = base[axis] + length;
+                match (lo.get_mut(axis), hi.get_mut(axis)) {
+                    (Some(l), Some(h)) => {
+                        *l = base[axis];
+                        *h = base[axis] + length;
+                    }
+                    // No such axis ([`Shape::validate`] refuses it): an empty box.
+                    _ => hi = lo,
+                }
                 (lo, hi)
             }
         }
@@ -142,17 +148,21 @@ impl Shape {
     }
     /// Checks the shape; `num_parts` bounds the part index.
     pub fn validate(&self, what: &str, num_parts: usize) -> Result<()> {
+        // The axis first: the extents below are computed along it.
+        if let Shape::Cylinder { axis, .. } = self {
+            if *axis > 2 {
+                return Err(Error::config(
+                    what,
+                    format!("axis = {axis}: must be 0 (x), 1 (y) or 2 (z)"),
+                ));
+            }
+        }
         let (lo, hi) = self.bounds();
         if !(lo.iter().chain(&hi).all(|x| x.is_finite()) && (0..3).all(|a| hi[a] > lo[a])) {
             return Err(Error::config(
                 what,
                 "shape extents must be finite and positive",
             ));
-        }
-        if let Shape::Cylinder { axis, .. } = self {
-            if *axis > 2 {
-                return Err(Error::config(what, "axis must be 0, 1 or 2"));
-            }
         }
         if self.part() as usize >= num_parts {
             return Err(Error::config(
@@ -169,7 +179,8 @@ impl Shape {
         Ok(())
     }
 
-    /// Appends the lattice points of the shape for grid spacing `dx`.
+    /// Appends the lattice points of the shape for grid spacing `dx`. A shape that
+    /// [`Shape::validate`] refuses (a cylinder axis other than 0, 1 or 2) adds none.
     pub fn sample(&self, dx: f64, out: &mut ParticleSet) {
         let (lo, hi) = self.bounds();
         let q = self.per_cell() as f64;
@@ -328,5 +339,20 @@ mod tests {
         assert_eq!(p.len(), 1000);
         assert!((p.x[0][0] as f64 - (0.4375 + 0.25 * dx)).abs() < 1e-7);
         assert!((p.volume[0] as f64 - (dx / 2.0).powi(3)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_cylinder_axis_outside_0_to_2_is_an_error_not_a_panic() {
+        let s = Shape::Cylinder {
+            base: [0.5; 3],
+            axis: 5,
+            radius: 0.1,
+            length: 0.2,
+            part: 0,
+            per_cell: 2,
+        };
+        let e = s.validate("c.toml: shapes[0]", 1).unwrap_err().to_string();
+        assert!(e.contains("shapes[0]") && e.contains("axis = 5"), "{e}");
+        assert!(ParticleSet::from_shapes(&[s], 1.0 / 32.0).is_empty());
     }
 }
