@@ -594,6 +594,19 @@ pub fn run(a: FitArgs) -> Result<()> {
         }
     }
     let (mut problem, physflow_units) = load_problem(&a)?;
+    // The fitted video is written at the end: a frame rate it cannot have is refused now.
+    if !(problem.fps.is_finite() && problem.fps > 0.0 && problem.fps <= r4d_video::MAX_FPS) {
+        bail!(
+            "the fit's frame rate {} ({}) must lie in (0, {}] fps, the range of the fitted video",
+            problem.fps,
+            if a.fps.is_some() {
+                "--fps"
+            } else {
+                "the reference video's, or 1 / frame_dt of the physics config"
+            },
+            r4d_video::MAX_FPS
+        );
+    }
     problem.compute = backend;
     if let Some(row) = a.row {
         let h = problem

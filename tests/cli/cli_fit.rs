@@ -179,6 +179,42 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("--row"), "{err}");
     assert!(!fresh.exists(), "nothing written for a refused --row");
+    // Refused before any work, nothing written: a frame rate the fitted video cannot have,
+    // a loss weight that overflows the loss, an output folder that holds the inputs, and an
+    // earlier run without --resume or --overwrite (never two runs mixed in one folder).
+    let mut bad = args.to_vec();
+    bad[14] = &fresh_s;
+    bad.extend(["--fps", "1e9"]);
+    let o = r4d(&bad);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--fps"), "{err}");
+    assert!(!fresh.exists(), "nothing written for a refused --fps");
+    let heavy = d.join("heavy.toml");
+    std::fs::write(&heavy, "iters = 1\n[loss.weights]\nspatial = 1e308\n").unwrap();
+    let heavy_s = heavy.to_str().unwrap().to_string();
+    let mut bad = args.to_vec();
+    bad[14] = &fresh_s;
+    bad[16] = &heavy_s;
+    let o = r4d(&bad);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("spatial"), "{err}");
+    assert!(!fresh.exists(), "nothing written for a refused loss weight");
+    let inp_s = inp.to_str().unwrap().to_string();
+    let mut bad = args.to_vec();
+    bad[14] = &inp_s;
+    let o = r4d(&bad);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("--out") && err.contains("contains"),
+        "{err}"
+    );
+    let o = r4d(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("--resume") && err.contains("--overwrite"),
+        "{err}"
+    );
+    assert_eq!(json(&run.join("checkpoint.json"))["iters_done"], 2);
 
     // Resume refuses other inputs: the run's checkpoint carries a fingerprint of the scene,
     // particles, parts, cameras, videos and settings (the reference changed here).

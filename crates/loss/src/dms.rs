@@ -69,6 +69,10 @@ impl DmsWeights {
     }
 }
 
+/// The largest loss weight: each term is at most a few units, so a weighted sum stays far
+/// from overflow (and from swamping the other terms by more than the float precision).
+pub const MAX_WEIGHT: f64 = 1e6;
+
 /// Settings of [`Dms`]: term weights, the SSIM of `L_spatial` and the spectral terms. The
 /// default is the paper's loss with the README's conventions.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -101,9 +105,9 @@ impl DmsConfig {
             ("mag", w.mag),
             ("phase", w.phase),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
+            if !(v.is_finite() && (0.0..=MAX_WEIGHT).contains(&v)) {
                 return Err(LossError::Config(format!(
-                    "weight {name} is {v}: weights are finite and not negative"
+                    "weight {name} is {v}: weights lie in [0, {MAX_WEIGHT:e}] (larger ones overflow the loss)"
                 )));
             }
         }

@@ -123,9 +123,9 @@ impl SpectralConfig {
                 self.patch[0], self.patch[1]
             )));
         }
-        if !(self.eps >= 0.0 && self.eps.is_finite()) {
+        if !(self.eps > 0.0 && self.eps <= 1.0) {
             return Err(LossError::Config(format!(
-                "phase eps must be finite and >= 0, got {}",
+                "phase eps must lie in (0, 1] (F / (|F| + eps) is 0/0 where a spectrum entry is 0), got {}",
                 self.eps
             )));
         }
