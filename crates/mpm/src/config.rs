@@ -188,10 +188,13 @@ impl SimConfig {
     /// resolved against the config's folder.
     pub fn load(path: &Path) -> Result<SimConfig> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text =
+            r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES).map_err(|source| {
+                Error::Io {
+                    path: path.to_path_buf(),
+                    source,
+                }
+            })?;
         let mut cfg = Self::parse(&text, path)?;
         if let Some(p) = &cfg.particles {
             if p.is_relative() {

@@ -79,7 +79,8 @@ impl PartLabels {
                 ..Default::default()
             }
         } else {
-            let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+            let text = r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES)
+                .map_err(|e| bad(e.to_string()))?;
             return PartLabels::parse(&text, path);
         };
         labels.validate().map_err(bad)?;

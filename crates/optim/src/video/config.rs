@@ -256,7 +256,7 @@ fn kinds(names: &[String], what: &str) -> Result<Vec<ParamKind>, FitError> {
 impl FitConfig {
     /// Reads a TOML file.
     pub fn load(path: &Path) -> Result<FitConfig, FitError> {
-        let text = std::fs::read_to_string(path)
+        let text = r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES)
             .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
         let c: FitConfig = toml::from_str(&text)
             .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
