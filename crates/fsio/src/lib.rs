@@ -42,9 +42,9 @@ pub fn temp_path(path: &Path) -> PathBuf {
 pub const MAX_TEXT_BYTES: u64 = 256 << 20;
 
 /// The most bytes a binary input read whole (a PLY file, a `state.r4d` snapshot, a COLMAP
-/// binary file, a `.npy` mask) is read to: 16 GiB. Readers with a tighter bound of their own
+/// binary file) is read to: 4 GiB. Readers with a tighter bound of their own
 /// (videos, images, LPIPS weights, checkpoints) use theirs.
-pub const MAX_BINARY_BYTES: u64 = 16 << 30;
+pub const MAX_BINARY_BYTES: u64 = 4 << 30;
 
 /// Reads a whole file of at most `max` bytes, counting the bytes it actually reads: a regular
 /// file whose size is over `max` is refused from its metadata before anything is read, and
