@@ -201,8 +201,8 @@ fn r4d(args: &[String]) -> Result<()> {
 }
 
 fn read_json(path: &Path) -> Result<Value> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES)
+        .with_context(|| format!("reading {}", path.display()))?;
     serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))
 }
 

@@ -63,6 +63,13 @@ pub struct DemoArgs {
 pub fn run(a: DemoArgs) -> Result<()> {
     let t_start = std::time::Instant::now();
     let scene = DemoScene::parse(&a.scene)?;
+    // Counts are bounded before anything is loaded or written.
+    if let Some(n) = a.candidates {
+        r4d_optim::video::config::check_candidates(n).map_err(|m| anyhow::anyhow!("--{m}"))?;
+    }
+    if let Some(n) = a.iters {
+        r4d_optim::video::config::check_iters(n).map_err(|m| anyhow::anyhow!("--{m}"))?;
+    }
     let mut opts = if a.quick {
         DemoOptions::quick()
     } else {

@@ -34,7 +34,7 @@ pub struct EvalArgs {
 }
 
 fn read_text(path: &Path, what: &str) -> Result<String> {
-    std::fs::read_to_string(path).with_context(|| {
+    r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES).with_context(|| {
         format!(
             "{}: {what} (is {} a run folder of `r4d fit`?)",
             path.display(),
@@ -191,7 +191,7 @@ fn verify_run(dir: &Path, problem: &VideoProblem, cfg: &FitConfig, fitted: &Fitt
 /// allocator).
 fn peak_memory(dir: &Path) -> Result<Option<usize>> {
     let path = dir.join("log.jsonl");
-    let Ok(text) = std::fs::read_to_string(&path) else {
+    let Ok(text) = r4d_fsio::read_to_string_bounded(&path, r4d_fsio::MAX_TEXT_BYTES) else {
         return Ok(None);
     };
     let mut peak = 0usize;

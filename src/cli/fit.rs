@@ -129,7 +129,7 @@ fn need<'a>(v: &'a Option<PathBuf>, flag: &str) -> Result<&'a PathBuf> {
 
 fn is_physgaussian(path: &Path) -> bool {
     path.extension().is_some_and(|e| e == "json")
-        && std::fs::read_to_string(path)
+        && r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES)
             .ok()
             .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
             .is_some_and(|v| v.get("time").is_none() && v.get("n_grid").is_some())
@@ -528,7 +528,7 @@ pub fn run(a: FitArgs) -> Result<()> {
     let (a, out, resume) = match &a.resume {
         Some(dir) => {
             let inv = dir.join("invocation.json");
-            let text = std::fs::read_to_string(&inv)
+            let text = r4d_fsio::read_to_string_bounded(&inv, r4d_fsio::MAX_TEXT_BYTES)
                 .with_context(|| format!("--resume: reading {}", inv.display()))?;
             let mut saved: FitArgs = serde_json::from_str(&text)
                 .with_context(|| format!("{}: not an r4d fit invocation", inv.display()))?;
@@ -559,7 +559,7 @@ pub fn run(a: FitArgs) -> Result<()> {
         // A resumed run continues with the settings it started with (saved in the run
         // folder); an edited FIT.toml is refused, not silently used.
         let saved = out.join("fit_config.json");
-        if let Ok(text) = std::fs::read_to_string(&saved) {
+        if let Ok(text) = r4d_fsio::read_to_string_bounded(&saved, r4d_fsio::MAX_TEXT_BYTES) {
             let was: FitConfig = serde_json::from_str(&text)
                 .with_context(|| format!("{}: not a fit configuration", saved.display()))?;
             let (now_v, was_v) = (serde_json::to_value(&cfg)?, serde_json::to_value(&was)?);
@@ -674,8 +674,8 @@ pub fn run(a: FitArgs) -> Result<()> {
 /// Adds `physflow: {E, nu, density, yield_stress, plastic_viscosity}` (PhysFlow's config
 /// units) to every part of `params.json`.
 fn add_physflow_units(path: &Path, parts: &[r4d_mpm::PartParams]) -> Result<()> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES)
+        .with_context(|| format!("reading {}", path.display()))?;
     let mut v: serde_json::Value = serde_json::from_str(&text)?;
     if let Some(list) = v["parts"].as_array_mut() {
         for (rec, p) in list.iter_mut().zip(parts) {

@@ -110,7 +110,10 @@ pub fn run(a: FitTrajectoryArgs) -> Result<()> {
     let mut config = loaded.config;
     if let Some(f) = a.frames {
         config.time.frames = f;
+        // The same budget as the config's `frames`, before anything is written.
+        config.time.validate(&format!("--frames {f}"))?;
     }
+    r4d_optim::video::config::check_iters(a.iters).map_err(|m| anyhow::anyhow!("--{m}"))?;
     let params = a
         .params
         .split(',')

@@ -36,7 +36,7 @@ pub fn run(a: PrepareArgs) -> Result<()> {
         .output("--out", &a.out)
         .check()?;
     let input = r4d_splat::ply::read_gaussians(&a.scene)?;
-    let text = std::fs::read_to_string(&a.config)
+    let text = r4d_fsio::read_to_string_bounded(&a.config, r4d_fsio::MAX_TEXT_BYTES)
         .with_context(|| format!("reading {}", a.config.display()))?;
     let cfg: PrepareConfig = serde_json::from_str(&text)
         .with_context(|| format!("{}: not a PhysGaussian scene config", a.config.display()))?;

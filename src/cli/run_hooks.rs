@@ -236,6 +236,8 @@ pub fn open_log_records(path: &Path, keep: usize) -> Result<(std::fs::File, Vec<
     if keep > 0 {
         let f = std::fs::File::open(path)
             .with_context(|| format!("resuming: reading {}", path.display()))?;
+        // The bytes read are bounded (a device or a pipe at the log's name cannot fill memory).
+        let f = std::io::Read::take(f, r4d_fsio::MAX_TEXT_BYTES);
         for (i, line) in std::io::BufReader::new(f).lines().take(keep).enumerate() {
             let line = line.with_context(|| format!("resuming: reading {}", path.display()))?;
             log.push(serde_json::from_str(&line).with_context(|| {

@@ -53,6 +53,8 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     let mut config = loaded.config;
     if let Some(f) = a.frames {
         config.time.frames = f;
+        // The same budget as the config's `frames`, before anything is written.
+        config.time.validate(&format!("--frames {f}"))?;
     }
     let (scene, source, warnings) = (loaded.scene, loaded.source, loaded.warnings);
     let vulkan = matches!(a.backend, BackendKind::Vulkan);

@@ -171,7 +171,7 @@ const COLMAP_MODELS: &[(&str, usize)] = &[
 /// `images.txt` without 2D points).
 pub fn colmap_bin_to_text(cameras: &Path, images: &Path) -> Result<(String, String)> {
     let read = |p: &Path| {
-        std::fs::read(p).map_err(|source| DatasetError::Io {
+        r4d_fsio::read_bounded(p, r4d_fsio::MAX_BINARY_BYTES).map_err(|source| DatasetError::Io {
             path: p.to_path_buf(),
             source,
         })

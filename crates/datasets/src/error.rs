@@ -78,8 +78,10 @@ impl DatasetError {
 
 /// Reads a text file, naming it on failure.
 pub(crate) fn read_text(path: &std::path::Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
-        path: path.to_path_buf(),
-        source,
+    r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES).map_err(|source| {
+        DatasetError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     })
 }

@@ -59,7 +59,16 @@ pub const LIMITS: BenchLimits = BenchLimits {
     max_frames: 1_000,
     max_substeps: 100_000,
     max_total_substeps: 10_000_000,
+    max_bytes: 256 << 30,
 };
+
+/// Bytes one Gaussian takes in the estimate of [`BenchScale::estimated_bytes`]: its
+/// parameters (SH degree 3), its projection and tile lists, and their gradients.
+pub const GAUSSIAN_BYTES: u64 = 1024;
+
+/// Bytes one pixel of one video frame takes in the estimate: the rendered frame (3 x f32),
+/// its gradient (3 x f32) and the 8-bit reference (3 bytes).
+pub const VIDEO_PIXEL_BYTES: u64 = 27;
 
 /// See [`LIMITS`].
 #[derive(Clone, Copy, Debug)]
@@ -72,6 +81,9 @@ pub struct BenchLimits {
     pub max_substeps: usize,
     /// Frames x substeps.
     pub max_total_substeps: usize,
+    /// The estimated memory of the run ([`BenchScale::estimated_bytes`]); the machine's
+    /// available memory bounds it too.
+    pub max_bytes: u64,
 }
 
 impl BenchScale {
@@ -124,6 +136,60 @@ impl BenchScale {
         }
         if self.band_rows == 0 {
             return bad("band_rows = 0: at least 1 (rounded up to 16)".into());
+        }
+        self.check_memory(r4d_mpm::budget::available_memory())
+    }
+
+    /// The estimated peak memory of a run whose sizes passed [`BenchScale::validate`]'s other
+    /// checks (bytes, saturating): the simulation's checkpoints,
+    /// grids and scratch ([`memory_plan`], f32), the Gaussians ([`GAUSSIAN_BYTES`] each) and
+    /// the video frames ([`VIDEO_PIXEL_BYTES`] a pixel, the rest frame included).
+    pub fn estimated_bytes(&self) -> u64 {
+        let cells = self.cells as u64;
+        let particles = cells.saturating_pow(3).saturating_mul(8);
+        let total = (self.frames as u64).saturating_mul(self.substeps as u64);
+        let sim = memory_plan(
+            particles,
+            N_GRID as u64,
+            total,
+            u32::try_from(self.substeps).unwrap_or(u32::MAX),
+            self.checkpointing,
+            4,
+        )
+        .peak_bytes;
+        let video = (self.frames as u64 + 1)
+            .saturating_mul(self.width as u64)
+            .saturating_mul(self.height as u64)
+            .saturating_mul(VIDEO_PIXEL_BYTES);
+        sim.saturating_add((self.gaussians as u64).saturating_mul(GAUSSIAN_BYTES))
+            .saturating_add(video)
+    }
+
+    /// Checks [`BenchScale::estimated_bytes`] against `LIMITS.max_bytes` and `available` (the
+    /// machine's available memory, when known), naming the sizes to lower.
+    pub fn check_memory(&self, available: Option<u64>) -> Result<(), FitError> {
+        let need = self.estimated_bytes();
+        let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
+        let limit = match available {
+            Some(a) if a < LIMITS.max_bytes => (a, "the memory this machine has available"),
+            _ => (LIMITS.max_bytes, "the benchmark's limit (LIMITS.max_bytes)"),
+        };
+        if need > limit.0 {
+            return Err(FitError::Input(format!(
+                "cells = {}, gaussians = {}, frames x substeps = {} x {}, resolution {}x{}, \
+                 checkpointing {}: about {:.1} GiB, more than the {:.1} GiB of {}: lower the \
+                 sizes or use a nested checkpointing",
+                self.cells,
+                self.gaussians,
+                self.frames,
+                self.substeps,
+                self.width,
+                self.height,
+                checkpointing_name(self.checkpointing),
+                gib(need),
+                gib(limit.0),
+                limit.1
+            )));
         }
         Ok(())
     }

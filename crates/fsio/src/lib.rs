@@ -23,7 +23,7 @@ pub mod npy;
 
 use std::ffi::OsString;
 use std::fs::File;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
 /// The temporary file [`write_atomic`] and [`AtomicFile`] write before the rename.
@@ -36,19 +36,57 @@ pub fn temp_path(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
-/// Reads a whole file of at most `max` bytes: a larger one is refused from its size before
-/// anything is read (an `InvalidData` error giving its size and the limit), so a file cannot
-/// make a reader allocate without bound. The errors do not repeat the path: callers' error
-/// types name the file.
+/// The most bytes a text input (a configuration: TOML or JSON, a camera file, a parts file, a
+/// run folder's JSON records) is read to: 256 MiB. Such files are a few kilobytes; a larger
+/// one (or a device, a pipe) is refused by [`read_to_string_bounded`] before it fills memory.
+pub const MAX_TEXT_BYTES: u64 = 256 << 20;
+
+/// The most bytes a binary input read whole (a PLY file, a `state.r4d` snapshot, a COLMAP
+/// binary file) is read to: 4 GiB. Readers with a tighter bound of their own
+/// (videos, images, LPIPS weights, checkpoints) use theirs.
+pub const MAX_BINARY_BYTES: u64 = 4 << 30;
+
+/// Reads a whole file of at most `max` bytes, counting the bytes it actually reads: a regular
+/// file whose size is over `max` is refused from its metadata before anything is read, and
+/// any source (a device such as `/dev/zero`, a pipe, a file that grows while it is read) is
+/// refused as soon as more than `max` bytes arrive, so no file can make a reader allocate
+/// without bound. The error is `InvalidData`, giving the limit. The errors do not repeat the
+/// path: callers' error types name the file.
 pub fn read_bounded(path: &Path, max: u64) -> io::Result<Vec<u8>> {
-    let len = std::fs::metadata(path)?.len();
-    if len > max {
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidData,
-            format!("{len} bytes, more than the {max} read from such a file"),
-        ));
+    let f = File::open(path)?;
+    let meta = f.metadata()?;
+    if meta.is_file() && meta.len() > max {
+        return Err(too_large(Some(meta.len()), max));
     }
-    std::fs::read(path)
+    // Regular files: reserve what the metadata says (already checked against `max`); other
+    // sources report no useful length.
+    let hint = if meta.is_file() { meta.len() } else { 0 };
+    let mut out = Vec::with_capacity(usize::try_from(hint.min(max)).unwrap_or(0));
+    f.take(max.saturating_add(1)).read_to_end(&mut out)?;
+    if out.len() as u64 > max {
+        return Err(too_large(None, max));
+    }
+    Ok(out)
+}
+
+/// [`read_bounded`] for UTF-8 text: more than `max` bytes or text that is not UTF-8 is an
+/// `InvalidData` error.
+pub fn read_to_string_bounded(path: &Path, max: u64) -> io::Result<String> {
+    String::from_utf8(read_bounded(path, max)?).map_err(|e| {
+        io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("not UTF-8 text: {}", e.utf8_error()),
+        )
+    })
+}
+
+/// The error of a source larger than a reader's limit (its size when known).
+fn too_large(len: Option<u64>, max: u64) -> io::Error {
+    let msg = match len {
+        Some(len) => format!("{len} bytes, more than the {max} read from such a file"),
+        None => format!("more than the {max} bytes read from such a file"),
+    };
+    io::Error::new(io::ErrorKind::InvalidData, msg)
 }
 
 /// Writes `bytes` to `path` atomically (see the crate docs).
@@ -540,6 +578,25 @@ mod tests {
             "{e}"
         );
         assert!(read_bounded(&d.join("none"), 1).is_err());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn bounded_reads_count_the_bytes_of_sources_without_a_length() {
+        // A device reports length 0 and never ends: the bytes read are counted.
+        let e = read_bounded(Path::new("/dev/zero"), 1 << 16).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidData);
+        assert!(e.to_string().contains("65536"), "{e}");
+        let e = read_to_string_bounded(Path::new("/dev/zero"), 10).unwrap_err();
+        assert!(e.to_string().contains("more than the 10"), "{e}");
+        let d = dir("bounded-text");
+        let p = d.join("t.toml");
+        write_atomic(&p, b"a = 1\n").unwrap();
+        assert_eq!(read_to_string_bounded(&p, 6).unwrap(), "a = 1\n");
+        write_atomic(&p, &[0xff, 0xfe]).unwrap();
+        let e = read_to_string_bounded(&p, 6).unwrap_err();
+        assert!(e.to_string().contains("UTF-8"), "{e}");
         std::fs::remove_dir_all(&d).unwrap();
     }
 

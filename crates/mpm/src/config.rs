@@ -79,6 +79,67 @@ pub struct TimeConfig {
     pub frames: usize,
 }
 impl TimeConfig {
+    /// Checks the time step and the run's length: frames at most
+    /// [`budget::MAX_FRAMES`](crate::budget::MAX_FRAMES), frames x substeps per frame at most
+    /// [`budget::MAX_TOTAL_SUBSTEPS`](crate::budget::MAX_TOTAL_SUBSTEPS) (computed in `f64`, so
+    /// `frame_dt / substep_dt` cannot saturate or wrap); `file` names the source (a config
+    /// file, or the flag that set `frames`).
+    pub fn validate(&self, file: &str) -> Result<()> {
+        use crate::budget::{MAX_FRAMES, MAX_TOTAL_SUBSTEPS};
+        let bad = |field: &str, value: f64, reason: String| Error::InvalidParameter {
+            what: file.to_string(),
+            field: field.to_string(),
+            value,
+            reason,
+        };
+        if !(self.substep_dt.is_finite() && self.substep_dt > 0.0) {
+            return Err(bad(
+                "time.substep_dt",
+                self.substep_dt,
+                "must be > 0".into(),
+            ));
+        }
+        if let Some(f) = self.frame_dt {
+            if !(f.is_finite() && f >= self.substep_dt) {
+                return Err(bad("time.frame_dt", f, "must be >= substep_dt".into()));
+            }
+        }
+        if self.substeps_per_frame == Some(0) {
+            return Err(bad("time.substeps_per_frame", 0.0, "must be >= 1".into()));
+        }
+        if self.frames > MAX_FRAMES {
+            return Err(bad(
+                "time.frames",
+                self.frames as f64,
+                format!("at most {MAX_FRAMES} frames (MAX_FRAMES)"),
+            ));
+        }
+        let per_frame = match (self.substeps_per_frame, self.frame_dt) {
+            (Some(n), _) => n as f64,
+            (None, Some(f)) => (f / self.substep_dt).round().max(1.0),
+            (None, None) => 1.0,
+        };
+        let total = per_frame * self.frames as f64;
+        if per_frame > MAX_TOTAL_SUBSTEPS as f64 || total > MAX_TOTAL_SUBSTEPS as f64 {
+            let (field, value) = match (self.substeps_per_frame, self.frame_dt) {
+                (Some(n), _) => ("time.substeps_per_frame", n as f64),
+                (None, Some(f)) => ("time.frame_dt", f),
+                (None, None) => ("time.frames", self.frames as f64),
+            };
+            return Err(bad(
+                field,
+                value,
+                format!(
+                    "{per_frame:e} substeps per frame x {} frames = {total:e} substeps, more than \
+                     the {MAX_TOTAL_SUBSTEPS} a simulation may run (MAX_TOTAL_SUBSTEPS): raise \
+                     substep_dt or lower frame_dt or frames",
+                    self.frames
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// Substeps per frame.
     pub fn substeps(&self) -> u32 {
         match (self.substeps_per_frame, self.frame_dt) {
@@ -188,10 +249,13 @@ impl SimConfig {
     /// resolved against the config's folder.
     pub fn load(path: &Path) -> Result<SimConfig> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text =
+            r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES).map_err(|source| {
+                Error::Io {
+                    path: path.to_path_buf(),
+                    source,
+                }
+            })?;
         let mut cfg = Self::parse(&text, path)?;
         if let Some(p) = &cfg.particles {
             if p.is_relative() {
@@ -232,18 +296,7 @@ impl SimConfig {
                 "must lie in [8, 1024]",
             ));
         }
-        let t = &self.time;
-        if !(t.substep_dt.is_finite() && t.substep_dt > 0.0) {
-            return Err(bad("time.substep_dt", t.substep_dt, "must be > 0"));
-        }
-        if let Some(f) = t.frame_dt {
-            if !(f.is_finite() && f >= t.substep_dt) {
-                return Err(bad("time.frame_dt", f, "must be >= substep_dt"));
-            }
-        }
-        if t.substeps_per_frame == Some(0) {
-            return Err(bad("time.substeps_per_frame", 0.0, "must be >= 1"));
-        }
+        self.time.validate(file)?;
         let s = &self.solver;
         for (a, g) in s.gravity.iter().enumerate() {
             if !g.is_finite() {
@@ -269,8 +322,21 @@ impl SimConfig {
         for (i, p) in self.parts.iter().enumerate() {
             p.validate(&format!("{file}: parts[{i}]"))?;
         }
+        let mut sampled = 0u64;
         for (i, sh) in self.shapes.iter().enumerate() {
-            sh.validate(&format!("{file}: shapes[{i}]"), self.parts.len())?;
+            let what = format!("{file}: shapes[{i}]");
+            sh.validate(&what, self.parts.len())?;
+            sampled = sampled.saturating_add(sh.check_in_grid(&what, d.dx(), d.n_grid)?);
+        }
+        let max = crate::budget::MAX_SHAPE_PARTICLES;
+        if sampled > max {
+            return Err(Error::config(
+                file,
+                format!(
+                    "shapes: about {sampled} particles, more than the {max} shapes may sample \
+                     (MAX_SHAPE_PARTICLES): lower per_cell or n_grid, or shrink the shapes"
+                ),
+            ));
         }
         if self.shapes.is_empty() && self.particles.is_none() {
             return Err(Error::config(

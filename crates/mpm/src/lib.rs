@@ -41,6 +41,7 @@
 
 pub mod adjoint;
 pub mod boundary;
+pub mod budget;
 pub mod config;
 pub mod constitutive;
 pub mod error;

@@ -79,10 +79,13 @@ impl Import {
 
 /// Reads and converts a PhysGaussian scene config.
 pub fn import_file(path: &Path) -> Result<Import> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text =
+        r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES).map_err(|source| {
+            Error::Io {
+                path: path.to_path_buf(),
+                source,
+            }
+        })?;
     import_str(&text, &path.display().to_string())
 }
 

@@ -179,22 +179,61 @@ impl Shape {
         Ok(())
     }
 
-    /// Appends the lattice points of the shape for grid spacing `dx`. A shape that
-    /// [`Shape::validate`] refuses (a cylinder axis other than 0, 1 or 2) adds none.
-    pub fn sample(&self, dx: f64, out: &mut ParticleSet) {
+    /// The lattice indices `m` (points at `(m + 0.5) h`, `h = dx / per_cell`) of the shape's
+    /// bounding box per axis, for grid spacing `dx`; for q per cell the points are the cell
+    /// offsets `(k + 0.5) / q dx`.
+    fn lattice(&self, dx: f64) -> [std::ops::Range<i64>; 3] {
         let (lo, hi) = self.bounds();
-        let q = self.per_cell() as f64;
-        let h = dx / q;
-        let vol = (h * h * h) as f32;
-        // Lattice points at (m + 0.5) h, which for q per cell are the cell offsets (k+0.5)/q dx.
-        let range = |a: usize| {
+        let h = dx / self.per_cell() as f64;
+        std::array::from_fn(|a| {
             let m0 = (lo[a] / h - 0.5).ceil() as i64;
             let m1 = (hi[a] / h - 0.5).ceil() as i64; // exclusive
             m0..m1
-        };
-        for i in range(0) {
-            for j in range(1) {
-                for k in range(2) {
+        })
+    }
+
+    /// Checks, before sampling, that the shape's lattice lies in the grid's interior
+    /// (`[0.5 dx, (n_grid - 1.5) dx)` on every axis, where a particle's stencil is on the grid)
+    /// and returns the number of lattice points of its bounding box: an upper bound of the
+    /// particles [`Shape::sample`] adds, computed without sampling. `what` names the shape.
+    pub fn check_in_grid(&self, what: &str, dx: f64, n_grid: usize) -> Result<u64> {
+        let h = dx / self.per_cell() as f64;
+        let ranges = self.lattice(dx);
+        if ranges.iter().any(|r| r.is_empty()) {
+            return Ok(0);
+        }
+        let (lo, hi) = (0.5 * dx, (n_grid as f64 - 1.5) * dx);
+        for (a, r) in ranges.iter().enumerate() {
+            let first = (r.start as f64 + 0.5) * h;
+            let last = (r.end as f64 - 0.5) * h;
+            if first < lo || last >= hi {
+                return Err(Error::config(
+                    what,
+                    format!(
+                        "the shape reaches {} = {} m, outside the grid interior [{lo}, {hi}) m \
+                         (grid_lim = {}, n_grid = {n_grid})",
+                        ["x", "y", "z"][a],
+                        if first < lo { first } else { last },
+                        dx * n_grid as f64
+                    ),
+                ));
+            }
+        }
+        Ok(ranges
+            .iter()
+            .map(|r| r.end.saturating_sub(r.start) as u64)
+            .fold(1u64, u64::saturating_mul))
+    }
+
+    /// Appends the lattice points of the shape for grid spacing `dx`. A shape that
+    /// [`Shape::validate`] refuses (a cylinder axis other than 0, 1 or 2) adds none.
+    pub fn sample(&self, dx: f64, out: &mut ParticleSet) {
+        let h = dx / self.per_cell() as f64;
+        let vol = (h * h * h) as f32;
+        let [r0, r1, r2] = self.lattice(dx);
+        for i in r0 {
+            for j in r1.clone() {
+                for k in r2.clone() {
                     let p = [
                         (i as f64 + 0.5) * h,
                         (j as f64 + 0.5) * h,

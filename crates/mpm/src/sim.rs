@@ -167,6 +167,12 @@ impl<B: MpmKernels> MpmSim<B> {
         }
         setup.check_cfl(&config.parts)?;
         let n = setup.n;
+        // The grid and the particles' memory, checked before the grid is allocated.
+        crate::budget::check_memory(
+            source,
+            crate::budget::simulation_bytes(n, scene.len() as u64),
+            crate::budget::available_memory(),
+        )?;
         let nb = blocks_per_axis(n);
         let grid = Grid {
             n,

@@ -118,9 +118,11 @@ impl Snapshot {
                 ),
             });
         }
-        let b = std::fs::read(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
+        let b = r4d_fsio::read_bounded(path, r4d_fsio::MAX_BINARY_BYTES).map_err(|source| {
+            Error::Io {
+                path: path.to_path_buf(),
+                source,
+            }
         })?;
         Snapshot::decode(&b, path, particles, fingerprint)
     }

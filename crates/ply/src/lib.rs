@@ -153,9 +153,11 @@ type Element = (String, usize, Vec<(String, Ty)>);
 
 /// Reads the vertex element of a PLY file.
 pub fn read_ply(path: &Path) -> Result<PlyVertices> {
-    let bytes = std::fs::read(path).map_err(|source| PlyError::Io {
-        path: path.to_path_buf(),
-        source,
+    let bytes = r4d_fsio::read_bounded(path, r4d_fsio::MAX_BINARY_BYTES).map_err(|source| {
+        PlyError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     })?;
     parse_ply(&bytes, &path.display().to_string())
 }

@@ -6,6 +6,10 @@ use r4d_splat::SimLink;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// The most parts a parts file may declare (`num_parts`, or the largest `part` of a PLY plus
+/// one): the most classes a mask can hold.
+pub const MAX_PARTS: usize = 65_534;
+
 /// Part labels per Gaussian: `{"num_parts": M, "class_names": [...], "labels": [...],
 /// "confidence": [...], "counts": [...]}`; label -1 is static background.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -79,7 +83,8 @@ impl PartLabels {
                 ..Default::default()
             }
         } else {
-            let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+            let text = r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES)
+                .map_err(|e| bad(e.to_string()))?;
             return PartLabels::parse(&text, path);
         };
         labels.validate().map_err(bad)?;
@@ -98,8 +103,15 @@ impl PartLabels {
         Ok(labels)
     }
 
-    /// Checks labels against `num_parts`.
+    /// Checks labels against `num_parts` (itself at most [`MAX_PARTS`], checked before any
+    /// conversion, so a count past `i32` cannot wrap into a small one).
     pub fn validate(&self) -> Result<(), String> {
+        if self.num_parts > MAX_PARTS {
+            return Err(format!(
+                "num_parts = {}: at most {MAX_PARTS} parts (MAX_PARTS)",
+                self.num_parts
+            ));
+        }
         if let Some((i, &l)) = self
             .labels
             .iter()

@@ -376,8 +376,14 @@ pub fn lift<S: MaskSource + ?Sized>(
 /// confidence however weakly it is seen ([`LiftConfig::full_visibility`]).
 pub const PURE_SHARE: f64 = 0.9;
 
-/// Largest per-view vote table [`lift`] keeps (`views x N x (M + 2)` bytes): 4 GiB.
+/// Largest memory of [`lift`]'s vote tables (`views x N x (M + 2)` bytes) and accumulators
+/// (`workers x N x (M + 2)` f64 and `N x (M + 1)` f64): 4 GiB.
 pub const MAX_VOTE_BYTES: usize = 4 << 30;
+
+/// The most classes x pixels one view may have in [`lift`] (`M x width x height`, checked
+/// from the cameras before any mask is read): a view's probability maps and its votes grow
+/// with both.
+pub const MAX_CLASS_PIXELS: u64 = 1 << 30;
 
 /// The label map a mask votes with most (for the boundary trust): 0 background, `k + 1`
 /// part `k`, [`IGNORE`] where it votes for nothing.
@@ -407,21 +413,47 @@ pub fn lift_with_progress<S: MaskSource + ?Sized>(
     let sw = s + 1;
     let n = g.len();
     let nv = cameras.len();
-    // One byte per class and one for the view's weight, per view and Gaussian.
+    let nw = workers(cfg.par);
+    // Classes x pixels of every view, before any mask is read: a view's work and its
+    // probability maps grow with both.
+    for cam in cameras {
+        let class_pixels = (m as u64)
+            .saturating_mul(cam.width as u64)
+            .saturating_mul(cam.height as u64);
+        if class_pixels > MAX_CLASS_PIXELS {
+            return Err(Error::Input(format!(
+                "camera '{}': {m} classes x {} x {} pixels = {class_pixels} class-pixels, more \
+                 than the {MAX_CLASS_PIXELS} a view may have (MAX_CLASS_PIXELS): use fewer \
+                 classes or smaller images",
+                cam.name, cam.width, cam.height
+            )));
+        }
+    }
+    // One byte per class and one for the view's weight, per view and Gaussian; and the
+    // per-worker accumulators (f64) and class weights beside them, all counted before any is
+    // allocated.
     let vote_bytes = nv
         .checked_mul(n)
         .and_then(|x| x.checked_mul(sw))
-        .filter(|&b| b <= MAX_VOTE_BYTES)
+        .filter(|&b| b <= MAX_VOTE_BYTES);
+    let work_bytes = n
+        .checked_mul(sw)
+        .and_then(|x| x.checked_mul(8 * nw))
+        .and_then(|x| x.checked_add(n.checked_mul(s)?.checked_mul(8)?));
+    let vote_bytes = vote_bytes
+        .zip(work_bytes)
+        .filter(|&(v, w)| v.checked_add(w).is_some_and(|t| t <= MAX_VOTE_BYTES))
+        .map(|(v, _)| v)
         .ok_or_else(|| {
             Error::Input(format!(
-                "{nv} views x {n} Gaussians x {sw} classes of votes exceed the lift's limit of {} GiB",
+                "{nv} views x {n} Gaussians x {sw} classes of votes (and {nw} workers' \
+                 accumulators) exceed the lift's limit of {} GiB (MAX_VOTE_BYTES)",
                 MAX_VOTE_BYTES >> 30
             ))
         })?;
     let mut votes = vec![0u8; vote_bytes];
     // Each view's total vote per Gaussian (for the consistency check).
     let mut view_totals = vec![0f32; nv * n];
-    let nw = workers(cfg.par);
     let mut accs = vec![vec![0f64; n * sw]; nw];
     let mut scratch: Vec<WeightScratch<f32>> = vec![WeightScratch::default(); nw];
     let mut class_weights = vec![0f64; n * s];

@@ -244,7 +244,8 @@ impl MaskDir {
         }
         let classes_path = dir.join("classes.json");
         let classes = if classes_path.is_file() {
-            let text = std::fs::read_to_string(&classes_path).map_err(Error::io(&classes_path))?;
+            let text = r4d_fsio::read_to_string_bounded(&classes_path, r4d_fsio::MAX_TEXT_BYTES)
+                .map_err(Error::io(&classes_path))?;
             let (class_names, ignore) = parse_classes(&text, &classes_path)?;
             Some(ClassesFile {
                 class_names,
@@ -461,6 +462,10 @@ impl MaskSource for MaskDir {
 pub const MAX_IMAGE_SIDE: u32 = 8192;
 /// The most memory one decoded mask image may take (bytes).
 pub const MAX_IMAGE_BYTES: u64 = 256 << 20;
+/// The largest `.npy` mask file read (bytes): a stack of class maps `(M, H, W)` in float64
+/// at the image limit fits many classes; a larger file, a device or a pipe is refused as its
+/// bytes arrive.
+pub const MAX_NPY_MASK_BYTES: u64 = 4 << 30;
 
 fn decode_png(bytes: &[u8], path: &Path) -> Result<image::DynamicImage> {
     let mut limits = image::Limits::default();
@@ -516,7 +521,7 @@ pub fn read_probability_map(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
     let bytes = if is_npy {
-        std::fs::read(path).map_err(Error::io(path))?
+        r4d_fsio::read_bounded(path, MAX_NPY_MASK_BYTES).map_err(Error::io(path))?
     } else {
         read_bounded(path)?
     };
@@ -590,7 +595,7 @@ pub struct NpyArray {
 
 /// Reads a little-endian float32/float64 or bool `.npy` in C order.
 pub fn read_npy(path: &Path) -> Result<NpyArray> {
-    let bytes = std::fs::read(path).map_err(Error::io(path))?;
+    let bytes = r4d_fsio::read_bounded(path, MAX_NPY_MASK_BYTES).map_err(Error::io(path))?;
     parse_npy(&bytes).map_err(|m| Error::mask(path.display(), m))
 }
 

@@ -39,7 +39,7 @@ fn cerr(file: &str, m: impl Into<String>) -> Error {
 }
 
 fn read_text(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| Error::Io {
+    r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,
     })

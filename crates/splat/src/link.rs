@@ -48,10 +48,13 @@ impl SimLink {
 
     /// Reads `link.json`.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text =
+            r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES).map_err(|source| {
+                Error::Io {
+                    path: path.to_path_buf(),
+                    source,
+                }
+            })?;
         let l: SimLink = serde_json::from_str(&text).map_err(|e| {
             Error::Mismatch(format!("{}: not a simulation link: {e}", path.display()))
         })?;

@@ -10,10 +10,11 @@ use std::path::Path;
 
 /// Reads an INRIA 3DGS PLY file.
 pub fn read_gaussians(path: &Path) -> Result<Gaussians> {
-    let bytes = std::fs::read(path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes =
+        r4d_fsio::read_bounded(path, r4d_fsio::MAX_BINARY_BYTES).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
     parse_gaussians(&bytes, &path.display().to_string())
 }
 

@@ -105,16 +105,17 @@ impl LpipsWeights {
             path: path.to_path_buf(),
             source,
         };
-        let len = std::fs::metadata(path).map_err(io)?.len();
-        if len > MAX_WEIGHTS_FILE_BYTES {
-            return Err(LpipsError::Format {
-                origin: path.display().to_string(),
-                detail: format!(
-                    "{len} bytes, more than the {MAX_WEIGHTS_FILE_BYTES} an LPIPS weights file can have"
-                ),
-            });
-        }
-        let bytes = std::fs::read(path).map_err(io)?;
+        // The bytes read are counted: a device or a pipe is refused like a large file.
+        let bytes = r4d_fsio::read_bounded(path, MAX_WEIGHTS_FILE_BYTES).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::InvalidData {
+                LpipsError::Format {
+                    origin: path.display().to_string(),
+                    detail: format!("{e} (an LPIPS weights file's limit)"),
+                }
+            } else {
+                io(e)
+            }
+        })?;
         Self::from_safetensors(&bytes, &path.display().to_string(), expect)
     }
 

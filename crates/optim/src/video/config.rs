@@ -253,10 +253,39 @@ fn kinds(names: &[String], what: &str) -> Result<Vec<ParamKind>, FitError> {
         .collect()
 }
 
+/// The most Latin hypercube candidates an initialisation may evaluate (`[init] candidates`,
+/// `r4d demo --candidates`).
+pub const MAX_INIT_CANDIDATES: usize = 10_000;
+
+/// The most frames an initialisation may simulate in all: `[init] candidates x [init] frames`.
+pub const MAX_INIT_FRAME_EVALS: u64 = 1_000_000;
+
+/// The most iterations a fit may ask for (`iters`, `r4d demo --iters`).
+pub const MAX_ITERS: usize = 1_000_000;
+
+/// Checks a candidate count against [`MAX_INIT_CANDIDATES`]; the message starts with
+/// `candidates = N` (callers prefix the key or flag).
+pub fn check_candidates(n: usize) -> Result<(), String> {
+    if n > MAX_INIT_CANDIDATES {
+        return Err(format!(
+            "candidates = {n}: at most {MAX_INIT_CANDIDATES} (MAX_INIT_CANDIDATES)"
+        ));
+    }
+    Ok(())
+}
+
+/// Checks an iteration count against [`MAX_ITERS`]; the message starts with `iters = N`.
+pub fn check_iters(n: usize) -> Result<(), String> {
+    if n > MAX_ITERS {
+        return Err(format!("iters = {n}: at most {MAX_ITERS} (MAX_ITERS)"));
+    }
+    Ok(())
+}
+
 impl FitConfig {
     /// Reads a TOML file.
     pub fn load(path: &Path) -> Result<FitConfig, FitError> {
-        let text = std::fs::read_to_string(path)
+        let text = r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES)
             .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
         let c: FitConfig = toml::from_str(&text)
             .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
@@ -284,6 +313,16 @@ impl FitConfig {
         if self.init.enabled && self.init.candidates == 0 {
             return bad("init.candidates must be at least 1".into());
         }
+        check_candidates(self.init.candidates).map_err(|m| FitError::Input(format!("init.{m}")))?;
+        let evals = (self.init.candidates as u64).saturating_mul(self.init.frames as u64);
+        if self.init.enabled && evals > MAX_INIT_FRAME_EVALS {
+            return bad(format!(
+                "init.candidates x init.frames = {} x {} = {evals} simulated frames, more than \
+                 the {MAX_INIT_FRAME_EVALS} an initialisation may simulate (MAX_INIT_FRAME_EVALS)",
+                self.init.candidates, self.init.frames
+            ));
+        }
+        check_iters(self.iters).map_err(FitError::Input)?;
         if self.flat_probe == 1 || self.flat_probe > 64 {
             return bad(format!(
                 "flat_probe = {}: 0 (off) or 2..=64 points",
