@@ -244,18 +244,20 @@ pub struct SimConfig {
     pub boundary: Vec<BoundaryCondition>,
 }
 
+/// Reads a text file of at most [`r4d_fsio::MAX_TEXT_BYTES`] (a config, a scene JSON).
+pub(crate) fn read_text(path: &Path) -> Result<String> {
+    r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
 impl SimConfig {
     /// Reads a config (`.toml` or `.json`) and validates it. A relative `particles` path is
     /// resolved against the config's folder.
     pub fn load(path: &Path) -> Result<SimConfig> {
         let file = path.display().to_string();
-        let text =
-            r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES).map_err(|source| {
-                Error::Io {
-                    path: path.to_path_buf(),
-                    source,
-                }
-            })?;
+        let text = read_text(path)?;
         let mut cfg = Self::parse(&text, path)?;
         if let Some(p) = &cfg.particles {
             if p.is_relative() {

@@ -79,13 +79,7 @@ impl Import {
 
 /// Reads and converts a PhysGaussian scene config.
 pub fn import_file(path: &Path) -> Result<Import> {
-    let text =
-        r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES).map_err(|source| {
-            Error::Io {
-                path: path.to_path_buf(),
-                source,
-            }
-        })?;
+    let text = crate::config::read_text(path)?;
     import_str(&text, &path.display().to_string())
 }
 
