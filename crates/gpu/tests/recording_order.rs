@@ -170,10 +170,11 @@ fn a_substep_dispatches_its_stages_in_the_order_of_substep_forward_and_reverse()
         "mpm_particle_vjp",
         "mpm_reduce_slots",
     ];
-    let expected: Vec<&str> = forward.iter().chain(&reverse).copied().collect();
+    // The forward up to the updated grid (G2P's outputs are not read by the reverse stages).
+    let expected: Vec<&str> = forward[..4].iter().chain(&reverse).copied().collect();
     assert_eq!(
         trace(),
         expected,
-        "the reverse substep re-runs its forward, then reverses"
+        "the reverse substep re-runs its forward up to the grid, then reverses"
     );
 }
