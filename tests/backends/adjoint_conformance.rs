@@ -4,9 +4,9 @@
 //! driver: parameter gradients (issue 9's bound for elastic scenes: 1e-3 relative) and the
 //! adjoint of the initial state.
 
+use crate::common::gpu::{self, Lease};
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_backend_vulkan::{VulkanEngine, VulkanMpm};
-use r4d_backend_wgpu::testing::gpu_or_skip;
 use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
 use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, MpmAdjointKernels};
@@ -15,7 +15,6 @@ use r4d_mpm::{
     BoundaryCondition, Domain, ForceForm, Material, PartParams, ParticleSet, Shape, SimConfig,
     SolverConfig, Surface, TimeConfig,
 };
-use std::sync::Arc;
 
 /// Two jelly parts in a bounding box (sticky with the classic force form; slip, plus a friction
 /// ground collider, with MLS), the upper one partly held by a cuboid clamp, the lower one
@@ -159,19 +158,20 @@ fn cpu(sim: &HostSim, params: &[PhysParams<f32>]) -> (Vec<PhysParams<f32>>, Host
     run(CpuBackend::<f32>::with_par(Par::Rayon), sim, params)
 }
 
-/// A GPU engine the suite runs on (every test below runs on each, `wgpu::*` and `vulkan::*`).
+/// A GPU engine the suite runs on (every test below runs on each, `wgpu::*` and `vulkan::*`):
+/// the binary's shared engine (`tests/common/gpu.rs`).
 enum Gpu {
-    Wgpu(Arc<WgpuContext>),
-    Vulkan(VulkanEngine),
+    Wgpu(Lease<std::sync::Arc<WgpuContext>>),
+    Vulkan(Lease<VulkanEngine>),
 }
 
 impl Gpu {
     fn wgpu(test: &str) -> Option<Gpu> {
-        gpu_or_skip(test).map(|c| Gpu::Wgpu(Arc::new(c)))
+        gpu::wgpu(test).map(Gpu::Wgpu)
     }
 
     fn vulkan(test: &str) -> Option<Gpu> {
-        r4d_backend_vulkan::testing::vulkan_or_skip(test).map(Gpu::Vulkan)
+        gpu::vulkan(test).map(Gpu::Vulkan)
     }
 
     /// No validation message on the Vulkan engine (`R4D_VULKAN_VALIDATION=1`).
@@ -188,8 +188,8 @@ fn gpu(
     params: &[PhysParams<f32>],
 ) -> (Vec<PhysParams<f32>>, HostState<f32>) {
     match b {
-        Gpu::Wgpu(ctx) => run(WgpuMpm::new(ctx.clone()), sim, params),
-        Gpu::Vulkan(e) => run(VulkanMpm::new(e.clone()), sim, params),
+        Gpu::Wgpu(ctx) => run(WgpuMpm::new((**ctx).clone()), sim, params),
+        Gpu::Vulkan(e) => run(VulkanMpm::new((**e).clone()), sim, params),
     }
 }
 

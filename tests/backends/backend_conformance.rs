@@ -3,11 +3,13 @@
 //! frames; path-dependent materials within 0.05 dx per particle and 0.01 dx for the centroid
 //! after 10 frames, since float atomics reorder sums and plastic flow amplifies rounding).
 //!
-//! GPU instances use `r4d_backend_wgpu::testing::gpu_or_skip`: without an adapter they skip,
+//! GPU instances use the binary's shared engines (`tests/common/gpu.rs`, made by
+//! `r4d_backend_wgpu::testing::gpu_or_skip` and its Vulkan twin): without an adapter they skip,
 //! unless `R4D_REQUIRE_GPU=1` (CI), where they fail.
 
+use crate::common::gpu;
 use r4d_backend_cpu::CpuBackend;
-use r4d_backend_wgpu::testing::{gpu_or_skip, gpu_or_skip_with};
+use r4d_backend_wgpu::testing::gpu_or_skip_with;
 use r4d_backend_wgpu::WgpuMpm;
 use r4d_mpm::{MpmKernels, MpmSim, ParticleSet, SimConfig, Simulator};
 use std::sync::Arc;
@@ -254,17 +256,17 @@ type = "bounding_box"
     )
 }
 
-/// The GPU backend, or `None` (skip).
-fn wgpu(test: &str) -> Option<WgpuMpm> {
-    gpu_or_skip(test).map(|c| WgpuMpm::new(Arc::new(c)))
-}
-
 #[test]
 fn wgpu_jelly_beam_with_every_boundary_condition_matches_cpu() {
-    let Some(b) = wgpu("wgpu_jelly_beam") else {
+    let Some(ctx) = gpu::wgpu("wgpu_jelly_beam") else {
         return;
     };
-    compare_elastic("wgpu jelly beam", JELLY_BEAM, b, 20);
+    compare_elastic(
+        "wgpu jelly beam",
+        JELLY_BEAM,
+        WgpuMpm::new((*ctx).clone()),
+        20,
+    );
 }
 
 #[test]
@@ -283,10 +285,15 @@ fn wgpu_compare_exchange_scatter_matches_cpu() {
 
 #[test]
 fn wgpu_two_part_object_matches_cpu() {
-    let Some(b) = wgpu("wgpu_two_part") else {
+    let Some(ctx) = gpu::wgpu("wgpu_two_part") else {
         return;
     };
-    compare_elastic("wgpu two-part object", TWO_PART, b, 20);
+    compare_elastic(
+        "wgpu two-part object",
+        TWO_PART,
+        WgpuMpm::new((*ctx).clone()),
+        20,
+    );
 }
 
 /// The path-dependent scenes of the suite: every plastic model and the fluid.
@@ -345,21 +352,15 @@ fn path_dependent_materials_match_cpu<B: MpmKernels>(engine: &str, make: impl Fn
 
 #[test]
 fn wgpu_path_dependent_materials_match_cpu() {
-    let Some(b) = wgpu("wgpu_plastic") else {
+    let Some(ctx) = gpu::wgpu("wgpu_plastic") else {
         return;
     };
-    let ctx = b.engine().context().clone();
-    path_dependent_materials_match_cpu("wgpu", || WgpuMpm::new(ctx.clone()));
-}
-
-/// The Vulkan engine (ash), or `None` (skip).
-fn vulkan(test: &str) -> Option<r4d_backend_vulkan::VulkanEngine> {
-    r4d_backend_vulkan::testing::vulkan_or_skip(test)
+    path_dependent_materials_match_cpu("wgpu", || WgpuMpm::new((*ctx).clone()));
 }
 
 #[test]
 fn vulkan_elastic_scenes_match_cpu() {
-    let Some(e) = vulkan("vulkan_elastic") else {
+    let Some(e) = gpu::vulkan("vulkan_elastic") else {
         return;
     };
     compare_elastic(
@@ -395,7 +396,7 @@ fn vulkan_compare_exchange_scatter_matches_cpu() {
 
 #[test]
 fn vulkan_path_dependent_materials_match_cpu() {
-    let Some(e) = vulkan("vulkan_plastic") else {
+    let Some(e) = gpu::vulkan("vulkan_plastic") else {
         return;
     };
     path_dependent_materials_match_cpu("vulkan", || r4d_backend_vulkan::VulkanMpm::new(e.clone()));

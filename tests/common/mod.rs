@@ -1,7 +1,9 @@
 //! Helpers shared by the integration tests: reading the reference `.npz` fixtures.
 #![allow(dead_code)]
 
+pub mod gpu;
 pub mod scenes;
+pub mod video;
 
 use std::collections::HashMap;
 use std::io::Read;

@@ -10,5 +10,4 @@ mod ablate;
 mod datasets;
 mod demo_recovery;
 mod fit_trajectory;
-mod fit_trajectory_wgpu;
 mod video_fit;

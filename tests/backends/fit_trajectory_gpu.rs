@@ -7,7 +7,6 @@ use crate::common;
 
 use common::fixture;
 use r4d_backend_cpu::CpuBackend;
-use r4d_backend_wgpu::testing::gpu_or_skip;
 use r4d_mpm::{MpmSim, ParticleSet, SimConfig, Simulator};
 use resonance4d::compute::{self, Compute};
 use resonance4d::fit_trajectory::{fit_trajectory, FitOptions, IterRecord};
@@ -30,17 +29,16 @@ fn rel(a: f64, b: f64) -> f64 {
 
 #[test]
 fn wgpu_fit_matches_the_cpu_fit() {
-    let Some(ctx) = gpu_or_skip("wgpu_fit_matches_the_cpu_fit") else {
+    let Some(ctx) = common::gpu::wgpu("wgpu_fit_matches_the_cpu_fit") else {
         return;
     };
-    gpu_fit_matches_the_cpu_fit(compute::wgpu(std::sync::Arc::new(ctx)));
+    gpu_fit_matches_the_cpu_fit(compute::wgpu((*ctx).clone()));
 }
 
 /// The same on the Vulkan engine (ash): the recordings of wgpu, executed through Vulkan.
 #[test]
 fn vulkan_fit_matches_the_cpu_fit() {
-    let Some(e) = r4d_backend_vulkan::testing::vulkan_or_skip("vulkan_fit_matches_the_cpu_fit")
-    else {
+    let Some(e) = common::gpu::vulkan("vulkan_fit_matches_the_cpu_fit") else {
         return;
     };
     gpu_fit_matches_the_cpu_fit(compute::vulkan(e.clone()));
@@ -106,10 +104,10 @@ fn gpu_fit_matches_the_cpu_fit(gpu: std::sync::Arc<dyn Compute>) {
 /// adjoint) of a metal beam that yields under its own weight.
 #[test]
 fn wgpu_yield_stress_gradient_matches_the_cpu() {
-    let Some(ctx) = gpu_or_skip("wgpu_yield_stress_gradient_matches_the_cpu") else {
+    let Some(ctx) = common::gpu::wgpu("wgpu_yield_stress_gradient_matches_the_cpu") else {
         return;
     };
-    let gpu = compute::wgpu(std::sync::Arc::new(ctx));
+    let gpu = compute::wgpu((*ctx).clone());
     let mut truth = SimConfig::load(&fixture("fit/beam.toml")).unwrap();
     truth.time.frames = 2;
     truth.parts[0].material = r4d_mpm::Material::Metal;
