@@ -45,7 +45,8 @@ fn ok(o: &std::process::Output) {
 fn quick_demo_then_fit_and_resume_on_its_inputs() {
     let d = tmp("demo");
     let out = d.join("demo");
-    let o = r4d(&["demo", "--quick", "--out", out.to_str().unwrap()]);
+    // The test-size plant (`--small`): the same stages and files as the full-size demo.
+    let o = r4d(&["demo", "--quick", "--small", "--out", out.to_str().unwrap()]);
     ok(&o);
     let s = json(&out.join("summary.json"));
     for k in ["truth", "init", "fit"] {
