@@ -60,7 +60,19 @@ fn small(scene: DemoScene) -> (SceneSpec, VideoProblem, FitConfig) {
     if scene != DemoScene::Metal {
         cfg.init.candidates = 12;
     }
-    cfg.iters = 30;
+    // Iterations up to where the fit's result settles (it returns the lowest loss it evaluated;
+    // the trust radius's cosine schedule spans the iterations), measured: the foam's yield
+    // stress and viscosity come within their tolerances only at iteration 28 of 30; the
+    // metal's largest checked error is its hardening's, -8.5% with 18 iterations (-8.0% with
+    // 30); the plasticine ends where the multi-start before the iterations left it (8 and 30
+    // give the same fit); the sand's friction angle is within 0.2 degree with 10 (and 30).
+    cfg.iters = match scene {
+        DemoScene::Foam => 30,
+        DemoScene::Metal => 18,
+        DemoScene::Sand => 10,
+        DemoScene::Plasticine => 8,
+        DemoScene::Plant => 30,
+    };
     (spec, problem, cfg)
 }
 
