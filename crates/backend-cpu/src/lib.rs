@@ -319,12 +319,15 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
                 starts,
                 &mut [] as &mut [()],
                 |lo, ids, nodes, _| {
-                    for &i in ids {
-                        let i = i as usize;
-                        let st = stencil(x[i], inv_dx);
-                        let a = damped_affine(&cm[i], c.rpic_damping);
-                        scatter(nodes, lo, n, &st, v[i], &a, mass[i], &stress[i], c);
+                    ScatterRun {
+                        x,
+                        v,
+                        cm,
+                        mass,
+                        stress,
+                        c,
                     }
+                    .run(nodes, lo, n, ids)
                 },
             );
         });
@@ -432,28 +435,187 @@ struct G2pChunk<'a, T> {
 }
 
 impl<T: Real> G2pChunk<'_, T> {
-    /// Runs G2P on the chunk's particles; returns its earliest health problem.
+    /// Runs G2P on the chunk's particles; returns its earliest health problem. In `f32` on a
+    /// processor with AVX (detected at run time), two particles' gathers share each
+    /// instruction ([`r4d_mpm::transfer_avx`]); the results are bitwise the same either way.
+    fn run(mut self) -> Problem {
+        #[cfg(target_arch = "x86_64")]
+        if std::any::TypeId::of::<T>() == std::any::TypeId::of::<f32>()
+            && r4d_mpm::transfer_avx::available()
+        {
+            // SAFETY: the processor supports AVX (checked just above).
+            return unsafe { self.run_pairs_avx() };
+        }
+        let mut worst = None;
+        for j in 0..self.x.len() {
+            worst = earliest(worst, self.one(j));
+        }
+        worst
+    }
+
+    /// G2P of particle `j` of the chunk on its own.
     #[inline(always)]
-    fn run(self) -> Problem {
+    fn one(&mut self, j: usize) -> Problem {
         let (n, c) = (self.n, self.c);
         let inv_dx = k::<T>(c.inv_dx);
+        let i = (self.first + j) as u32;
+        let x = &mut self.x[j];
+        if !in_domain(*x, inv_dx, n) {
+            let value = out_of_domain_coordinate(*x, inv_dx, n);
+            return Some((HEALTH_OUT_OF_DOMAIN, i, value));
+        }
+        let st = stencil(*x, inv_dx);
+        let gathered = gather(self.nodes, n, &st, c);
+        let (code, value) = g2p_finish(
+            &gathered,
+            x,
+            &mut self.v[j],
+            &mut self.cm[j],
+            &mut self.f[j],
+            c,
+        );
+        (code != 0).then_some((code, i, value))
+    }
+
+    /// [`Self::run`] two particles at a time where both are inside the grid (`T` = `f32`).
+    ///
+    /// # Safety
+    /// The processor must support AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn run_pairs_avx(mut self) -> Problem {
+        use r4d_mpm::transfer::{Gathered, Stencil};
+        let (n, c) = (self.n, self.c);
+        let inv_dx = k::<T>(c.inv_dx);
+        // `T` is `f32` here, so these conversions are exact.
+        let nodes: &[[f32; 4]] = bytemuck::cast_slice(self.nodes);
+        let to_f32 = |x: [T; 3]| x.map(|e| e.f64() as f32);
+        let back = |g: &Gathered<f32>| Gathered::<T> {
+            v: g.v.map(|e| T::c(e as f64)),
+            c: g.c.map(|e| T::c(e as f64)),
+            grad_v: g.grad_v.map(|e| T::c(e as f64)),
+        };
         let mut worst = None;
-        let particles = self.x.iter_mut().zip(self.v.iter_mut());
-        let particles = particles.zip(self.cm.iter_mut()).zip(self.f.iter_mut());
-        for (j, (((x, v), cm), f)) in particles.enumerate() {
-            let i = (self.first + j) as u32;
-            if !in_domain(*x, inv_dx, n) {
-                let value = out_of_domain_coordinate(*x, inv_dx, n);
-                worst = earliest(worst, Some((HEALTH_OUT_OF_DOMAIN, i, value)));
-                continue;
-            }
-            let st = stencil(*x, inv_dx);
-            let gathered = gather(self.nodes, n, &st, c);
-            let (code, value) = g2p_finish(&gathered, x, v, cm, f, c);
-            if code != 0 {
-                worst = earliest(worst, Some((code, i, value)));
+        let len = self.x.len();
+        let mut j = 0;
+        while j < len {
+            if j + 1 < len && in_domain(self.x[j], inv_dx, n) && in_domain(self.x[j + 1], inv_dx, n)
+            {
+                let inv = k::<f32>(c.inv_dx);
+                let st: [Stencil<f32>; 2] = [
+                    stencil(to_f32(self.x[j]), inv),
+                    stencil(to_f32(self.x[j + 1]), inv),
+                ];
+                let gathered = r4d_mpm::transfer_avx::gather_pair(nodes, n, &st, c);
+                for (p, g) in gathered.iter().enumerate() {
+                    let q = j + p;
+                    let (code, value) = g2p_finish(
+                        &back(g),
+                        &mut self.x[q],
+                        &mut self.v[q],
+                        &mut self.cm[q],
+                        &mut self.f[q],
+                        c,
+                    );
+                    if code != 0 {
+                        worst = earliest(worst, Some((code, (self.first + q) as u32, value)));
+                    }
+                }
+                j += 2;
+            } else {
+                worst = earliest(worst, self.one(j));
+                j += 1;
             }
         }
         worst
+    }
+}
+
+/// The particles of one P2G scatter.
+struct ScatterRun<'a, T> {
+    x: &'a [[T; 3]],
+    v: &'a [[T; 3]],
+    cm: &'a [[T; 9]],
+    mass: &'a [T],
+    stress: &'a [[T; 9]],
+    c: &'a StepConsts,
+}
+
+impl<T: Real> ScatterRun<'_, T> {
+    /// Scatters particles `ids` (in order) into `nodes`, a slab starting at layer `lo`. In
+    /// `f32` on a processor with AVX (detected at run time) two particles' node shares are
+    /// computed side by side ([`r4d_mpm::transfer_avx::scatter_pair`]); every node receives
+    /// bitwise the same sums either way.
+    fn run(&self, nodes: &mut [[T; 4]], lo: usize, n: usize, ids: &[u32]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::any::TypeId::of::<T>() == std::any::TypeId::of::<f32>()
+            && r4d_mpm::transfer_avx::available()
+        {
+            // SAFETY: the processor supports AVX (checked just above).
+            return unsafe { self.run_pairs_avx(nodes, lo, n, ids) };
+        }
+        for &i in ids {
+            self.one(nodes, lo, n, i as usize);
+        }
+    }
+
+    /// Scatters particle `i` on its own.
+    #[inline(always)]
+    fn one(&self, nodes: &mut [[T; 4]], lo: usize, n: usize, i: usize) {
+        let c = self.c;
+        let st = stencil(self.x[i], k::<T>(c.inv_dx));
+        let a = damped_affine(&self.cm[i], c.rpic_damping);
+        scatter(
+            nodes,
+            lo,
+            n,
+            &st,
+            self.v[i],
+            &a,
+            self.mass[i],
+            &self.stress[i],
+            c,
+        );
+    }
+
+    /// [`Self::run`] two particles at a time (`T` = `f32`).
+    ///
+    /// # Safety
+    /// The processor must support AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn run_pairs_avx(&self, nodes: &mut [[T; 4]], lo: usize, n: usize, ids: &[u32]) {
+        let c = self.c;
+        let inv = k::<f32>(c.inv_dx);
+        // `T` is `f32` here: these views and conversions are exact.
+        let nodes32: &mut [[f32; 4]] = bytemuck::cast_slice_mut(nodes);
+        let nine = |a: &[T; 9]| -> [f32; 9] { a.map(|e| e.f64() as f32) };
+        let three = |a: &[T; 3]| -> [f32; 3] { a.map(|e| e.f64() as f32) };
+        let mass: &[f32] = bytemuck::cast_slice(self.mass);
+        let mut pairs = ids.chunks_exact(2);
+        for ab in &mut pairs {
+            let (a, b) = (ab[0] as usize, ab[1] as usize);
+            let st = [
+                stencil(three(&self.x[a]), inv),
+                stencil(three(&self.x[b]), inv),
+            ];
+            let ca = nine(&damped_affine(&self.cm[a], c.rpic_damping));
+            let cb = nine(&damped_affine(&self.cm[b], c.rpic_damping));
+            let (sa, sb) = (nine(&self.stress[a]), nine(&self.stress[b]));
+            r4d_mpm::transfer_avx::scatter_pair(
+                nodes32,
+                lo,
+                n,
+                &st,
+                [three(&self.v[a]), three(&self.v[b])],
+                [&ca, &cb],
+                [mass[a], mass[b]],
+                [&sa, &sb],
+                c,
+            );
+        }
+        if let [i] = pairs.remainder() {
+            self.one(bytemuck::cast_slice_mut(nodes32), lo, n, *i as usize);
+        }
     }
 }

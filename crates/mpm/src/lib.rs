@@ -57,6 +57,8 @@ pub mod sim;
 pub mod snapshot;
 pub mod substep;
 pub mod transfer;
+#[cfg(target_arch = "x86_64")]
+pub mod transfer_avx;
 
 pub use boundary::{BoundaryCondition, Surface};
 pub use config::{Domain, ForceForm, OutOfDomain, SimConfig, SolverConfig, TimeConfig};
