@@ -76,6 +76,18 @@ pub struct FitTrajectoryArgs {
 }
 
 fn read_targets(dir: &Path, max: usize) -> Result<Vec<Vec<[f32; 3]>>> {
+    // A gap in the folder's frame_NNNN.ply numbering is an error, not the end of the targets.
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        let listed: Vec<PathBuf> = rd
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                p.file_name()
+                    .and_then(|n| n.to_str())
+                    .is_some_and(|n| n.starts_with("frame_") && n.ends_with(".ply"))
+            })
+            .collect();
+        r4d_fsio::seq::check_numbering(&listed)?;
+    }
     let mut out = Vec::new();
     for k in 1..=max {
         let f = dir.join(format!("frame_{k:04}.ply"));

@@ -8,10 +8,12 @@ use std::path::{Path, PathBuf};
 /// Arguments of `r4d metrics-trajectory`.
 #[derive(clap::Args, Debug)]
 pub struct MetricsTrajectoryArgs {
-    /// Ground-truth frames: a folder of PLY files (x, y, z), sorted by name.
+    /// Ground-truth frames: a folder of PLY files (x, y, z), in natural order (`frame_2`
+    /// before `frame_10`); a gap in their numbering is an error.
     #[arg(long)]
     reference: PathBuf,
-    /// Simulated frames: a folder of PLY files (`r4d simulate` output), sorted by name.
+    /// Simulated frames: a folder of PLY files (`r4d simulate` output), in natural order; a
+    /// gap in their numbering is an error.
     #[arg(long)]
     simulated: PathBuf,
     /// F-score thresholds (default: 0.04, plus the reference table's 0.005 .. 0.1 in --json).
@@ -26,12 +28,12 @@ pub struct MetricsTrajectoryArgs {
 }
 
 fn read_frames(dir: &Path) -> Result<Vec<Vec<[f64; 3]>>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+    let files: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("reading {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|e| e == "ply"))
         .collect();
-    files.sort();
+    let files = r4d_fsio::seq::frame_sequence(files)?;
     if files.is_empty() {
         bail!("{}: no .ply frames", dir.display());
     }

@@ -11,6 +11,7 @@ mod fit_trajectory;
 mod metrics;
 mod metrics_trajectory;
 mod npy;
+mod numeric;
 mod paths;
 mod prepare;
 mod profile;

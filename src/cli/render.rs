@@ -59,9 +59,10 @@ pub struct RenderArgs {
     /// link.json when present, else every Gaussian is particle i in world coordinates.
     #[arg(long)]
     link: Option<PathBuf>,
-    /// Background r,g,b in [0, 1] when the camera file has none.
-    #[arg(long, value_delimiter = ',', num_args = 3)]
-    background: Option<Vec<f32>>,
+    /// Background r,g,b in [0, 1] when the camera file has none (`0.5,0.5,0.5` or
+    /// `0.5 0.5 0.5`).
+    #[arg(long, value_delimiter = ',', num_args = 1..=3, value_parser = super::numeric::f64_in(0.0, 1.0))]
+    background: Option<Vec<f64>>,
     /// Rasterize mode when the camera file has none.
     #[arg(long, value_enum)]
     mode: Option<ModeArg>,
@@ -79,6 +80,12 @@ pub struct RenderArgs {
 
 /// Runs the command.
 pub fn run(a: RenderArgs) -> Result<()> {
+    if let Some(b) = a.background.as_ref().filter(|b| b.len() != 3) {
+        bail!(
+            "--background: give three values r,g,b in [0, 1] (got {})",
+            b.len()
+        );
+    }
     super::paths::Io::new()
         .input("--scene", &a.scene)
         .input("--camera", &a.camera)
@@ -101,12 +108,11 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let settings = RenderSettings {
         background: match (set.background, &a.background) {
             (Some(b), _) => b,
-            (None, Some(b)) => {
-                if b.iter().any(|v| !v.is_finite()) {
-                    bail!("--background must be three finite numbers");
-                }
-                [b[0], b[1], b[2]]
-            }
+            // Three values in [0, 1], checked when the command line is parsed.
+            (None, Some(b)) => match b[..] {
+                [r, g, bl] => [r as f32, g as f32, bl as f32],
+                _ => bail!("--background: give three values r,g,b (got {})", b.len()),
+            },
             (None, None) => [0.0; 3],
         },
         mode: match (set.mode, a.mode) {
@@ -219,7 +225,7 @@ fn render_sequence(
     settings: &RenderSettings,
     renderer: &mut dyn Renderer,
 ) -> Result<()> {
-    let mut frames: Vec<PathBuf> = std::fs::read_dir(dir)
+    let frames: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("reading {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
@@ -228,7 +234,7 @@ fn render_sequence(
                 .is_some_and(|n| n.starts_with("frame_") && n.ends_with(".ply"))
         })
         .collect();
-    frames.sort();
+    let frames = r4d_fsio::seq::frame_sequence(frames)?;
     if frames.is_empty() {
         bail!("{}: no frame_NNNN.ply files", dir.display());
     }

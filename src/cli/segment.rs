@@ -34,9 +34,10 @@ pub struct SegmentArgs {
     /// Neighbours of the KNN smoothing in 3D (1: keep the raw lift's labels).
     #[arg(long, default_value_t = 16)]
     k: usize,
-    /// Softmax temperature over the normalised class weights (smaller: more confident).
-    #[arg(long, default_value_t = 0.1)]
-    temperature: f32,
+    /// Softmax temperature over the normalised class weights (smaller: more confident), in
+    /// [1e-6, 1e6].
+    #[arg(long, default_value_t = 0.1, value_parser = super::numeric::f64_in(1e-6, 1e6))]
+    temperature: f64,
     /// Label clusters with fewer Gaussians are relabelled by their surroundings (default:
     /// k).
     #[arg(long)]
@@ -47,38 +48,38 @@ pub struct SegmentArgs {
     rounds: u32,
     /// A Gaussian with mixed evidence seen with less than this compositing weight (pixel
     /// equivalents, over all views) gets proportionally less confidence, so that the KNN pass
-    /// decides it from its well-seen neighbours (0: off).
-    #[arg(long, default_value_t = 4.0)]
-    full_visibility: f32,
+    /// decides it from its well-seen neighbours (0: off; at most 1e9).
+    #[arg(long, default_value_t = 4.0, value_parser = super::numeric::f64_in(0.0, 1e9))]
+    full_visibility: f64,
     /// Weight, in [0, 1], of a view whose own verdict on a Gaussian is background, relative
     /// to views that see a part there (a view whose mask misses part of a part outvotes less
     /// of the views that show it; where all views agree nothing changes).
-    #[arg(long, default_value_t = 0.25)]
-    background_weight: f32,
+    #[arg(long, default_value_t = 0.25, value_parser = super::numeric::f64_in(0.0, 1.0))]
+    background_weight: f64,
     /// Merge threshold of the smooth-surface regions (graph segmentation of the KNN graph
     /// that ends at creases) whose summed evidence is a prior on which part their Gaussians
     /// are: a thin part most views' masks erase keeps its label where its whole surface
-    /// says so (0: off; larger: bigger regions).
-    #[arg(long, default_value_t = 30.0)]
-    region_tau: f32,
+    /// says so (0: off; larger: bigger regions; at most 1e6).
+    #[arg(long, default_value_t = 30.0, value_parser = super::numeric::f64_in(0.0, 1e6))]
+    region_tau: f64,
     /// Exponent of the region prior: a Gaussian's evidence for a part is scaled by the
-    /// region's evidence for it relative to the region's strongest part, to this power (0:
-    /// off).
-    #[arg(long, default_value_t = 4.0)]
-    region_power: f32,
+    /// region's evidence for it relative to the region's strongest part, to this power, in
+    /// [0, 64] (0: off).
+    #[arg(long, default_value_t = 4.0, value_parser = super::numeric::f64_in(0.0, 64.0))]
+    region_power: f64,
     /// Exponent of the region prior on the static scene, one-sided: where a region's
     /// strongest part outweighs the static scene in it, its Gaussians' static evidence is
     /// scaled by their ratio to this power (a part's rim that eroded masks give to the
-    /// background keeps its part); regions the static scene dominates are left alone (0:
-    /// off).
-    #[arg(long, default_value_t = 2.0)]
-    region_static_power: f32,
+    /// background keeps its part); regions the static scene dominates are left alone; in
+    /// [0, 64] (0: off).
+    #[arg(long, default_value_t = 2.0, value_parser = super::numeric::f64_in(0.0, 64.0))]
+    region_static_power: f64,
     /// Strength, in [0, 1], of the appearance term of the region prior: a region's evidence
     /// for a part is scaled by 1 - S + S x (how well its Gaussians' base colours fit that
     /// part's robust colour model), so colour can overturn at most a 1 / (1 - S) lead of
     /// the masks (parts of one colour, or colours no part has, change nothing; 0: off).
-    #[arg(long, default_value_t = 0.8)]
-    appearance: f32,
+    #[arg(long, default_value_t = 0.8, value_parser = super::numeric::f64_in(0.0, 1.0))]
+    appearance: f64,
     /// Do not scale a view's votes by the share of the Gaussian's drawn footprint that is
     /// the Gaussian itself (edge-on Gaussians then vote with their whole blurred line).
     #[arg(long)]
@@ -111,21 +112,7 @@ pub fn run(a: SegmentArgs) -> Result<()> {
     if a.k == 0 {
         bail!("--k 0: use --k 1 for no smoothing");
     }
-    if !(a.region_tau.is_finite() && (0.0..=1e6).contains(&a.region_tau)) {
-        bail!("--region-tau {}: must lie in [0, 1e6]", a.region_tau);
-    }
-    if !(a.region_power.is_finite() && (0.0..=64.0).contains(&a.region_power)) {
-        bail!("--region-power {}: must lie in [0, 64]", a.region_power);
-    }
-    if !(a.region_static_power.is_finite() && (0.0..=64.0).contains(&a.region_static_power)) {
-        bail!(
-            "--region-static-power {}: must lie in [0, 64]",
-            a.region_static_power
-        );
-    }
-    if !(a.appearance.is_finite() && (0.0..=1.0).contains(&a.appearance)) {
-        bail!("--appearance {}: must lie in [0, 1]", a.appearance);
-    }
+    // The float options' ranges are checked when the command line is parsed (numeric.rs).
     if a.out
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"))
@@ -165,19 +152,13 @@ pub fn run(a: SegmentArgs) -> Result<()> {
         set.cameras.len(),
         masks.class_names().join(", ")
     );
-    if !(a.full_visibility.is_finite() && a.full_visibility >= 0.0) {
-        bail!(
-            "--full-visibility {}: must be >= 0 and finite",
-            a.full_visibility
-        );
-    }
     let base = if a.classic {
         LiftConfig::classic()
     } else {
         LiftConfig {
-            full_visibility: a.full_visibility,
+            full_visibility: a.full_visibility as f32,
             footprint_trust: !a.no_footprint_trust,
-            background_weight: a.background_weight,
+            background_weight: a.background_weight as f32,
             ..Default::default()
         }
     };
@@ -187,7 +168,7 @@ pub fn run(a: SegmentArgs) -> Result<()> {
             (false, Vote::Confusion) => r4d_segment::ViewVote::Confusion,
             (false, Vote::Sum) => r4d_segment::ViewVote::Sum,
         },
-        temperature: a.temperature,
+        temperature: a.temperature as f32,
         mode: set.mode.unwrap_or_default(),
         par: Par::Rayon,
         ..base
@@ -202,10 +183,10 @@ pub fn run(a: SegmentArgs) -> Result<()> {
             k: a.k,
             min_cluster: a.min_cluster.unwrap_or(a.k),
             rounds: a.rounds,
-            region_tau: a.region_tau,
-            region_power: a.region_power,
-            region_static_power: a.region_static_power,
-            appearance: a.appearance,
+            region_tau: a.region_tau as f32,
+            region_power: a.region_power as f32,
+            region_static_power: a.region_static_power as f32,
+            appearance: a.appearance as f32,
             ..Default::default()
         };
         smooth_lifted(&g, &lifted, lift_cfg.temperature, &cfg)?

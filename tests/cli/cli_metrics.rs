@@ -187,7 +187,7 @@ fn bad_input_exits_nonzero_naming_the_input() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success());
     assert!(
-        err.contains("rendered: frame 2 has NaN at row 1, column 4"),
+        err.contains("nan.npy") && err.contains("NaN at frame 2, row 1, column 4"),
         "{err}"
     );
     // Missing file, and a directory without PNG frames.

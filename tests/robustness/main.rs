@@ -9,3 +9,4 @@ mod common;
 mod errors;
 mod fault_injection;
 mod hostile_options;
+mod hostile_readers;

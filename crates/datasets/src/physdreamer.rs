@@ -193,7 +193,7 @@ fn find_videos(
         })?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .collect();
-    entries.sort();
+    r4d_fsio::seq::sort_natural(&mut entries);
     let camera_of = |p: &Path| -> Option<usize> {
         let name = p.file_name()?.to_str()?;
         // The longest matching image name wins (frame_0001 vs frame_00011...).

@@ -30,10 +30,11 @@
 //!    1920 pixels per side as PhysFlow's `get_camera_view` does. The view is
 //!    `default_camera_index`.
 //! 8. **Reference video**: an `.mp4` in the folder (H.264, at its own frame rate unless `--fps`;
-//!    the first by name when there are several; `--key-frames` does not apply), else the frames of
-//!    `images_generated/` (PNG or JPEG, sorted by name) at `1 / frame_dt` unless `--fps` says
-//!    otherwise. With `--key-frames K`, PhysFlow's own rule: keep the files whose index `i` has
-//!    `i % (n / K) == 0` (PhysFlow's `n_key_frame`, 8), spaced `11 x opt_frame_dt` of simulated
+//!    the first in natural order when there are several; `--key-frames` does not apply), else
+//!    the frames of `images_generated/` (PNG or JPEG, in natural order, numbering checked) at
+//!    `1 / frame_dt` unless `--fps` says otherwise. With `--key-frames K`, PhysFlow's own
+//!    rule: keep the files whose index `i` has `i % (n / K) == 0` (PhysFlow's `n_key_frame`,
+//!    8), spaced `11 x opt_frame_dt` of simulated
 //!    time (PhysFlow renders an optimisation frame every `(1 + stage_num) x opt_frame_dt`,
 //!    `stage_num = 10`). The camera is rescaled to the frames' size when the aspect ratios agree.
 //! 9. **Ground truth**: `pcd/<k>.ply` (PAC-NeRF scenes) is the world-frame point cloud of frame
@@ -302,12 +303,12 @@ fn reference_video(
         .filter(|p| p.is_file() && p.extension().is_some_and(|e| e.eq_ignore_ascii_case("mp4")))
         .collect();
     let mut mp4s = mp4s;
-    mp4s.sort();
+    r4d_fsio::seq::sort_natural(&mut mp4s);
     let gen = dir.join("images_generated");
     if let Some(m) = mp4s.first() {
         if mp4s.len() > 1 {
             warnings.push(format!(
-                "{}: {} MP4 files in the scene folder; the first by name is the reference video",
+                "{}: {} MP4 files in the scene folder; the first in natural order is the reference video",
                 dir.display(),
                 mp4s.len()
             ));

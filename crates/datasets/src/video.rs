@@ -31,18 +31,20 @@ pub fn is_frame_file(p: &Path) -> bool {
     })
 }
 
-/// The image files of a folder (PNG or JPEG), sorted by file name.
+/// The image files of a folder (PNG or JPEG), in natural order (`frame_2` before
+/// `frame_10`) with their numbering checked: a gap or a number written twice is an error
+/// naming the number ([`r4d_fsio::seq::frame_sequence`]).
 pub fn frame_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let rd = std::fs::read_dir(dir).map_err(|source| DatasetError::Io {
         path: dir.to_path_buf(),
         source,
     })?;
-    let mut files: Vec<PathBuf> = rd
+    let files: Vec<PathBuf> = rd
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_file() && is_frame_file(p))
         .collect();
-    files.sort_by(|a, b| a.file_name().cmp(&b.file_name()));
-    Ok(files)
+    r4d_fsio::seq::frame_sequence(files)
+        .map_err(|e| DatasetError::Video(r4d_loss::io::VideoIoError::Sequence(e)))
 }
 
 /// PhysFlow's key-frame rule (`CogVideoGuidance`): of `n` sorted files keep those whose index

@@ -20,6 +20,7 @@
 //! they resume (refusing a resume on other inputs) and of their own content (a checksum).
 
 pub mod npy;
+pub mod seq;
 
 use std::ffi::OsString;
 use std::fs::File;

@@ -1,12 +1,17 @@
 //! Reading and writing videos: a directory of PNG frames or a float32 `.npy` of shape
 //! `(T, H, W, 3)`, the video format of every `r4d` command.
 //!
-//! * PNG directory: every `*.png` in the directory, sorted by file name (so
-//!   `frame_0000.png, frame_0001.png, ...` as `r4d render --frames` writes them). An 8-bit
+//! * PNG directory: every `*.png` in the directory, in natural order (`frame_2.png` before
+//!   `frame_10.png`; [`r4d_fsio::seq`]), so `frame_0000.png, frame_0001.png, ...` as
+//!   `r4d render --frames` writes them. A gap in the numbering (`frame_3.png` missing between
+//!   `frame_2.png` and `frame_4.png`) is an error naming the missing number. An 8-bit
 //!   value `k` means `k / 255` and a 16-bit value `k / 65535`, with no gamma conversion.
 //!   Gray frames are replicated to RGB; an alpha channel is ignored.
-//! * `.npy`: little-endian float32 (or float64, rounded) in C order, shape `(T, H, W, 3)`;
-//!   a single `(H, W, 3)` frame is read as a one-frame video.
+//! * `.npy`: little-endian float32 (or float64, rounded) in C or Fortran order, shape
+//!   `(T, H, W, 3)`; a single `(H, W, 3)` frame is read as a one-frame video. Every value must
+//!   lie in [0, 1] (a value outside, NaN included, is an error naming the file, the value and
+//!   where it is: videos are RGB in [0, 1], not 0..255).
+//! * Every frame of a video has the first frame's size.
 
 use crate::error::Input;
 use crate::real::Real;
@@ -48,6 +53,25 @@ pub enum VideoIoError {
         expected: (u32, u32),
         /// Size of this frame.
         got: (u32, u32),
+    },
+    /// A gap or a repeated number in a folder's numbered frames.
+    #[error("{0}")]
+    Sequence(#[from] r4d_fsio::seq::SequenceError),
+    /// A value of a float video outside [0, 1] (or not a number).
+    #[error("{path}: value {value} at frame {frame}, row {row}, column {col}, channel {channel} is outside [0, 1] (video values are RGB in [0, 1]; divide 8-bit values by 255)")]
+    Range {
+        /// The file.
+        path: PathBuf,
+        /// The value.
+        value: f64,
+        /// Its frame.
+        frame: usize,
+        /// Its row.
+        row: usize,
+        /// Its column.
+        col: usize,
+        /// Its channel (0 red, 1 green, 2 blue).
+        channel: usize,
     },
     /// A malformed or unsupported `.npy`.
     #[error("{path}: {message}")]
@@ -94,15 +118,15 @@ pub const MAX_IMAGE_BYTES: u64 = 256 << 20;
 /// `MAX_DECODED_BYTES` is the same 8 GiB).
 pub const MAX_VIDEO_BYTES: u64 = 8 << 30;
 
-/// Every `*.png` of `dir`, sorted by file name.
+/// Every `*.png` of `dir`, in natural order with the numbering checked
+/// ([`r4d_fsio::seq::frame_sequence`]: a gap or a number written twice is an error).
 pub fn png_frames(dir: &Path) -> Result<Vec<PathBuf>, VideoIoError> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+    let files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(io_err(dir))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_file() && p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")))
         .collect();
-    files.sort_by(|a, b| a.file_name().cmp(&b.file_name()));
-    Ok(files)
+    Ok(r4d_fsio::seq::frame_sequence(files)?)
 }
 
 fn read_png_dir<T: Real>(dir: &Path) -> Result<Video<T>, VideoIoError> {
@@ -262,7 +286,7 @@ pub fn decode_npy_video<T: Real>(bytes: &[u8], path: &Path) -> Result<Video<T>, 
         path: path.to_path_buf(),
         message,
     };
-    let a = r4d_fsio::npy::parse(bytes).map_err(bad)?;
+    let a = r4d_fsio::npy::parse(bytes).map_err(|e| bad(e.to_string()))?;
     if a.dtype == r4d_fsio::npy::Dtype::Bool {
         return Err(bad(
             "dtype |b1 is not supported for a video (float32 '<f4' or float64 '<f8')".into(),
@@ -278,6 +302,22 @@ pub fn decode_npy_video<T: Real>(bytes: &[u8], path: &Path) -> Result<Video<T>, 
             )))
         }
     };
+    // Checked before the copy: a value outside [0, 1] (or NaN) names where it is.
+    if let Some((i, value)) = a
+        .values_f64()
+        .enumerate()
+        .find(|(_, v)| !(0.0..=1.0).contains(v))
+    {
+        let (px, channel) = (i / 3, i % 3);
+        return Err(VideoIoError::Range {
+            path: path.to_path_buf(),
+            value,
+            frame: px / (h * w),
+            row: px / w % h,
+            col: px % w,
+            channel,
+        });
+    }
     let data: Vec<T> = a.values_f64().map(T::c).collect();
     Video::new(t, h, w, data).map_err(|e| bad(e.to_string()))
 }

@@ -293,15 +293,25 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
                 .iter()
                 .try_fold(0usize, |a, e| a.checked_add(e.1))
                 .ok_or_else(|| err("elements before 'vertex' declare too many rows".into()))?;
+            // Rows keep their line ends: a row without one is the file's last line, cut
+            // (a writer ends every row with a newline), possibly inside a number.
             let mut rows = text
-                .lines()
+                .split_inclusive('\n')
                 .filter(|l| !l.trim().is_empty())
                 .skip(skip_rows);
             for r in 0..count {
-                let row = rows.next().ok_or_else(|| {
-                    err(format!("vertex {r}: file ends early ({count} declared)"))
+                let line = rows.next().ok_or_else(|| {
+                    err(format!(
+                        "vertex {r}: file ends early ({count} declared, {r} present)"
+                    ))
                 })?;
-                let mut vals = row.split_whitespace();
+                if !line.ends_with('\n') {
+                    return Err(err(format!(
+                        "vertex {r}: the file ends inside the row ('{}' has no line end): truncated",
+                        line.trim()
+                    )));
+                }
+                let mut vals = line.split_whitespace();
                 for (ci, (name, _)) in props.iter().enumerate() {
                     let tok = vals
                         .next()
@@ -310,6 +320,14 @@ pub fn parse_ply(bytes: &[u8], file: &str) -> Result<PlyVertices> {
                         err(format!("vertex {r}: '{name}' = '{tok}' is not a number"))
                     })?;
                     columns[ci].1.push(v);
+                }
+                let extra = vals.count();
+                if extra > 0 {
+                    return Err(err(format!(
+                        "vertex {r}: {} values, the header declares {} properties",
+                        props.len() + extra,
+                        props.len()
+                    )));
                 }
             }
         }
@@ -448,5 +466,39 @@ mod tests {
             let e = parse_ply(h.as_bytes(), "huge.ply").unwrap_err().to_string();
             assert!(e.contains("huge.ply"), "{e}");
         }
+    }
+
+    #[test]
+    fn truncated_ascii_bodies_are_typed_errors() {
+        let head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nend_header\n";
+        let whole = format!("{head}1.25 2.5\n3.75 4.5\n5.125 6.875\n");
+        assert_eq!(
+            parse_ply(whole.as_bytes(), "ok.ply")
+                .unwrap()
+                .get("y")
+                .unwrap(),
+            &[2.5, 4.5, 6.875]
+        );
+        // Every cut inside the body: inside a number, between values, between rows.
+        for cut in head.len()..whole.len() - 1 {
+            let e = parse_ply(&whole.as_bytes()[..cut], "cut.ply")
+                .expect_err(&whole[..cut])
+                .to_string();
+            assert!(e.contains("cut.ply"), "{e}");
+            assert!(
+                e.contains("truncated") || e.contains("ends early") || e.contains("missing value"),
+                "{e}"
+            );
+        }
+        // Fewer rows than declared, with a line end.
+        let e = parse_ply(format!("{head}1 2\n3 4\n").as_bytes(), "few.ply")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("3 declared, 2 present"), "{e}");
+        // A row with more values than properties (the rows do not match the header).
+        let e = parse_ply(format!("{head}1 2 3\n4 5\n6 7\n").as_bytes(), "wide.ply")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("vertex 0: 3 values"), "{e}");
     }
 }

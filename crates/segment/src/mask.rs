@@ -601,12 +601,11 @@ pub fn read_npy(path: &Path) -> Result<NpyArray> {
 
 /// A mask array from the bytes of a `.npy` file ([`r4d_fsio::npy::parse`]: sizes checked).
 pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
-    let a = r4d_fsio::npy::parse(bytes).map_err(|e| {
-        if e.starts_with("dtype") {
+    let a = r4d_fsio::npy::parse(bytes).map_err(|e| match e {
+        r4d_fsio::npy::NpyError::Dtype(_) => {
             format!("{e}; save probabilities as float, not uint8")
-        } else {
-            e
         }
+        e => e.to_string(),
     })?;
     Ok(NpyArray {
         data: a.values_f32().collect(),

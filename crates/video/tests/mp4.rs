@@ -249,3 +249,29 @@ fn corrupt_h264_payloads_are_errors_or_frames_never_crashes() {
     }
     eprintln!("corrupted payloads: {ok} decoded, {err} typed errors");
 }
+
+#[test]
+fn frame_sizes_from_the_container_are_bounded_before_decoding() {
+    // A valid file whose sample entry claims 8192 x 8192 frames: 12 of them as f32 are
+    // 9.7 GB, over MAX_DECODED_BYTES, so the read is refused before a frame is decoded or
+    // a buffer of that size allocated; the header itself is within MAX_SIDE.
+    let v = clip(12, 16, 16);
+    let p = tmp("claims_8k.mp4");
+    write_mp4(&p, &v, 30.0).unwrap();
+    let mut bytes = std::fs::read(&p).unwrap();
+    let at = find(&bytes, b"avc1", find(&bytes, b"stsd", 0)) + 4 + 24;
+    bytes[at..at + 4].copy_from_slice(&[0x20, 0x00, 0x20, 0x00]);
+    std::fs::write(&p, &bytes).unwrap();
+    let info = probe(&p).unwrap();
+    assert_eq!((info.width, info.height, info.frames), (8192, 8192, 12));
+    let e = read_mp4::<f32>(&p, None).unwrap_err();
+    assert!(
+        matches!(&e, VideoError::Limit { limit, .. } if *limit == r4d_video::MAX_DECODED_BYTES),
+        "{e}"
+    );
+    assert!(e.to_string().contains("claims_8k.mp4"), "{e}");
+    // One side over MAX_SIDE is refused from the header.
+    bytes[at..at + 2].copy_from_slice(&[0x40, 0x00]);
+    std::fs::write(&p, &bytes).unwrap();
+    assert!(matches!(probe(&p), Err(VideoError::Limit { .. })));
+}
