@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Hostile-input sweep over every `r4d` subcommand (issue 41).
+"""Hostile-input sweep over every `r4d` subcommand.
 
 Generates malformed, extreme and inconsistent inputs (files and option values), runs the
 `r4d` binary on each with a per-run timeout and classifies every run:

@@ -96,7 +96,7 @@ fn bench_scale_sizes_are_bounded_before_any_work() {
     );
 }
 
-/// Issue 41, item 3: every count read from a file or a flag, and every product of them, is
+/// Every count read from a file or a flag, and every product of them, is
 /// refused against its documented limit before any work (each of these used to hang, abort
 /// or allocate without bound), and fast.
 #[test]
@@ -248,7 +248,7 @@ fn counts_and_their_products_are_bounded_before_work() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Issue 41, item 3: readers count the bytes they read; a device or a pipe given as a file is
+/// Readers count the bytes they read; a device or a pipe given as a file is
 /// refused at the reader's limit instead of filling memory.
 #[cfg(unix)]
 #[test]

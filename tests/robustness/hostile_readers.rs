@@ -1,4 +1,4 @@
-//! Issue 41, the reader and flag side: one hostile-input test per class, through the CLI.
+//! The readers and the float options: one hostile-input test per class, through the CLI.
 //! Video inputs (range, natural order and numbering, frame sizes), `.npy` headers numpy
 //! refuses, truncated ASCII PLY files and float options out of range must each end in a
 //! typed error naming the file (or flag) and the value or limit: never a panic, a hang or
