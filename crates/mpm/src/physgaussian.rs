@@ -17,6 +17,11 @@
 //!   `load_from_sampling` does) and notes such keys in a warning.
 //! * **Safety checks.** A substep that violates the CFL bound is refused up front, and a run
 //!   that produces NaN, exceeds the CFL speed or leaves the grid stops with a typed error.
+//! * **Strict keys and values.** A key given twice, a key PhysGaussian does not read (at the top
+//!   level, in a boundary condition or a material region) or an unknown material or collider
+//!   surface is an error naming it with the closest known name (PhysGaussian keeps the last
+//!   duplicate, ignores unknown keys and treats any unknown surface as friction); the values go
+//!   through the project's validator ([`SimConfig::validate_named`]).
 //! * `enforce_particle_velocity_rotation` is not supported (a typed error says so).
 //! * A missing `g` is an error (PhysGaussian's decoder default, a scalar, crashes its solver).
 //! * Sand's stress uses `log(max(|s|, 1e-14))` so an inverted particle gives a finite stress.
