@@ -80,6 +80,10 @@ fn variants(study: Study, base: &FitConfig, free: &[Vec<String>]) -> Vec<Variant
                         .cloned()
                         .unwrap_or_default();
                     p.id = id;
+                    if !free_density {
+                        // Bounds of a parameter that is not free are refused.
+                        p.bounds.retain(|n, _| !n.eq_ignore_ascii_case("density"));
+                    }
                     p.free = Some(names);
                     p
                 })

@@ -28,6 +28,17 @@ pub struct PrepareArgs {
     overwrite: bool,
 }
 
+/// Decodes the preprocessing keys of a PhysGaussian (or PhysFlow) scene config under the rules
+/// of every config dialect (`r4d_mpm::strict`): a key twice, or an unknown key at the top level
+/// or inside `particle_filling`, is an error naming it with the closest known key.
+fn read_config(text: &str) -> std::result::Result<PrepareConfig, String> {
+    let map = r4d_mpm::strict::parse_json_object(text)?;
+    let mut known = r4d_mpm::physgaussian::known_keys();
+    known.extend(r4d_datasets::physflow_config::PHYSFLOW_ONLY);
+    r4d_mpm::strict::check_keys(map.keys(), &known, "")?;
+    r4d_mpm::strict::decode_value(serde_json::Value::Object(map))
+}
+
 /// Runs the command.
 pub fn run(a: PrepareArgs) -> Result<()> {
     super::paths::Io::new()
@@ -35,11 +46,11 @@ pub fn run(a: PrepareArgs) -> Result<()> {
         .input("--config", &a.config)
         .output("--out", &a.out)
         .check()?;
-    let input = r4d_splat::ply::read_gaussians(&a.scene)?;
+    // The config first: its mistakes are reported before the scene is read.
     let text = r4d_fsio::read_to_string_bounded(&a.config, r4d_fsio::MAX_TEXT_BYTES)
         .with_context(|| format!("reading {}", a.config.display()))?;
-    let cfg: PrepareConfig = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a PhysGaussian scene config", a.config.display()))?;
+    let cfg = read_config(&text).map_err(|e| anyhow::anyhow!("{}: {e}", a.config.display()))?;
+    let input = r4d_splat::ply::read_gaussians(&a.scene)?;
     let p = prepare(&input, &cfg, &a.config.display().to_string())?;
     for w in &p.warnings {
         eprintln!("warning: {}: {w}", a.config.display());

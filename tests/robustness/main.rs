@@ -6,6 +6,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod config_dialects;
 mod errors;
 mod fault_injection;
 mod hostile_options;

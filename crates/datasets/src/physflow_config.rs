@@ -26,8 +26,10 @@
 //!   `particle_filling` with its defaults) become an [`r4d_splat::PrepareConfig`].
 //!
 //! Differences from PhysFlow's decoder, on purpose: a missing `g` is an error (PhysFlow's
-//! default, the scalar 9.8, crashes its solver); keys PhysFlow's decoder does not know are
-//! reported as warnings (PhysFlow ignores them silently).
+//! default, the scalar 9.8, crashes its solver); a key given twice, or a key PhysFlow's decoder
+//! does not know (at any depth), is an error naming it with the closest known key (PhysFlow
+//! keeps the last and ignores unknown keys silently); the values go through the project's one
+//! validator ([`SimConfig::validate_named`]), as the project's TOML and PhysGaussian's JSON do.
 
 use crate::error::{DatasetError, Result};
 use r4d_mpm::physgaussian;
@@ -128,7 +130,7 @@ pub struct PhysFlowConfig {
 }
 
 /// Keys read by PhysFlow's decoder that the PhysGaussian importer does not know.
-const PHYSFLOW_ONLY: &[&str] = &[
+pub const PHYSFLOW_ONLY: &[&str] = &[
     "opt_frame_dt",
     "mu_N",
     "lam_N",
@@ -189,12 +191,13 @@ pub fn load(path: &Path) -> Result<PhysFlowConfig> {
 
 /// Decodes PhysFlow config text; `path` names the file in errors.
 pub fn decode(text: &str, path: &Path) -> Result<PhysFlowConfig> {
-    let root: Value = serde_json::from_str(text)
-        .map_err(|e| DatasetError::invalid(path, format!("not JSON: {e}")))?;
-    let mut map = match root {
-        Value::Object(m) => m,
-        _ => return Err(DatasetError::invalid(path, "expected a JSON object")),
-    };
+    // A key twice is an error (never last-wins), as in every config dialect.
+    let mut map =
+        r4d_mpm::strict::parse_json_object(text).map_err(|e| DatasetError::invalid(path, e))?;
+    let mut known = physgaussian::known_keys();
+    known.extend(PHYSFLOW_ONLY);
+    r4d_mpm::strict::check_keys(map.keys(), &known, "")
+        .map_err(|e| DatasetError::invalid(path, e))?;
     let mut warnings = Vec::new();
     let material_name = match map.get("material") {
         None => "jelly".to_string(),
@@ -227,9 +230,19 @@ pub fn decode(text: &str, path: &Path) -> Result<PhysFlowConfig> {
         other => {
             return Err(DatasetError::invalid(
                 path,
-                format!(
-                    "material: unknown '{other}' (PhysFlow accepts jelly, elastic, metal, sand, \
-                     foam, plasticine, newtonian, non_newtonian)"
+                r4d_mpm::strict::unknown_value(
+                    "material",
+                    other,
+                    &[
+                        "jelly",
+                        "elastic",
+                        "metal",
+                        "sand",
+                        "foam",
+                        "plasticine",
+                        "newtonian",
+                        "non_newtonian",
+                    ],
                 ),
             ))
         }
@@ -316,7 +329,7 @@ pub fn decode(text: &str, path: &Path) -> Result<PhysFlowConfig> {
             pre.insert(key.into(), v.clone());
         }
     }
-    let prepare: PrepareConfig = serde_json::from_value(Value::Object(pre))
+    let prepare: PrepareConfig = r4d_mpm::strict::decode_value(Value::Object(pre))
         .map_err(|e| DatasetError::invalid(path, format!("preprocessing keys: {e}")))?;
     for key in PHYSFLOW_ONLY {
         map.remove(*key);
@@ -473,5 +486,35 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("o.json") && e.contains("opt_frame_dt"), "{e}");
+    }
+
+    /// The same strict rules as every config dialect: a key twice, an unknown key at any depth
+    /// (top level, a boundary condition, `particle_filling`) and the project's value limits.
+    #[test]
+    fn keys_and_values_are_checked_as_in_every_dialect() {
+        let err = |t: &str| decode(t, Path::new("p.json")).unwrap_err().to_string();
+        let e = err(r#"{"g": [0,0,0], "E": 0.1, "E": 0.2}"#);
+        assert!(
+            e.contains("p.json") && e.contains("duplicate key `E`"),
+            "{e}"
+        );
+        let e = err(r#"{"g": [0,0,0], "opt_frame_dtt": 0.1}"#);
+        assert!(
+            e.contains("`opt_frame_dtt`") && e.contains("`opt_frame_dt`?"),
+            "{e}"
+        );
+        let e = err(r#"{"g": [0,0,0], "particle_filling": {"n_gird": 64}}"#);
+        assert!(
+            e.contains("`particle_filling.n_gird`") && e.contains("`n_grid`?"),
+            "{e}"
+        );
+        let e = err(r#"{"g": [0,0,0], "grid_v_damping_scale": 0}"#);
+        assert!(
+            e.contains("invalid grid_v_damping_scale = 0: must be > 0"),
+            "{e}"
+        );
+        let e = err(r#"{"g": [0,0,0], "material": "jely"}"#);
+        assert!(e.contains("`jelly`?"), "{e}");
+        assert!(err("[]").contains("expected a table of keys"));
     }
 }

@@ -147,62 +147,127 @@ fn time32(t: f64) -> f32 {
 }
 
 impl BoundaryCondition {
-    /// Checks values; `what` names the condition in errors (e.g. `"boundary[2]"`).
-    pub fn validate(&self, what: &str) -> Result<()> {
-        let bad = |field: &str, msg: &str| Err(Error::config(what, format!("{field}: {msg}")));
-        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    /// Checks values against the grid of `n_grid` nodes per axis; `what` names the condition
+    /// in errors (e.g. `"c.toml: boundary[2]"`), and each error is an
+    /// [`Error::InvalidParameter`] whose `field` is the bare key (`start_time`, `size[1]`).
+    ///
+    /// Every vector is finite; a box's half extents (`size`) are > 0; a time window has a
+    /// finite `start_time` and an `end_time` after it (an empty or NaN window never acts);
+    /// `layers` lies in `[1, (n_grid - 1) / 2]` (walls on both faces leave interior nodes);
+    /// `num_dt >= 1`; a collider's normal is non-zero and its friction >= 0.
+    pub fn validate(&self, what: &str, n_grid: usize) -> Result<()> {
+        let bad = |field: &str, value: f64, reason: &str| {
+            Err(Error::InvalidParameter {
+                what: what.to_string(),
+                field: field.to_string(),
+                value,
+                reason: reason.to_string(),
+            })
+        };
+        let finite = |field: &str, v: &[f64; 3]| -> Result<()> {
+            match v.iter().position(|x| !x.is_finite()) {
+                Some(a) => bad(&format!("{field}[{a}]"), v[a], "must be finite"),
+                None => Ok(()),
+            }
+        };
+        let half = |v: &[f64; 3]| -> Result<()> {
+            finite("size", v)?;
+            match v.iter().position(|x| *x <= 0.0) {
+                Some(a) => bad(
+                    &format!("size[{a}]"),
+                    v[a],
+                    "a half extent must be > 0 (a box with a zero or negative half extent \
+                     holds nothing)",
+                ),
+                None => Ok(()),
+            }
+        };
+        let window = |start: f64, end: Option<f64>| -> Result<()> {
+            if !start.is_finite() {
+                return bad("start_time", start, "must be finite (s)");
+            }
+            match end {
+                Some(e) if e.is_nan() || e <= start => bad(
+                    "end_time",
+                    e,
+                    &format!("must be > start_time = {start} (the window [start, end) is empty)"),
+                ),
+                _ => Ok(()),
+            }
+        };
         match self {
-            BoundaryCondition::BoundingBox { layers, .. } if *layers == 0 => {
-                bad("layers", "must be >= 1")
+            BoundaryCondition::BoundingBox { layers, .. } => {
+                let max = n_grid.saturating_sub(1) / 2;
+                if *layers == 0 || *layers as usize > max {
+                    return bad(
+                        "layers",
+                        f64::from(*layers),
+                        &format!(
+                            "must lie in [1, {max}] (walls on both faces of a grid of n_grid = \
+                             {n_grid} nodes must leave interior nodes)"
+                        ),
+                    );
+                }
+                Ok(())
             }
             BoundaryCondition::Cuboid {
                 point,
                 size,
                 velocity,
+                start_time,
+                end_time,
                 ..
             } => {
-                if !finite(point) || !finite(size) || !finite(velocity) {
-                    return bad("point/size/velocity", "must be finite");
-                }
-                Ok(())
+                finite("point", point)?;
+                half(size)?;
+                finite("velocity", velocity)?;
+                window(*start_time, Some(*end_time))
             }
             BoundaryCondition::SurfaceCollider {
                 point,
                 normal,
                 friction,
+                start_time,
+                end_time,
                 ..
             } => {
-                if !finite(point) || !finite(normal) {
-                    return bad("point/normal", "must be finite");
-                }
+                finite("point", point)?;
+                finite("normal", normal)?;
                 if normal.iter().map(|x| x * x).sum::<f64>() < 1e-20 {
-                    return bad("normal", "must be non-zero");
+                    return bad("normal", 0.0, "must be non-zero");
                 }
                 if !(friction.is_finite() && *friction >= 0.0) {
-                    return bad("friction", "must be >= 0");
+                    return bad("friction", *friction, "must be >= 0");
                 }
-                Ok(())
+                window(*start_time, Some(*end_time))
             }
             BoundaryCondition::ParticleImpulse {
-                force, point, size, ..
+                force,
+                point,
+                size,
+                num_dt,
+                start_time,
             } => {
-                if !finite(force) || !finite(point) || !finite(size) {
-                    return bad("force/point/size", "must be finite");
+                finite("force", force)?;
+                finite("point", point)?;
+                half(size)?;
+                if *num_dt == 0 {
+                    return bad("num_dt", 0.0, "must be >= 1 (substeps the force acts)");
                 }
-                Ok(())
+                window(*start_time, None)
             }
             BoundaryCondition::ParticleVelocity {
                 velocity,
                 point,
                 size,
-                ..
+                start_time,
+                end_time,
             } => {
-                if !finite(velocity) || !finite(point) || !finite(size) {
-                    return bad("velocity/point/size", "must be finite");
-                }
-                Ok(())
+                finite("velocity", velocity)?;
+                finite("point", point)?;
+                half(size)?;
+                window(*start_time, Some(*end_time))
             }
-            _ => Ok(()),
         }
     }
 
@@ -298,5 +363,78 @@ impl BoundaryCondition {
             },
             _ => return None,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A condition that could never act (a NaN or infinite start, an empty window, a box with
+    /// a zero or negative half extent, no substeps) or that would index past the grid (walls
+    /// thicker than half of it) is an error naming the field and the limit.
+    #[test]
+    fn conditions_that_never_act_or_overrun_the_grid_are_refused() {
+        let cuboid = |start_time: f64, end_time: f64, size: [f64; 3]| BoundaryCondition::Cuboid {
+            point: [0.5; 3],
+            size,
+            velocity: [0.0; 3],
+            start_time,
+            end_time,
+            reset: false,
+        };
+        let err = |b: BoundaryCondition| b.validate("c.toml", 32).unwrap_err().to_string();
+        let e = err(cuboid(f64::NAN, f64::INFINITY, [0.1; 3]));
+        assert!(
+            e.contains("c.toml") && e.contains("start_time = NaN") && e.contains("finite"),
+            "{e}"
+        );
+        let e = err(cuboid(1.0, 0.5, [0.1; 3]));
+        assert!(
+            e.contains("end_time = 0.5") && e.contains("> start_time"),
+            "{e}"
+        );
+        let e = err(cuboid(0.0, f64::NAN, [0.1; 3]));
+        assert!(e.contains("end_time = NaN"), "{e}");
+        let e = err(cuboid(0.0, 1.0, [0.1, -0.2, 0.1]));
+        assert!(
+            e.contains("size[1] = -0.2") && e.contains("half extent"),
+            "{e}"
+        );
+        let e = err(BoundaryCondition::ParticleVelocity {
+            velocity: [0.0; 3],
+            point: [0.5; 3],
+            size: [0.0, 0.1, 0.1],
+            start_time: 0.0,
+            end_time: 1.0,
+        });
+        assert!(e.contains("size[0] = 0"), "{e}");
+        let e = err(BoundaryCondition::ParticleImpulse {
+            force: [0.0; 3],
+            point: [0.5; 3],
+            size: [0.1; 3],
+            num_dt: 0,
+            start_time: 0.0,
+        });
+        assert!(e.contains("num_dt = 0"), "{e}");
+        for layers in [0, 16, u32::MAX] {
+            let e = err(BoundaryCondition::BoundingBox {
+                layers,
+                surface: Surface::Slip,
+            });
+            assert!(
+                e.contains(&format!("layers = {layers}")) && e.contains("[1, 15]"),
+                "{e}"
+            );
+        }
+        BoundaryCondition::BoundingBox {
+            layers: 15,
+            surface: Surface::Slip,
+        }
+        .validate("c.toml", 32)
+        .unwrap();
+        cuboid(0.0, f64::INFINITY, [0.1; 3])
+            .validate("c.toml", 32)
+            .unwrap();
     }
 }

@@ -85,10 +85,17 @@ impl TimeConfig {
     /// `frame_dt / substep_dt` cannot saturate or wrap); `file` names the source (a config
     /// file, or the flag that set `frames`).
     pub fn validate(&self, file: &str) -> Result<()> {
+        self.validate_named(file, &|f| f.to_string())
+    }
+
+    /// [`TimeConfig::validate`] for a config whose keys are spelled otherwise: `name` maps a
+    /// field's path here (`time.frames`) to the key of the source file (PhysGaussian's
+    /// `frame_num`).
+    pub fn validate_named(&self, file: &str, name: &dyn Fn(&str) -> String) -> Result<()> {
         use crate::budget::{MAX_FRAMES, MAX_TOTAL_SUBSTEPS};
         let bad = |field: &str, value: f64, reason: String| Error::InvalidParameter {
             what: file.to_string(),
-            field: field.to_string(),
+            field: name(field),
             value,
             reason,
         };
@@ -269,23 +276,47 @@ impl SimConfig {
     }
 
     /// Parses config text; the extension of `path` picks the format (JSON for `.json`, TOML
-    /// otherwise).
+    /// otherwise). Decoded by [`crate::strict`]: a key twice, an unknown key at any depth (named
+    /// by its path, with the closest known key) or a document that is not a table is an error.
     pub fn parse(text: &str, path: &Path) -> Result<SimConfig> {
         let file = path.display().to_string();
-        if path.extension().and_then(|e| e.to_str()) == Some("json") {
-            serde_json::from_str(text).map_err(|e| Error::config(&file, e.to_string()))
-        } else {
-            toml::from_str(text).map_err(|e| Error::config(&file, e.to_string()))
-        }
+        crate::strict::decode(text, crate::strict::Format::of_path(path))
+            .map_err(|e| Error::config(&file, e))
     }
 
-    /// Checks every value; `file` names the source in errors.
+    /// Checks every value; `file` names the source in errors. The particles' source (shapes,
+    /// a `particles` file or `--particles`) is the loader's to check: a config without shapes
+    /// is valid when the particles come from elsewhere.
     pub fn validate(&self, file: &str) -> Result<()> {
+        self.validate_named(file, &|f| f.to_string())
+    }
+
+    /// The one validator of every config dialect (the project's TOML and JSON, PhysGaussian's
+    /// and PhysFlow's scene JSON decode into a [`SimConfig`] and come here): the same limits
+    /// and messages, with each field named as the source file spells it. `name` maps a
+    /// field's path in this struct (`domain.n_grid`, `solver.grid_v_damping`,
+    /// `parts[1].poisson_ratio`, `boundary[2].start_time`) to that key.
+    pub fn validate_named(&self, file: &str, name: &dyn Fn(&str) -> String) -> Result<()> {
         let bad = |field: &str, value: f64, reason: &str| Error::InvalidParameter {
             what: file.to_string(),
-            field: field.to_string(),
+            field: name(field),
             value,
             reason: reason.to_string(),
+        };
+        // A part's or a condition's own check names its bare field; prefix its path here.
+        let rename = |prefix: String, e: Error| match e {
+            Error::InvalidParameter {
+                field,
+                value,
+                reason,
+                ..
+            } => Error::InvalidParameter {
+                what: file.to_string(),
+                field: name(&format!("{prefix}.{field}")),
+                value,
+                reason,
+            },
+            other => other,
         };
         let d = &self.domain;
         if !(d.grid_lim.is_finite() && d.grid_lim > 0.0) {
@@ -298,7 +329,7 @@ impl SimConfig {
                 "must lie in [8, 1024]",
             ));
         }
-        self.time.validate(file)?;
+        self.time.validate_named(file, name)?;
         let s = &self.solver;
         for (a, g) in s.gravity.iter().enumerate() {
             if !g.is_finite() {
@@ -319,10 +350,14 @@ impl SimConfig {
             return Err(bad("solver.rpic_damping", s.rpic_damping, "must be <= 1"));
         }
         if self.parts.is_empty() {
-            return Err(Error::config(file, "parts: at least one part is required"));
+            return Err(Error::config(
+                file,
+                format!("{}: at least one part is required", name("parts")),
+            ));
         }
         for (i, p) in self.parts.iter().enumerate() {
-            p.validate(&format!("{file}: parts[{i}]"))?;
+            p.validate(file)
+                .map_err(|e| rename(format!("parts[{i}]"), e))?;
         }
         let mut sampled = 0u64;
         for (i, sh) in self.shapes.iter().enumerate() {
@@ -340,15 +375,90 @@ impl SimConfig {
                 ),
             ));
         }
-        if self.shapes.is_empty() && self.particles.is_none() {
-            return Err(Error::config(
-                file,
-                "no particles: give [[shapes]] or particles = \"file.ply\" (or --particles)",
-            ));
-        }
         for (i, b) in self.boundary.iter().enumerate() {
-            b.validate(&format!("{file}: boundary[{i}]"))?;
+            b.validate(file, d.n_grid)
+                .map_err(|e| rename(format!("boundary[{i}]"), e))?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const BASE: &str = "[time]\nsubstep_dt = 1e-4\nframes = 2\n[[parts]]\nmaterial = \"jelly\"\n";
+
+    fn err(text: &str, file: &str) -> String {
+        match SimConfig::parse(text, Path::new(file)) {
+            Ok(c) => c.validate(file).unwrap_err().to_string(),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn a_config_without_shapes_is_valid_when_particles_come_from_elsewhere() {
+        let c = SimConfig::parse(BASE, Path::new("c.toml")).unwrap();
+        c.validate("c.toml").unwrap();
+    }
+
+    #[test]
+    fn boundary_values_are_named_by_their_path() {
+        let e = err(
+            &format!("{BASE}[[boundary]]\ntype = \"bounding_box\"\n[[boundary]]\ntype = \"cuboid\"\npoint = [0.5, 0.5, 0.5]\nsize = [0.1, 0.1, 0.1]\nstart_time = nan\n"),
+            "c.toml",
+        );
+        assert!(
+            e.contains("c.toml: invalid boundary[1].start_time = NaN"),
+            "{e}"
+        );
+        let e = err(
+            &format!("{BASE}[[boundary]]\ntype = \"bounding_box\"\nlayers = 4000000000\n"),
+            "c.toml",
+        );
+        assert!(
+            e.contains("boundary[0].layers") && e.contains("[1, 31]"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn typos_at_any_depth_duplicates_and_non_tables_are_errors() {
+        let e = err(
+            &format!("{BASE}[solver]\ngravty = [0.0, 0.0, -9.8]\n"),
+            "c.toml",
+        );
+        assert!(
+            e.starts_with("c.toml: ") && e.contains("`solver.gravty`") && e.contains("`gravity`?"),
+            "{e}"
+        );
+        let e = err(
+            &format!("{BASE}[[boundary]]\ntype = \"cuboid\"\npoint = [0.5, 0.5, 0.5]\nsize = [0.1, 0.1, 0.1]\nstrat_time = 0.0\n"),
+            "c.toml",
+        );
+        assert!(
+            e.contains("`boundary[0].strat_time`") && e.contains("`start_time`?"),
+            "{e}"
+        );
+        let e = err(&BASE.replace("\"jelly\"", "\"jely\""), "c.toml");
+        assert!(
+            e.contains("`jely` of `parts[0].material`") && e.contains("`jelly`?"),
+            "{e}"
+        );
+        let e = err(
+            &format!("{BASE}[domain]\nn_grid = 32\nn_grid = 64\n"),
+            "c.toml",
+        );
+        assert!(e.contains("c.toml") && e.contains("duplicate key"), "{e}");
+        let json = r#"{"time": {"substep_dt": 1e-4, "frames": 2, "frames": 3}, "parts": [{}]}"#;
+        let e = err(json, "c.json");
+        assert!(e.contains("c.json") && e.contains("duplicate"), "{e}");
+        for text in ["[]", "[{\"substep_dt\": 1e-4}, [], []]", "1"] {
+            let e = err(text, "c.json");
+            assert!(
+                e.contains("c.json: expected a table of keys"),
+                "{text}: {e}"
+            );
+        }
     }
 }

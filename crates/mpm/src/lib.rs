@@ -55,6 +55,7 @@ pub mod reference;
 pub mod scene;
 pub mod sim;
 pub mod snapshot;
+pub mod strict;
 pub mod substep;
 pub mod transfer;
 #[cfg(target_arch = "x86_64")]

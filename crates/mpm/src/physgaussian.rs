@@ -17,6 +17,11 @@
 //!   `load_from_sampling` does) and notes such keys in a warning.
 //! * **Safety checks.** A substep that violates the CFL bound is refused up front, and a run
 //!   that produces NaN, exceeds the CFL speed or leaves the grid stops with a typed error.
+//! * **Strict keys and values.** A key given twice, a key PhysGaussian does not read (at the top
+//!   level, in a boundary condition or a material region) or an unknown material or collider
+//!   surface is an error naming it with the closest known name (PhysGaussian keeps the last
+//!   duplicate, ignores unknown keys and treats any unknown surface as friction); the values go
+//!   through the project's validator ([`SimConfig::validate_named`]).
 //! * `enforce_particle_velocity_rotation` is not supported (a typed error says so).
 //! * A missing `g` is an error (PhysGaussian's decoder default, a scalar, crashes its solver).
 //! * Sand's stress uses `log(max(|s|, 1e-14))` so an inverted particle gives a finite stress.
@@ -26,6 +31,7 @@ use crate::config::{Domain, ForceForm, OutOfDomain, SimConfig, SolverConfig, Tim
 use crate::error::{Error, Result};
 use crate::material::{Material, PartParams};
 use crate::scene::ParticleSet;
+use crate::strict;
 use serde_json::{Map, Value};
 use std::path::Path;
 
@@ -152,18 +158,118 @@ const PREPROCESSING_KEYS: &[&str] = &[
     "particle_filling",
 ];
 
+/// The keys of a PhysGaussian scene config that reach the solver.
+const KNOWN_KEYS: &[&str] = &[
+    "material",
+    "E",
+    "nu",
+    "density",
+    "g",
+    "grid_lim",
+    "n_grid",
+    "substep_dt",
+    "frame_dt",
+    "frame_num",
+    "yield_stress",
+    "plastic_viscosity",
+    "friction_angle",
+    "hardening",
+    "xi",
+    "softening",
+    "rpic_damping",
+    "grid_v_damping_scale",
+    "boundary_conditions",
+    "additional_material_params",
+];
+
+/// PhysGaussian's material names.
+const MATERIALS: &[&str] = &["jelly", "metal", "sand", "foam", "snow", "plasticine"];
+
+/// PhysGaussian's boundary condition types.
+const BOUNDARY_TYPES: &[&str] = &[
+    "bounding_box",
+    "cuboid",
+    "particle_impulse",
+    "enforce_particle_translation",
+    "release_particles_sequentially",
+    "surface_collider",
+    "enforce_particle_velocity_rotation",
+];
+
+/// Every top-level key a PhysGaussian scene config may hold (the solver's, the renderer's
+/// and the preprocessing keys), for dialects built on this one.
+pub fn known_keys() -> Vec<&'static str> {
+    let mut k = KNOWN_KEYS.to_vec();
+    k.extend(IGNORED_RENDER_KEYS);
+    k.extend(PREPROCESSING_KEYS);
+    k
+}
+
+/// The PhysGaussian key of a field of the decoded [`SimConfig`] (its path as
+/// [`SimConfig::validate_named`] names it); `sources[k]` is the `boundary_conditions` entry
+/// condition `k` comes from.
+fn key_of(field: &str, sources: &[usize]) -> String {
+    let simple = match field {
+        "domain.grid_lim" => Some("grid_lim"),
+        "domain.n_grid" => Some("n_grid"),
+        "time.substep_dt" => Some("substep_dt"),
+        "time.frame_dt" | "time.substeps_per_frame" => Some("frame_dt"),
+        "time.frames" => Some("frame_num"),
+        "solver.grid_v_damping" => Some("grid_v_damping_scale"),
+        "solver.rpic_damping" => Some("rpic_damping"),
+        "parts" => Some("material"),
+        _ => None,
+    };
+    if let Some(k) = simple {
+        return k.to_string();
+    }
+    if let Some(rest) = field.strip_prefix("solver.gravity") {
+        return format!("g{rest}");
+    }
+    let split = |rest: &str| -> Option<(usize, String)> {
+        let (i, f) = rest.split_once("].")?;
+        Some((i.parse().ok()?, f.to_string()))
+    };
+    if let Some((i, f)) = field.strip_prefix("parts[").and_then(split) {
+        let key = match f.as_str() {
+            "youngs_modulus_pa" => "E",
+            "poisson_ratio" => "nu",
+            "density_kg_m3" => "density",
+            "yield_stress_pa" => "yield_stress",
+            "plastic_viscosity_pa_s" => "plastic_viscosity",
+            "friction_angle_deg" => "friction_angle",
+            other => other,
+        };
+        return match i {
+            0 => key.to_string(),
+            _ => format!("additional_material_params[{}].{key}", i - 1),
+        };
+    }
+    if let Some((k, f)) = field.strip_prefix("boundary[").and_then(split) {
+        let entry = sources.get(k).copied().unwrap_or(k);
+        return format!("boundary_conditions[{entry}].{f}");
+    }
+    field.to_string()
+}
+
 /// Converts PhysGaussian config text; `file` names the source in errors.
+///
+/// The text is read by [`strict`] rules (a key twice or an unknown key at any depth is an
+/// error naming it, with the closest known key) and the decoded config goes through
+/// [`SimConfig::validate_named`], the validator of the project's own configs, with each field
+/// named by its PhysGaussian key.
 pub fn import_str(text: &str, file: &str) -> Result<Import> {
-    let root: Value =
-        serde_json::from_str(text).map_err(|e| Error::config(file, format!("not JSON: {e}")))?;
-    let map = root
-        .as_object()
-        .ok_or_else(|| Error::config(file, "expected a JSON object"))?;
+    let root = strict::parse_json_object(text).map_err(|e| Error::config(file, e))?;
+    let map = &root;
     let r = Reader {
         file,
         map,
         ctx: String::new(),
     };
+    let mut known: Vec<&str> = KNOWN_KEYS.to_vec();
+    known.extend(IGNORED_RENDER_KEYS);
+    known.extend(PREPROCESSING_KEYS);
+    strict::check_keys(map.keys(), &known, "").map_err(|e| Error::config(file, e))?;
     let mut warnings = Vec::new();
 
     let mat_name = match map.get("material") {
@@ -174,11 +280,9 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
     let material = Material::from_name(&mat_name)
         .filter(|m| m.physgaussian_id().is_some())
         .ok_or_else(|| {
-            r.err(
-                "material",
-                &format!(
-                    "unknown material '{mat_name}' (jelly, metal, sand, foam, snow, plasticine)"
-                ),
+            Error::config(
+                file,
+                strict::unknown_value("material", &mat_name, MATERIALS),
             )
         })?;
     let defaults = PartParams::default();
@@ -199,16 +303,11 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
         None => return Err(r.err("g", "missing (a 3-vector in m/s^2, e.g. [0, 0, -9.8])")),
         Some(_) => r.vec3_req("g")?,
     };
+    // Only the types are checked here; the values go through `SimConfig::validate_named`.
     let grid_lim = r.f64_or("grid_lim", 2.0)?;
     let n_grid = r.f64_or("n_grid", 50.0)?;
-    if !(n_grid >= 1.0 && n_grid.fract() == 0.0) {
-        return Err(r.err("n_grid", "expected a positive integer"));
-    }
-    if !(8.0..=1024.0).contains(&n_grid) {
-        return Err(r.err("n_grid", &format!("{n_grid} must lie in [8, 1024]")));
-    }
-    if !(grid_lim.is_finite() && grid_lim > 0.0) {
-        return Err(r.err("grid_lim", &format!("{grid_lim} must be > 0")));
+    if !(n_grid >= 0.0 && n_grid.fract() == 0.0) {
+        return Err(r.err("n_grid", "expected a non-negative integer"));
     }
     let substep_dt = r.f64_or("substep_dt", 1e-4)?;
     let frame_dt = r.f64_or("frame_dt", 1e-2)?;
@@ -216,10 +315,8 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
     if !(frame_num >= 0.0 && frame_num.fract() == 0.0) {
         return Err(r.err("frame_num", "expected a non-negative integer"));
     }
-    if !(substep_dt > 0.0 && frame_dt >= substep_dt) {
-        return Err(r.err("substep_dt", "must be > 0 and <= frame_dt"));
-    }
-    // PhysGaussian: steps_per_frame = int(frame_dt / substep_dt) (truncation, as Python does).
+    // PhysGaussian: steps_per_frame = int(frame_dt / substep_dt) (truncation, as Python does);
+    // a non-positive substep_dt is refused by the validator before this count is used.
     let substeps = (frame_dt / substep_dt) as u32;
 
     let mut parts = vec![base];
@@ -240,6 +337,12 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
                 map: m,
                 ctx: format!("additional_material_params[{i}]."),
             };
+            strict::check_keys(
+                m.keys(),
+                &["point", "size", "E", "nu", "density"],
+                &format!("additional_material_params[{i}]"),
+            )
+            .map_err(|e| Error::config(file, e))?;
             regions.push(MaterialRegion {
                 point: rr.vec3_req("point")?,
                 size: rr.vec3_req("size")?,
@@ -254,6 +357,8 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
     }
 
     let mut boundary = Vec::new();
+    // The entry of `boundary_conditions` each condition comes from (one entry may expand).
+    let mut sources = Vec::new();
     if let Some(v) = map.get("boundary_conditions") {
         let list = v
             .as_array()
@@ -267,7 +372,69 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
                 map: m,
                 ctx: format!("boundary_conditions[{i}]."),
             };
-            let ty = m.get("type").and_then(Value::as_str).unwrap_or("");
+            let ty = match m.get("type") {
+                Some(Value::String(t)) => t.as_str(),
+                Some(_) => return Err(b.err("type", "expected a string")),
+                None => return Err(b.err("type", "missing")),
+            };
+            let keys: &[&str] = match ty {
+                "bounding_box" => &["type"],
+                "cuboid" => &[
+                    "type",
+                    "point",
+                    "size",
+                    "velocity",
+                    "start_time",
+                    "end_time",
+                    "reset",
+                ],
+                "particle_impulse" => &["type", "force", "point", "size", "num_dt", "start_time"],
+                "enforce_particle_translation" => &[
+                    "type",
+                    "velocity",
+                    "point",
+                    "size",
+                    "start_time",
+                    "end_time",
+                ],
+                "release_particles_sequentially" => &[
+                    "type",
+                    "normal",
+                    "start_position",
+                    "end_position",
+                    "start_time",
+                    "end_time",
+                    "num_layers",
+                ],
+                "surface_collider" => &[
+                    "type",
+                    "point",
+                    "normal",
+                    "surface",
+                    "friction",
+                    "start_time",
+                    "end_time",
+                ],
+                "enforce_particle_velocity_rotation" => {
+                    return Err(b.err(
+                        "type",
+                        "enforce_particle_velocity_rotation is not supported yet",
+                    ))
+                }
+                other => {
+                    return Err(Error::config(
+                        file,
+                        strict::unknown_value(
+                            &format!("boundary_conditions[{i}].type"),
+                            other,
+                            BOUNDARY_TYPES,
+                        ),
+                    ))
+                }
+            };
+            strict::check_keys(m.keys(), keys, &format!("boundary_conditions[{i}]"))
+                .map_err(|e| Error::config(file, e))?;
+            let before = boundary.len();
             match ty {
                 "bounding_box" => boundary.push(BoundaryCondition::BoundingBox {
                     layers: 3,
@@ -331,16 +498,27 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
                     }
                 }
                 "surface_collider" => {
-                    let surface = match m.get("surface").and_then(Value::as_str) {
-                        Some("sticky") => Surface::Sticky,
-                        Some("slip") => Surface::Slip,
-                        Some("cut") => {
-                            return Err(b.err(
+                    let surface = match m.get("surface") {
+                        Some(Value::String(t)) => match t.as_str() {
+                            "sticky" => Surface::Sticky,
+                            "slip" => Surface::Slip,
+                            "friction" => Surface::Friction,
+                            "cut" => return Err(b.err(
                                 "surface",
                                 "'cut' is a hard-coded special case of PhysGaussian and is not supported",
-                            ))
-                        }
-                        Some(_) => Surface::Friction,
+                            )),
+                            other => {
+                                return Err(Error::config(
+                                    file,
+                                    strict::unknown_value(
+                                        &format!("boundary_conditions[{i}].surface"),
+                                        other,
+                                        &["sticky", "slip", "friction", "cut"],
+                                    ),
+                                ))
+                            }
+                        },
+                        Some(_) => return Err(b.err("surface", "expected a string")),
                         None => return Err(b.err("surface", "missing")),
                     };
                     boundary.push(BoundaryCondition::SurfaceCollider {
@@ -358,48 +536,18 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
                         ));
                     }
                 }
-                "enforce_particle_velocity_rotation" => {
-                    return Err(b.err(
-                        "type",
-                        "enforce_particle_velocity_rotation is not supported yet",
-                    ))
-                }
-                other => {
-                    return Err(b.err("type", &format!("unknown boundary condition '{other}'")))
-                }
+                _ => {}
             }
+            sources.resize(boundary.len(), i);
+            debug_assert!(boundary.len() > before);
         }
     }
 
-    let known: &[&str] = &[
-        "material",
-        "E",
-        "nu",
-        "density",
-        "g",
-        "grid_lim",
-        "n_grid",
-        "substep_dt",
-        "frame_dt",
-        "frame_num",
-        "yield_stress",
-        "plastic_viscosity",
-        "friction_angle",
-        "hardening",
-        "xi",
-        "softening",
-        "rpic_damping",
-        "grid_v_damping_scale",
-        "boundary_conditions",
-        "additional_material_params",
-    ];
     for key in map.keys() {
         if PREPROCESSING_KEYS.contains(&key.as_str()) {
             warnings.push(format!(
                 "{key}: Gaussian-scene preprocessing is done by `r4d prepare`; the particles are taken as given, in MPM space"
             ));
-        } else if !known.contains(&key.as_str()) && !IGNORED_RENDER_KEYS.contains(&key.as_str()) {
-            warnings.push(format!("{key}: unknown key, ignored"));
         }
     }
 
@@ -427,17 +575,7 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
         particles: None,
         boundary,
     };
-    for (i, p) in config.parts.iter().enumerate() {
-        let what = if i == 0 {
-            file.to_string()
-        } else {
-            format!("{file}: additional_material_params[{}]", i - 1)
-        };
-        p.validate(&what)?;
-    }
-    for (i, b) in config.boundary.iter().enumerate() {
-        b.validate(&format!("{file}: boundary_conditions[{i}]"))?;
-    }
+    config.validate_named(file, &|f| key_of(f, &sources))?;
     Ok(Import {
         config,
         regions,
@@ -487,7 +625,10 @@ mod tests {
         let e = import_str(r#"{"g": [0,0,-9.8], "nu": 0.5}"#, "s.json")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("s.json") && e.contains("poisson_ratio"), "{e}");
+        assert!(
+            e.contains("s.json") && e.contains("invalid nu = 0.5"),
+            "{e}"
+        );
         let e = import_str(r#"{"E": 1e5}"#, "s.json")
             .unwrap_err()
             .to_string();
@@ -498,10 +639,101 @@ mod tests {
         )
         .unwrap_err()
         .to_string();
-        assert!(e.contains("boundary_conditions[0].type"), "{e}");
+        assert!(e.contains("`boundary_conditions[0].type`"), "{e}");
         let e = import_str(r#"{"g": [0,0,0], "n_grid": 1e9}"#, "s.json")
             .unwrap_err()
             .to_string();
         assert!(e.contains("n_grid") && e.contains("1024"), "{e}");
+    }
+
+    /// The importer's values go through the project's validator: what the TOML refuses, the
+    /// JSON refuses with the same limit and message, naming the PhysGaussian key.
+    #[test]
+    fn the_project_validator_checks_imported_values() {
+        let toml_err = |solver: &str| {
+            let text = format!(
+                "[time]\nsubstep_dt = 1e-4\nframes = 2\n[solver]\n{solver}\n[[parts]]\nmaterial = \"jelly\"\n"
+            );
+            SimConfig::parse(&text, Path::new("c.toml"))
+                .unwrap()
+                .validate("c.toml")
+                .unwrap_err()
+                .to_string()
+        };
+        for v in ["-1", "0"] {
+            let e = import_str(
+                &format!(r#"{{"g": [0,0,-9.8], "grid_v_damping_scale": {v}}}"#),
+                "s.json",
+            )
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains("s.json: invalid grid_v_damping_scale"), "{e}");
+            let t = toml_err(&format!("grid_v_damping = {v}"));
+            let reason = |m: &str| m.rsplit(": ").next().unwrap_or("").to_string();
+            assert_eq!(reason(&e), reason(&t), "{e} / {t}");
+        }
+        let e = import_str(r#"{"g": [0,0,-9.8], "frame_num": 1e9}"#, "s.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("frame_num") && e.contains("MAX_FRAMES"), "{e}");
+        let e = import_str(r#"{"g": [0,0,-9.8], "substep_dt": -1}"#, "s.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("invalid substep_dt = -1"), "{e}");
+        let e = import_str(
+            r#"{"g": [0,0,-9.8], "boundary_conditions": [{"type": "bounding_box"},
+                {"type": "release_particles_sequentially", "normal": [0,0,1], "start_position": 1,
+                 "end_position": 1, "start_time": 0, "end_time": 1}]}"#,
+            "s.json",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("boundary_conditions[1].size[2]") && e.contains("half extent"),
+            "the expanded layers are named by their entry: {e}"
+        );
+    }
+
+    /// Keys: a key twice, an unknown key at any depth, an unknown material or surface is an
+    /// error naming it with the closest known name (never last-wins, never jelly).
+    #[test]
+    fn keys_and_names_are_strict() {
+        let err = |t: &str| import_str(t, "s.json").unwrap_err().to_string();
+        let e = err(r#"{"g": [0,0,-9.8], "E": 1e5, "E": 2e5}"#);
+        assert!(
+            e.contains("s.json") && e.contains("duplicate key `E`"),
+            "{e}"
+        );
+        let e = err(r#"{"g": [0,0,-9.8], "materail": "metal"}"#);
+        assert!(
+            e.contains("`materail`") && e.contains("did you mean `material`?"),
+            "{e}"
+        );
+        let e = err(r#"{"g": [0,0,-9.8], "material": "jely"}"#);
+        assert!(
+            e.contains("unknown value `jely` of `material`: did you mean `jelly`?"),
+            "{e}"
+        );
+        let e = err(r#"{"g": [0,0,-9.8], "material": "rubber"}"#);
+        assert!(e.contains("unknown value `rubber`"), "{e}");
+        let e = err(
+            r#"{"g": [0,0,-9.8], "boundary_conditions": [{"type": "cuboid", "point": [1,1,1],
+                "size": [0.1,0.1,0.1], "velocity": [0,0,0], "strat_time": 0}]}"#,
+        );
+        assert!(
+            e.contains("`boundary_conditions[0].strat_time`") && e.contains("`start_time`?"),
+            "{e}"
+        );
+        let e = err(
+            r#"{"g": [0,0,-9.8], "boundary_conditions": [{"type": "surface_collider",
+                "point": [1,1,1], "normal": [0,0,1], "surface": "stiky"}]}"#,
+        );
+        assert!(e.contains("`stiky`") && e.contains("`sticky`?"), "{e}");
+        let e = err(
+            r#"{"g": [0,0,-9.8], "additional_material_params": [{"point": [1,1,1],
+                "size": [1,1,1], "E": 1e5, "nu": 0.2, "densty": 3}]}"#,
+        );
+        assert!(e.contains("additional_material_params[0].densty"), "{e}");
+        assert!(err("[]").contains("expected a table of keys"));
     }
 }

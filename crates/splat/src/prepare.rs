@@ -45,9 +45,18 @@ pub const MAX_FILL_PARTICLES: usize = 50_000_000;
 /// The most particles per filled cell (`max_particles_per_cell`).
 pub const MAX_PARTICLES_PER_CELL: usize = 64;
 
-/// PhysGaussian's `particle_filling` block.
+/// The smallest `scale` (simulation-space length of the simulated region's longest side):
+/// half a cell of the finest simulation grid (`grid_lim` 2 over 1024 nodes). Smaller regions
+/// collapse onto a few f32 positions (at `1e-300` every particle is one point).
+pub const MIN_SCALE: f64 = 1e-3;
+
+/// The largest `scale`: the region is centred at (1, 1, 1), so its longest side reaches the
+/// domain's faces at 2 (beyond, positions leave `[0, 2]^3`; at `1e300` they are infinite).
+pub const MAX_SCALE: f64 = 2.0;
+
+/// PhysGaussian's `particle_filling` block (an unknown key in it is an error).
 #[derive(Clone, Debug, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct Filling {
     /// Cells per axis of the filling grid.
     pub n_grid: usize,
@@ -206,8 +215,13 @@ pub fn prepare_with(
     if let Some(&a) = cfg.rotation_axis.iter().find(|&&a| a > 2) {
         return Err(bad(format!("rotation_axis {a} (0, 1 or 2)")));
     }
-    if !(cfg.scale.is_finite() && cfg.scale > 0.0) {
-        return Err(bad(format!("scale = {} must be positive", cfg.scale)));
+    if !(MIN_SCALE..=MAX_SCALE).contains(&cfg.scale) {
+        return Err(bad(format!(
+            "scale = {} must lie in [{MIN_SCALE}, {MAX_SCALE}] (MIN_SCALE, MAX_SCALE): the \
+             simulated region, centred at (1, 1, 1), must fit in [0, 2]^3 and span more than \
+             half a cell of the finest grid",
+            cfg.scale
+        )));
     }
     let rot = rotation_of(&cfg.rotation_degree, &cfg.rotation_axis);
     let kept: Vec<u32> = (0..input.len() as u32)
@@ -579,5 +593,46 @@ mod tests {
         let cfg: PrepareConfig =
             serde_json::from_str(r#"{"particle_filling": {"n_grid": 64}}"#).unwrap();
         prepare(&g, &cfg, "degenerate").unwrap();
+    }
+
+    /// `scale` 1e300 made infinite positions and 1e-300 a single point: both are refused
+    /// with the limits; the limits themselves are accepted.
+    #[test]
+    fn scale_is_bounded() {
+        let mut g = Gaussians::default();
+        for i in 0..3 {
+            g.means.push([i as f32 * 0.1, 0.0, 0.0]);
+            g.log_scales.push([(0.03f32).ln(); 3]);
+            g.quats.push([1.0, 0.0, 0.0, 0.0]);
+            g.opacity_logits.push(3.0);
+            g.sh.extend_from_slice(&[0.5; 3]);
+        }
+        for scale in [1e300, 1e-300, 0.0, -1.0, f64::NAN, 2.5, 5e-4] {
+            let cfg = PrepareConfig {
+                scale,
+                ..Default::default()
+            };
+            let e = prepare(&g, &cfg, "p.json").unwrap_err().to_string();
+            assert!(
+                e.contains("p.json") && e.contains("scale") && e.contains("MAX_SCALE"),
+                "{e}"
+            );
+        }
+        for scale in [MIN_SCALE, 1.0, MAX_SCALE] {
+            let cfg = PrepareConfig {
+                scale,
+                ..Default::default()
+            };
+            let p = prepare(&g, &cfg, "p.json").unwrap();
+            assert!(p
+                .particles
+                .iter()
+                .flatten()
+                .all(|c| c.is_finite() && (0.0..=2.0).contains(c)));
+            assert!(
+                p.particles[0] != p.particles[2],
+                "distinct positions at scale {scale}"
+            );
+        }
     }
 }

@@ -246,11 +246,73 @@ pub fn default_loss() -> DmsConfig {
     c
 }
 
+/// Parses parameter names (case-insensitive): an unknown name is an error with the closest
+/// known name, and a parameter named twice (`free = ["E", "E"]`, or `E` and `e`) is an error.
 fn kinds(names: &[String], what: &str) -> Result<Vec<ParamKind>, FitError> {
-    names
-        .iter()
-        .map(|n| ParamKind::parse(n).map_err(|e| FitError::Input(format!("{what}: {e}"))))
-        .collect()
+    let mut out: Vec<ParamKind> = Vec::with_capacity(names.len());
+    for (i, n) in names.iter().enumerate() {
+        let k = parse_kind(n, what)?;
+        if let Some(j) = out.iter().position(|&o| o == k) {
+            return Err(FitError::Input(format!(
+                "{what}: parameter {} given twice (`{}` and `{n}`, entries {j} and {i})",
+                k.name(),
+                names[j]
+            )));
+        }
+        out.push(k);
+    }
+    Ok(out)
+}
+
+/// Parses one parameter name; an unknown one names the closest known name.
+fn parse_kind(n: &str, what: &str) -> Result<ParamKind, FitError> {
+    ParamKind::parse(n).map_err(|e| {
+        let all: Vec<&str> = ParamKind::ALL.iter().map(|k| k.name()).collect();
+        let hint = r4d_mpm::strict::suggest(n, &all)
+            .map(|s| format!(": did you mean `{s}`?"))
+            .unwrap_or_default();
+        FitError::Input(format!("{what}: {e}{hint} (known: {})", all.join(", ")))
+    })
+}
+
+/// The kinds of a part override's `bounds` keys; a parameter bounded twice (`E` and `e`) is an
+/// error.
+fn bound_kinds(p: &PartFit) -> Result<Vec<(ParamKind, &String)>, FitError> {
+    let mut out: Vec<(ParamKind, &String)> = Vec::with_capacity(p.bounds.len());
+    for n in p.bounds.keys() {
+        let k = parse_kind(n, &format!("parts id {}: bounds", p.id))?;
+        if let Some((_, first)) = out.iter().find(|(o, _)| *o == k) {
+            return Err(FitError::Input(format!(
+                "parts id {}: bounds of {} given twice (`{first}` and `{n}`)",
+                p.id,
+                k.name()
+            )));
+        }
+        out.push((k, n));
+    }
+    Ok(out)
+}
+
+/// Bounds for a parameter that is not free would be ignored: an error naming the key.
+fn check_bounds_are_free(p: &PartFit, free: &[ParamKind], whence: &str) -> Result<(), FitError> {
+    for (k, n) in bound_kinds(p)? {
+        if !free.contains(&k) {
+            let list: Vec<&str> = free.iter().map(|k| k.name()).collect();
+            return Err(FitError::Input(format!(
+                "parts id {}: bounds.{n}: {} is not a free parameter of part {} (free, {whence}: \
+                 {}): remove its bounds or add it to free",
+                p.id,
+                k.name(),
+                p.id,
+                if list.is_empty() {
+                    "none".to_string()
+                } else {
+                    list.join(", ")
+                }
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// The most Latin hypercube candidates an initialisation may evaluate (`[init] candidates`,
@@ -283,11 +345,12 @@ pub fn check_iters(n: usize) -> Result<(), String> {
 }
 
 impl FitConfig {
-    /// Reads a TOML file.
+    /// Reads a TOML file (decoded by `r4d_mpm::strict`: an unknown key at any depth names its
+    /// path and the closest known key) and validates it.
     pub fn load(path: &Path) -> Result<FitConfig, FitError> {
         let text = r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES)
             .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
-        let c: FitConfig = toml::from_str(&text)
+        let c: FitConfig = r4d_mpm::strict::decode(&text, r4d_mpm::strict::Format::Toml)
             .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
         c.validate()
             .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
@@ -376,12 +439,16 @@ impl FitConfig {
             kinds(f, "free")?;
         }
         for p in &self.parts {
-            if let Some(f) = &p.free {
-                kinds(f, &format!("parts id {}: free", p.id))?;
+            let free = match (&p.free, &self.free) {
+                (Some(f), _) => Some((kinds(f, &format!("parts id {}: free", p.id))?, "its free")),
+                (None, Some(f)) => Some((kinds(f, "free")?, "the top-level free")),
+                (None, None) => None,
+            };
+            bound_kinds(p)?;
+            if let Some((free, whence)) = &free {
+                check_bounds_are_free(p, free, whence)?;
             }
             for (n, [lo, hi]) in &p.bounds {
-                ParamKind::parse(n)
-                    .map_err(|e| FitError::Input(format!("parts id {}: bounds: {e}", p.id)))?;
                 if !(lo.is_finite() && hi.is_finite() && *lo > 0.0 && hi >= lo) {
                     return bad(format!(
                         "parts id {}: bounds of {n} [{lo}, {hi}] must be positive and ordered",
@@ -438,6 +505,14 @@ impl FitConfig {
             })
             .collect::<Result<Vec<_>, FitError>>()
             .and_then(|free| {
+                for o in &self.parts {
+                    let whence = match (&o.free, &self.free) {
+                        (Some(_), _) => "its free",
+                        (None, Some(_)) => "the top-level free",
+                        (None, None) => "by its material",
+                    };
+                    check_bounds_are_free(o, &free[o.id], whence)?;
+                }
                 check_free(parts, &free, self.granularity)
                     .map_err(FitError::Input)
                     .map(|()| free)
@@ -561,5 +636,60 @@ mod tests {
         assert!(e.contains("valley"), "{e}");
         let off = serde_json::to_string(&FitConfig::default()).unwrap();
         assert!(!off.contains("valley"), "{off}");
+    }
+
+    /// A free parameter named twice, a bound given twice, a bound for a parameter that is not
+    /// free, or a misspelt name is an error naming the key (never silently ignored).
+    #[test]
+    fn free_parameters_and_bounds_are_checked_against_each_other() {
+        let parse = |t: &str| toml::from_str::<FitConfig>(t).unwrap();
+        let e = parse("free = [\"E\", \"E\"]\n")
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("free: parameter E given twice"), "{e}");
+        let e = parse("free = [\"E\", \"density\", \"e\"]\n")
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("given twice"), "{e}");
+        let e = parse("[[parts]]\nid = 0\nfree = [\"nu\", \"nu\"]\n")
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("parts id 0: free") && e.contains("twice"), "{e}");
+        let e = parse("free = [\"densty\"]\n")
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("did you mean `density`?"), "{e}");
+        let e = parse("free = [\"E\"]\n[[parts]]\nid = 0\nbounds = { nu = [0.1, 0.4] }\n")
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("bounds.nu") && e.contains("not a free parameter of part 0"),
+            "{e}"
+        );
+        let e = parse("[[parts]]\nid = 0\nbounds = { E = [1e4, 1e6], e = [1e3, 1e5] }\n")
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bounds of E given twice"), "{e}");
+        // Free by material (jelly: E, nu, density): bounds of its yield stress are refused
+        // when the free kinds are resolved.
+        let c = parse("[[parts]]\nid = 0\nbounds = { yield_stress = [1e3, 1e5] }\n");
+        c.validate().unwrap();
+        let e = c
+            .free_kinds(&[PartParams::default()])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("bounds.yield_stress") && e.contains("by its material"),
+            "{e}"
+        );
+        let ok = parse("free = [\"E\"]\n[[parts]]\nid = 0\nbounds = { E = [1e4, 1e6] }\n");
+        ok.validate().unwrap();
+        ok.free_kinds(&[PartParams::default()]).unwrap();
     }
 }
