@@ -221,7 +221,6 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
         let n = g.n;
         let np = p.count;
         let inv_dx = k::<T>(c.inv_dx);
-        let nb = blocks_per_axis(n);
         let n_slabs = slabs::slab_count(n);
         if g.scratch.len() != 2 * np + n_slabs + 1 {
             g.scratch = vec![0; 2 * np + n_slabs + 1];
@@ -290,23 +289,9 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
                     .for_each(stage);
             }
 
-            // 3. Mark the active blocks; sort the particles by slab.
-            g.active.fill(0);
-            for &k in keys.iter() {
-                if k == u32::MAX {
-                    continue;
-                }
-                let k = k as usize;
-                let (bx, by, bz) = (k / (n * n), (k / n) % n, k % n);
-                for ix in bx / BLOCK..=(bx + 2) / BLOCK {
-                    for iy in by / BLOCK..=(by + 2) / BLOCK {
-                        for iz in bz / BLOCK..=(bz + 2) / BLOCK {
-                            g.active[(ix * nb + iy) * nb + iz] = 1;
-                        }
-                    }
-                }
-            }
+            // 3. Sort the particles by slab; mark the active blocks.
             slabs::sort_by_slab(keys, n, order, starts);
+            slabs::mark_active_blocks(seq, keys, order, starts, n, &mut g.active);
 
             // 4. Scatter: even slabs in parallel, then odd slabs.
             let (v, mass, stress) = (&p.v, &p.mass, &p.stress);

@@ -4,6 +4,7 @@
 //! slabs. The summation order of every node is fixed by the scheme (deterministic for any
 //! thread count).
 
+use r4d_mpm::kernels::{blocks_per_axis, BLOCK};
 use rayon::prelude::*;
 
 /// Width (in node layers along x) of the slabs scattered in parallel; must be >= 2.
@@ -116,9 +117,98 @@ pub fn scatter_by_slab<T: Send, O: Send>(
     }
 }
 
+/// Flags the blocks of [`BLOCK`]^3 nodes that the stencils of the particles touch
+/// (`active[(ix nb + iy) nb + iz]`, 1 or 0), one x row of blocks per task (in parallel unless
+/// `seq`): a row reads the particles of the slabs whose stencils can reach it (`order` and
+/// `starts` from [`slabs::sort_by_slab`] of `keys`) and writes only its own flags.
+pub fn mark_active_blocks(
+    seq: bool,
+    keys: &[u32],
+    order: &[u32],
+    starts: &[u32],
+    n: usize,
+    active: &mut [u32],
+) {
+    let nb = blocks_per_axis(n);
+    let row = |(ix, flags): (usize, &mut [u32])| {
+        flags.fill(0);
+        // Stencil bases bx with bx / BLOCK <= ix <= (bx + 2) / BLOCK.
+        let (x0, x1) = (
+            (ix * BLOCK).saturating_sub(2),
+            (ix * BLOCK + BLOCK - 1).min(n - 1),
+        );
+        let (s0, s1) = (x0 / SLAB, (x1 / SLAB).min(starts.len() - 2));
+        let ids = &order[starts[s0] as usize..starts[s1 + 1] as usize];
+        for &i in ids {
+            let k = keys[i as usize] as usize;
+            let (bx, by, bz) = (k / (n * n), (k / n) % n, k % n);
+            if bx < x0 || bx > x1 {
+                continue;
+            }
+            for iy in by / BLOCK..=(by + 2) / BLOCK {
+                for iz in bz / BLOCK..=(bz + 2) / BLOCK {
+                    flags[iy * nb + iz] = 1;
+                }
+            }
+        }
+    };
+    if seq {
+        active.chunks_mut(nb * nb).enumerate().for_each(row);
+    } else {
+        active.par_chunks_mut(nb * nb).enumerate().for_each(row);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn active_blocks_are_those_the_stencils_touch() {
+        // Few particles on large grids, so that most blocks stay inactive and a missed or
+        // extra flag shows.
+        for (n, count, seed) in [
+            (9, 3, 1u32),
+            (16, 6, 2),
+            (21, 10, 3),
+            (33, 12, 4),
+            (64, 40, 5),
+        ] {
+            let nb = blocks_per_axis(n);
+            // Stencil bases inside the grid (0..=n-3 per axis), some particles left out.
+            let m = (n - 2) as u32;
+            let keys: Vec<u32> = (0..count)
+                .map(|i| {
+                    let h = (i + 1000 * seed).wrapping_mul(2654435761);
+                    if h % 17 == 0 {
+                        return u32::MAX;
+                    }
+                    let (x, y, z) = ((h >> 3) % m, (h >> 11) % m, (h >> 19) % m);
+                    (x * n as u32 + y) * n as u32 + z
+                })
+                .collect();
+            let mut order = vec![0; keys.len()];
+            let mut starts = vec![0; slab_count(n) + 1];
+            sort_by_slab(&keys, n, &mut order, &mut starts);
+            let mut want = vec![0u32; nb * nb * nb];
+            for &k in keys.iter().filter(|&&k| k != u32::MAX) {
+                let k = k as usize;
+                let (bx, by, bz) = (k / (n * n), (k / n) % n, k % n);
+                for ix in bx / BLOCK..=(bx + 2) / BLOCK {
+                    for iy in by / BLOCK..=(by + 2) / BLOCK {
+                        for iz in bz / BLOCK..=(bz + 2) / BLOCK {
+                            want[(ix * nb + iy) * nb + iz] = 1;
+                        }
+                    }
+                }
+            }
+            for seq in [true, false] {
+                let mut active = vec![7u32; nb * nb * nb];
+                mark_active_blocks(seq, &keys, &order, &starts, n, &mut active);
+                assert_eq!(active, want, "n = {n}, seq = {seq}");
+            }
+        }
+    }
 
     #[test]
     fn sort_by_slab_is_a_stable_sort_by_slab_leaving_out_the_marked() {
