@@ -546,6 +546,17 @@ pub fn run(a: FitArgs) -> Result<()> {
             (a, out, None)
         }
     };
+    // The dataset options act only on a dataset: given without one they would be ignored.
+    if a.dataset.is_none() {
+        for (flag, given) in [
+            ("--key-frames", a.dataset_opts.key_frames.is_some()),
+            ("--format", a.dataset_opts.format.is_some()),
+        ] {
+            if given {
+                bail!("{flag} applies only to --dataset: give --dataset DIR or drop {flag}");
+            }
+        }
+    }
     io(&a, &out).check()?;
     let backend = a.backend.compute()?;
     let _profile = super::profile::Profile::on_compute(&backend, a.profile)?;

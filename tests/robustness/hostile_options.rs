@@ -80,12 +80,32 @@ fn fit_trajectory_refuses_what_fit_refuses_before_writing() {
 }
 
 #[test]
+fn dataset_options_without_a_dataset_are_refused() {
+    let out = out_dir("fit_dataset_opts");
+    for (flag, value) in [("--key-frames", "3"), ("--format", "physflow")] {
+        refused(
+            &[
+                "fit",
+                "--video",
+                "/nonexistent.npy",
+                "--out",
+                out.to_str().unwrap(),
+                flag,
+                value,
+            ],
+            &[flag, "only to --dataset"],
+        );
+    }
+}
+
+#[test]
 fn bench_scale_sizes_are_bounded_before_any_work() {
     for (flag, value, needle) in [
         ("--resolution", "30000x30000", "pixels"),
         ("--frames", "0", "frames"),
         ("--substeps", "1000000", "substeps"),
         ("--gaussians", "1000000000", "gaussians"),
+        ("--gaussians", "0", "at least the block's"),
         ("--cells", "1", "cells"),
     ] {
         refused(&["bench-scale", flag, value], &[needle]);

@@ -330,6 +330,15 @@ fn reference_video(
     let mut files = video::frame_files(&gen)?;
     let mut fps = opts.fps.unwrap_or(1.0 / cfg.extras.frame_dt);
     if let Some(k) = opts.key_frames {
+        if k > files.len() {
+            return Err(DatasetError::invalid(
+                &gen,
+                format!(
+                    "--key-frames {k}: more key frames than the {} frames in the folder",
+                    files.len()
+                ),
+            ));
+        }
         let idx = video::key_frame_indices(files.len(), k);
         files = idx.into_iter().map(|i| files[i].clone()).collect();
         if opts.fps.is_none() {

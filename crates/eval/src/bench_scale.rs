@@ -98,9 +98,11 @@ impl BenchScale {
                 self.cells
             ));
         }
-        if self.gaussians > l.max_gaussians {
+        // The block's particles are Gaussians too: fewer would silently mean the block alone.
+        let block = 8 * self.cells.pow(3);
+        if self.gaussians < block || self.gaussians > l.max_gaussians {
             return bad(format!(
-                "gaussians = {}: at most {}",
+                "gaussians = {}: at least the block's {block} particles (8 x cells^3), at most {}",
                 self.gaussians, l.max_gaussians
             ));
         }
