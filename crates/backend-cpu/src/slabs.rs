@@ -120,7 +120,7 @@ pub fn scatter_by_slab<T: Send, O: Send>(
 /// Flags the blocks of [`BLOCK`]^3 nodes that the stencils of the particles touch
 /// (`active[(ix nb + iy) nb + iz]`, 1 or 0), one x row of blocks per task (in parallel unless
 /// `seq`): a row reads the particles of the slabs whose stencils can reach it (`order` and
-/// `starts` from [`slabs::sort_by_slab`] of `keys`) and writes only its own flags.
+/// `starts` from [`sort_by_slab`] of `keys`) and writes only its own flags.
 pub fn mark_active_blocks(
     seq: bool,
     keys: &[u32],
