@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # MP4 fixtures made by another project's code (ffmpeg with libx264 / libx265 / its MPEG-4
-# encoder), for crates/video/tests/ffmpeg_fixtures.rs. Needs ffmpeg (Debian: apt install ffmpeg);
+# encoder), for crates/video/tests/video/ffmpeg_fixtures.rs. Needs ffmpeg (Debian: apt install ffmpeg);
 # the outputs are committed, so tests and CI do not need ffmpeg.
 #
 #   x264_high_bframes.mp4  H.264 High profile, CABAC, 2 B-frames, 8x8 transform, 160x96, 12 frames

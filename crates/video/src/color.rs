@@ -9,7 +9,7 @@
 //! Chroma: writing averages each 2 x 2 block; reading gives each pixel the chroma sample of its
 //! block (no interpolation), as ffmpeg's `yuv420p -> rgb24` conversion does (and so decord,
 //! through which PhysDreamer and PhysFlow read their videos): a decoded frame matches ffmpeg's
-//! decode to within a level or two (48.5 dB PSNR on tests/ffmpeg_fixtures.rs' High-profile clip). Decoded values are
+//! decode to within a level or two (48.5 dB PSNR on tests/video/ffmpeg_fixtures.rs' High-profile clip). Decoded values are
 //! rounded to 8 bits (`k / 255`).
 
 use rayon::prelude::*;

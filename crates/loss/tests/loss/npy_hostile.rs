@@ -1,5 +1,5 @@
 //! Hostile `.npy` headers: sizes read from the file are checked before anything is allocated
-//! or sliced (issue 23: a shape whose product overflows used to wrap and panic later).
+//! or sliced (a shape whose product overflows must not wrap).
 
 use r4d_loss::io::read_video;
 

@@ -84,7 +84,7 @@ fn ffmpeg_decodes_what_we_write() {
         .output()
         .is_ok_and(|o| o.status.success());
     if !ok {
-        eprintln!("SKIPPED ffmpeg_decodes_what_we_write: no ffmpeg on PATH (the cross-check needs it; the round trip through our own decoder is in tests/mp4.rs)");
+        eprintln!("SKIPPED ffmpeg_decodes_what_we_write: no ffmpeg on PATH (the cross-check needs it; the round trip through our own decoder is in tests/video/mp4.rs)");
         return;
     }
     let src: Video<f32> = r4d_loss::io::read_video(&fixture("x264_high_bframes")).unwrap();

@@ -1,0 +1,5 @@
+//! The loss crate's integration tests, in one binary: band-wise DMS against the whole-video
+//! loss, and hostile `.npy` headers.
+
+mod bands;
+mod npy_hostile;
