@@ -1,7 +1,7 @@
 //! The renderer on the Vulkan engine against the CPU backend on gsplat's golden scenes
 //! (`tests/fixtures/splat` at the repository root): images within 1e-6 of the CPU's on average
 //! and 1e-3 at most (f32 on both; the CPU is within 2.4e-3 of gsplat), every gradient array of `render_vjp` within 5e-3 relative L2 (the wgpu
-//! backend's bounds, `crates/backend-wgpu/tests/splat.rs`). Skipped without a Vulkan device
+//! backend's bounds, `crates/backend-wgpu/tests/wgpu/splat.rs`). Skipped without a Vulkan device
 //! unless `R4D_REQUIRE_GPU=1`.
 
 use r4d_backend_cpu::splat::CpuSplat;
