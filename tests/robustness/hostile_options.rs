@@ -1,4 +1,4 @@
-//! Issue 23, the classes fixed so far: options every command checks the same way before any
+//! Options every command checks the same way before any
 //! work (one validation path), sizes a user can ask for bounded, resume state checked against
 //! what it resumes. Each case must be a typed error that names the flag or file; none may
 //! panic, hang or write a result.
@@ -6,7 +6,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn r4d(args: &[&str]) -> std::process::Output {
+/// Runs `r4d args`.
+pub(crate) fn r4d(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_r4d"))
         .args(args)
         .output()
@@ -27,7 +28,7 @@ fn out_dir(name: &str) -> PathBuf {
 }
 
 /// Runs `r4d args`, expects a failure whose message contains every `needle`.
-fn refused(args: &[&str], needles: &[&str]) -> String {
+pub(crate) fn refused(args: &[&str], needles: &[&str]) -> String {
     let o = r4d(args);
     let err = String::from_utf8_lossy(&o.stderr).to_string();
     assert!(!o.status.success(), "{args:?} was accepted: {err}");

@@ -4,15 +4,8 @@
 //! typed error naming the file (or flag) and the value or limit: never a panic, a hang or
 //! silently wrong data.
 
+use super::hostile_options::{r4d, refused};
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn r4d(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_r4d"))
-        .args(args)
-        .output()
-        .unwrap()
-}
 
 fn out_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("r4d_readers_{}_{name}", std::process::id()));
@@ -23,18 +16,6 @@ fn out_dir(name: &str) -> PathBuf {
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// Runs `r4d args`, expects a failure whose message contains every `needle`.
-fn refused(args: &[&str], needles: &[&str]) -> String {
-    let o = r4d(args);
-    let err = String::from_utf8_lossy(&o.stderr).to_string();
-    assert!(!o.status.success(), "{args:?} was accepted: {err}");
-    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
-    for n in needles {
-        assert!(err.contains(n), "{args:?}: '{n}' not in: {err}");
-    }
-    err
 }
 
 /// A float32 `.npy` with a raw header (padded as numpy pads it).

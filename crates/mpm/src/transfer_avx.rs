@@ -68,9 +68,8 @@ unsafe fn gather_pair_form<const MLS: bool>(
 ) -> [Gathered<f32>; 2] {
     // Every node read below lies between a stencil's first and last node: check those once.
     for s in st {
-        let last = column_start(s, n, 2, 2) + 2;
         assert!(
-            s.base.iter().all(|&b| b >= 0) && last < nodes.len(),
+            s.base.iter().all(|&b| b >= 0) && column_start(s, n, 2, 2) + 2 < nodes.len(),
             "gather_pair: a stencil reaches outside the grid"
         );
     }
