@@ -110,7 +110,7 @@ fn benches(c: &mut Criterion) {
         "cpu",
         CpuBackend::default,
         |_| {},
-        &[10_000, 32_000, 100_000],
+        &[10_000, 32_000, 100_000, 300_000],
     );
     bench_backend(c, "reference", ReferenceBackend::new, |_| {}, &[10_000]);
     // The wgpu backend on whatever adapter is present (on a machine without a GPU: lavapipe,

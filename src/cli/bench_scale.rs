@@ -2,7 +2,7 @@
 //! memory (see `resonance4d::bench_scale`).
 
 use anyhow::{bail, Context, Result};
-use resonance4d::bench_scale::{compute_bound_line, run, table, BenchScale};
+use resonance4d::bench_scale::{compute_bound_line, init_table, run, run_init, table, BenchScale};
 use std::path::PathBuf;
 
 /// Arguments of `r4d bench-scale` (defaults: the paper's scale).
@@ -42,6 +42,11 @@ pub struct BenchScaleArgs {
     /// rest frame repeated; skips one forward simulation).
     #[arg(long, default_value = "truth")]
     reference: String,
+    /// Time the simulation-driven initialisation with this many Latin hypercube candidates
+    /// (the paper: 32), each simulating and scoring the benchmark's frames, instead of one
+    /// fit iteration.
+    #[arg(long, value_name = "CANDIDATES")]
+    init: Option<usize>,
     /// Also write the measurement as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -82,6 +87,12 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
     scale
         .validate()
         .map_err(|e| anyhow::anyhow!("--{}", e.to_string().replace(" = ", " ")))?;
+    if let Some(n) = a.init {
+        let max = r4d_optim::video::config::MAX_INIT_CANDIDATES;
+        if !(1..=max).contains(&n) {
+            bail!("--init {n}: candidates must lie in 1..={max} (MAX_INIT_CANDIDATES)");
+        }
+    }
     let backend = a.backend.compute()?;
     let _profile = super::profile::Profile::on_compute(&backend, a.profile)?;
     eprintln!(
@@ -90,6 +101,31 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
     );
     let heap: std::sync::Arc<dyn r4d_optim::HeapProbe> =
         std::sync::Arc::new(resonance4d::alloc::CountingProbe);
+    if let Some(n) = a.init {
+        let t = std::time::Instant::now();
+        let mut done = 0usize;
+        let mut progress = |c: &r4d_optim::Candidate| {
+            done += 1;
+            let what = match (c.score, &c.error) {
+                (Some(s), _) => format!("MS-SSIM {s:.4}"),
+                (None, Some(e)) => format!("failed: {e}"),
+                (None, None) => "failed".into(),
+            };
+            eprintln!(
+                "bench-scale: candidate {} done ({done}/{n}, {:.0} s): {what}",
+                c.index,
+                t.elapsed().as_secs_f64()
+            );
+        };
+        let (_, report) = run_init(&scale, backend, Some(heap), n, &mut progress)?;
+        println!("{}", init_table(&report));
+        if let Some(path) = &a.json {
+            let text = serde_json::to_string_pretty(&report)?;
+            r4d_fsio::write_atomic(path, text.as_bytes())
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        return Ok(());
+    }
     let (_, report) = run(&scale, backend, Some(heap))?;
     println!("{}", table(&report));
     if let (true, Some(b)) = (a.profile, &report.compute_bound) {

@@ -53,7 +53,7 @@ impl Profile {
         if on {
             eprintln!(
                 "--profile: the {backend} backend does not measure per-kernel GPU time (the \
-                 Vulkan backend does, with timestamp queries); nothing will be printed"
+                 Vulkan backend does, with timestamp queries); no per-kernel times will be printed"
             );
         }
         Profile { times: None }

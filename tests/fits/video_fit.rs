@@ -678,3 +678,27 @@ fn the_objective_runs_any_banded_loss() {
         }
     }
 }
+
+/// The initialisation's score, computed frame by frame as the simulation produces the frames
+/// (`Objective::ms_ssim`), is bitwise the MS-SSIM of the whole rendered videos, with the
+/// simulated frames one per video frame and with video frames between simulated frames.
+#[test]
+fn streamed_ms_ssim_equals_the_score_of_the_rendered_videos() {
+    use resonance4d::video_fit::fit::ms_ssim_score;
+    let truth = [jelly(2e4, 800.0), jelly(8e3, 1500.0)];
+    let start = [jelly(1.4e4, 1000.0), jelly(1.1e4, 1200.0)];
+    for fps_factor in [1.0, 1.5] {
+        let mut p = small_problem(&truth, 5);
+        if fps_factor != 1.0 {
+            p.fps *= fps_factor;
+        }
+        let obj = Objective::new(&p, None, &fit_config(0).loss, false).unwrap();
+        assert_eq!(obj.time_map().is_identity(), fps_factor == 1.0);
+        let whole = ms_ssim_score(&p, &obj.render(&start).unwrap()).unwrap();
+        let streamed = obj.ms_ssim(&start).unwrap();
+        assert!(whole > 0.0 && whole < 1.0, "{whole}");
+        assert_eq!(streamed.to_bits(), whole.to_bits(), "{streamed} vs {whole}");
+        // A different candidate scores differently (the score is not a constant).
+        assert_ne!(obj.ms_ssim(&truth).unwrap(), streamed);
+    }
+}

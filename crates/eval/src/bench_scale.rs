@@ -652,6 +652,164 @@ pub fn run(
     Ok((scene, report))
 }
 
+/// The measurement of the simulation-driven initialisation at the benchmark's scale
+/// ([`run_init`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct InitBenchReport {
+    /// Simulated particles.
+    pub particles: usize,
+    /// Gaussians.
+    pub gaussians: usize,
+    /// Video frames each candidate simulates and compares.
+    pub frames: usize,
+    /// Substeps per frame.
+    pub substeps_per_frame: usize,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// `cpu`, `wgpu` or `vulkan`.
+    pub backend: String,
+    /// Latin hypercube candidates evaluated.
+    pub candidates: usize,
+    /// Candidates whose simulation or score failed (recorded and skipped, as in a fit).
+    pub failed: usize,
+    /// At most this many candidates ran at once (the memory budget over the estimate).
+    pub concurrent: usize,
+    /// Threads available to the process (the candidates and their simulations share them).
+    pub threads: usize,
+    /// [`Objective::score_bytes`]: the estimated heap of one candidate.
+    pub candidate_bytes_estimate: u64,
+    /// The best candidate's MS-SSIM.
+    pub best_score: f64,
+    /// Wall time of the whole initialisation (s).
+    pub total_s: f64,
+    /// `total_s / candidates`.
+    pub per_candidate_s: f64,
+    /// Peak heap bytes during the initialisation (process total: inputs included).
+    pub peak_bytes: usize,
+    /// Heap bytes held before it (scene, particles, reference).
+    pub held_bytes: usize,
+    /// Whether the counting allocator measured the heap (false: peaks are 0).
+    pub heap_measured: bool,
+}
+
+/// Young's modulus bounds of [`run_init`]'s candidates (Pa): around the scene's parameters
+/// (1e5 start, 5e4 and 2e5 truth) and stable at its substep.
+pub const INIT_E_BOUNDS: [f64; 2] = [2e4, 5e5];
+
+/// Runs the video fit's initialisation ([`r4d_optim::video::fit::initialize`], f32 simulation,
+/// both parts' Young's moduli free in [`INIT_E_BOUNDS`]) with `candidates` Latin hypercube
+/// candidates over the benchmark's scene and frames, and measures it. `on_candidate` sees
+/// each candidate as it finishes (progress).
+pub fn run_init(
+    s: &BenchScale,
+    compute: Arc<dyn Compute>,
+    heap: Option<Arc<dyn r4d_optim::HeapProbe>>,
+    candidates: usize,
+    on_candidate: &mut dyn FnMut(&r4d_optim::Candidate),
+) -> Result<(BenchScene, InitBenchReport), FitError> {
+    struct Progress<'a>(&'a mut dyn FnMut(&r4d_optim::Candidate));
+    impl r4d_optim::video::FitHooks for Progress<'_> {
+        fn on_candidate(&mut self, c: &r4d_optim::Candidate) {
+            (self.0)(c)
+        }
+    }
+    if candidates == 0 {
+        return Err(FitError::Input(
+            "init candidates = 0: must be at least 1".into(),
+        ));
+    }
+    let backend = compute.name().to_string();
+    let scene = BenchScene::build(s, compute)?;
+    let p = &scene.problem;
+    // Both parts' Young's moduli free over a range where every candidate is stable at the
+    // benchmark's substep (the CFL bound at 5e5 Pa and 1000 kg/m^3 is 3e-4 s), so each one
+    // runs all its frames, as the paper's candidates do.
+    let parts = (0..2)
+        .map(|id| r4d_optim::video::config::PartFit {
+            id,
+            free: None,
+            bounds: [("E".to_string(), INIT_E_BOUNDS)].into_iter().collect(),
+        })
+        .collect();
+    let cfg = r4d_optim::video::FitConfig {
+        precision: Precision::F32,
+        free: Some(vec!["E".to_string()]),
+        parts,
+        init: r4d_optim::video::InitConfig {
+            candidates,
+            frames: s.frames,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let estimate = Objective::new(p, Some(s.frames), &cfg.loss, false)?.score_bytes();
+    let concurrent = (r4d_optim::video::INIT_MEMORY_BUDGET_BYTES / estimate.max(1)).max(1) as usize;
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let span = heap.as_ref().map(|h| h.start());
+    let t = Instant::now();
+    let (_, outcome) = r4d_optim::video::fit::initialize(p, &cfg, &mut Progress(on_candidate))?;
+    let total_s = t.elapsed().as_secs_f64();
+    let peak = span.as_ref().map_or(0, |s| s.peak());
+    let best_score = outcome
+        .ranking
+        .first()
+        .and_then(|&i| outcome.candidates[i].score)
+        .unwrap_or(f64::NAN);
+    let report = InitBenchReport {
+        particles: p.particles.x.len(),
+        gaussians: p.scene.len(),
+        frames: s.frames,
+        substeps_per_frame: s.substeps,
+        width: s.width,
+        height: s.height,
+        backend,
+        candidates,
+        failed: outcome.failed().count(),
+        concurrent: concurrent.min(threads).min(candidates),
+        threads,
+        candidate_bytes_estimate: estimate,
+        best_score,
+        total_s,
+        per_candidate_s: total_s / candidates as f64,
+        peak_bytes: peak,
+        held_bytes: span.as_ref().map_or(0, |s| s.base()),
+        heap_measured: peak > 0,
+    };
+    Ok((scene, report))
+}
+
+/// [`InitBenchReport`] as text.
+pub fn init_table(r: &InitBenchReport) -> String {
+    let mib = |b: f64| b / (1024.0 * 1024.0);
+    let mut s = format!(
+        "initialisation: {} Latin hypercube candidates x {} frames x {} substeps, {} particles, {} Gaussians, {}x{}, backend {}\n",
+        r.candidates, r.frames, r.substeps_per_frame, r.particles, r.gaussians, r.width, r.height, r.backend
+    );
+    s += &format!(
+        "  at most {} at once on {} threads (estimate {:.1} MiB each, budget {:.0} MiB); {} failed; best MS-SSIM {:.4}\n",
+        r.concurrent,
+        r.threads,
+        mib(r.candidate_bytes_estimate as f64),
+        mib(r4d_optim::video::INIT_MEMORY_BUDGET_BYTES as f64),
+        r.failed,
+        r.best_score
+    );
+    s += &format!(
+        "  whole initialisation {:.1} s ({:.1} min), {:.1} s per candidate; peak heap {:.1} MiB (held before: {:.1} MiB)\n",
+        r.total_s,
+        r.total_s / 60.0,
+        r.per_candidate_s,
+        mib(r.peak_bytes as f64),
+        mib(r.held_bytes as f64)
+    );
+    if !r.heap_measured {
+        s += "  (the counting allocator is not installed: heap peaks read 0)\n";
+    }
+    s
+}
+
 /// `nested:20` etc.
 pub fn checkpointing_name(c: Checkpointing) -> String {
     match c {

@@ -379,6 +379,25 @@ impl SimConfig {
             b.validate(file, d.n_grid)
                 .map_err(|e| rename(format!("boundary[{i}]"), e))?;
         }
+        // The CFL bound of every part, before any particle is sampled (after the size budgets) (the simulator checks
+        // it again for the parameters it is given).
+        let dt = self.time.substep_dt;
+        for (i, p) in self.parts.iter().enumerate() {
+            let c = p.p_wave_speed();
+            let bound = s.max_cfl * d.dx() / c;
+            if dt > bound {
+                return Err(bad(
+                    &format!("parts[{i}].youngs_modulus_pa"),
+                    p.youngs_modulus_pa,
+                    &format!(
+                        "with density {:e} kg/m^3 its P-wave speed {c:e} m/s needs substep_dt <= \
+                         max_cfl dx / c_p = {bound:e} s (CFL), the config has {dt:e} s: lower \
+                         time.substep_dt or the modulus",
+                        p.density_kg_m3
+                    ),
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -399,6 +418,47 @@ mod tests {
     #[test]
     fn a_config_without_shapes_is_valid_when_particles_come_from_elsewhere() {
         let c = SimConfig::parse(BASE, Path::new("c.toml")).unwrap();
+        c.validate("c.toml").unwrap();
+    }
+
+    #[test]
+    fn part_values_beyond_their_limits_or_the_cfl_bound_name_the_file_and_key() {
+        let part = |extra: &str| {
+            format!(
+                "[time]\nsubstep_dt = 1e-4\nframes = 2\n[[parts]]\nmaterial = \"jelly\"\n{extra}"
+            )
+        };
+        for (extra, key, limit) in [
+            (
+                "youngs_modulus_pa = 1e300\n",
+                "parts[0].youngs_modulus_pa",
+                "1e13",
+            ),
+            ("density_kg_m3 = 1e308\n", "parts[0].density_kg_m3", "1e6"),
+            ("density_kg_m3 = 1e-300\n", "parts[0].density_kg_m3", "1e-6"),
+            (
+                "yield_stress_pa = 1e30\n",
+                "parts[0].yield_stress_pa",
+                "1e13",
+            ),
+        ] {
+            let e = err(&part(extra), "c.toml");
+            assert!(
+                e.contains("c.toml") && e.contains(key) && e.contains(limit),
+                "{extra}: {e}"
+            );
+        }
+        // Within the limits but too stiff for the substep: the CFL bound, before sampling.
+        let e = err(&part("youngs_modulus_pa = 1e12\n"), "c.toml");
+        assert!(
+            e.contains("c.toml") && e.contains("parts[0].youngs_modulus_pa") && e.contains("CFL"),
+            "{e}"
+        );
+        err_free(&part("youngs_modulus_pa = 1e6\n"));
+    }
+
+    fn err_free(text: &str) {
+        let c = SimConfig::parse(text, Path::new("c.toml")).unwrap();
         c.validate("c.toml").unwrap();
     }
 

@@ -65,7 +65,7 @@ pub use boundary::{BoundaryCondition, Surface};
 pub use config::{Domain, ForceForm, OutOfDomain, SimConfig, SolverConfig, TimeConfig};
 pub use error::{Error, Result};
 pub use kernels::{Grid, KernelTime, MemoryUsage, MpmKernels, Particles, StepConsts};
-pub use material::{Material, PartConsts, PartParams};
+pub use material::{Material, PartConsts, PartParams, PARAM_LIMITS};
 pub use scene::{ParticleSet, Shape};
 pub use sim::{MpmSim, SimSetup, SimState, Simulator};
 pub use snapshot::Snapshot;

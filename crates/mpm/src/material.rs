@@ -155,7 +155,36 @@ impl Default for PartParams {
     }
 }
 
+/// The range every part parameter must lie in (inclusive), besides its own rule (E and
+/// density > 0, nu in (-1, 0.5), ...): wide enough for any physical material (diamond's
+/// Young's modulus is 1.2e12 Pa, osmium's density 2.3e4 kg/m^3) and narrow enough that the
+/// kernels' f32 constants, masses and stresses stay finite and non-zero (with nu < 0.5 in
+/// f64, lambda stays below 1e29 Pa).
+pub const PARAM_LIMITS: [(&str, f64, f64); 7] = [
+    ("youngs_modulus_pa", 1e-6, 1e13),
+    ("density_kg_m3", 1e-6, 1e6),
+    ("yield_stress_pa", 0.0, 1e13),
+    ("plastic_viscosity_pa_s", 0.0, 1e13),
+    ("xi", -1e6, 1e6),
+    ("softening", 0.0, 1e9),
+    ("snow_hardening", -1e6, 1e6),
+];
+
 impl PartParams {
+    /// The value of a field named in [`PARAM_LIMITS`].
+    fn field(&self, name: &str) -> f64 {
+        match name {
+            "youngs_modulus_pa" => self.youngs_modulus_pa,
+            "density_kg_m3" => self.density_kg_m3,
+            "yield_stress_pa" => self.yield_stress_pa,
+            "plastic_viscosity_pa_s" => self.plastic_viscosity_pa_s,
+            "xi" => self.xi,
+            "softening" => self.softening,
+            "snow_hardening" => self.snow_hardening,
+            other => unreachable!("PARAM_LIMITS names {other}"),
+        }
+    }
+
     /// Default parameters for a material.
     pub fn new(material: Material) -> Self {
         PartParams {
@@ -244,6 +273,16 @@ impl PartParams {
         }
         if self.softening < 0.0 {
             return Err(bad("softening", self.softening, "must be >= 0"));
+        }
+        for &(field, lo, hi) in PARAM_LIMITS.iter() {
+            let v = self.field(field);
+            if !(lo..=hi).contains(&v) {
+                return Err(bad(
+                    field,
+                    v,
+                    &format!("must lie in [{lo:e}, {hi:e}] (PARAM_LIMITS)"),
+                ));
+            }
         }
         if self.material == Material::Snow {
             for (f, v) in [

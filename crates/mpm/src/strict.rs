@@ -11,6 +11,7 @@
 //!   `gravity`?"); an unknown enum value (`material = "jely"`) likewise.
 
 use serde::de::{DeserializeOwned, Deserializer, MapAccess, SeqAccess, Visitor};
+use serde::Serialize;
 use serde_json::{Map, Number, Value};
 use std::fmt;
 use std::path::Path;
@@ -195,7 +196,7 @@ impl Tree {
 
 /// Decodes config text into `T` (whose structs deny unknown fields) under the rules of this
 /// module; the error is a message without the file name (callers add it).
-pub fn decode<T: DeserializeOwned>(text: &str, format: Format) -> Result<T, String> {
+pub fn decode<T: DeserializeOwned + Serialize>(text: &str, format: Format) -> Result<T, String> {
     let tree = match format {
         Format::Json => Tree::of_json(&Value::Object(parse_json_object(text)?)),
         // TOML refuses duplicate keys by itself, and a document is always a table.
@@ -211,14 +212,56 @@ pub fn decode<T: DeserializeOwned>(text: &str, format: Format) -> Result<T, Stri
         Format::Json => serde_json::from_str::<T>(text).map_err(|e| e.to_string()),
         Format::Toml => toml::from_str::<T>(text).map_err(|e| e.to_string()),
     };
-    r.map_err(|m| explain_with(&m, &tree))
+    let t = r.map_err(|m| explain_with(&m, &tree))?;
+    refuse_array_tables(&tree, &t)?;
+    Ok(t)
 }
 
 /// Decodes a parsed JSON value into `T`, with unknown keys and values explained as in
 /// [`decode`] (their path is relative to `value`).
-pub fn decode_value<T: DeserializeOwned>(value: Value) -> Result<T, String> {
+pub fn decode_value<T: DeserializeOwned + Serialize>(value: Value) -> Result<T, String> {
     let tree = Tree::of_json(&value);
-    serde_json::from_value::<T>(value).map_err(|e| explain_with(&e.to_string(), &tree))
+    let t = serde_json::from_value::<T>(value).map_err(|e| explain_with(&e.to_string(), &tree))?;
+    refuse_array_tables(&tree, &t)?;
+    Ok(t)
+}
+
+/// Refuses a table written as an array (`domain = [1.0, 64]`: serde accepts a struct's
+/// fields in order as a sequence, which would silently bind values to fields by position):
+/// the decoded value, serialised again, shows where the document has an array and the
+/// config a table.
+fn refuse_array_tables<T: Serialize>(tree: &Tree, decoded: &T) -> Result<(), String> {
+    let Ok(v) = serde_json::to_value(decoded) else {
+        return Ok(());
+    };
+    match array_for_table(tree, &v, "") {
+        Some(path) => Err(format!(
+            "`{path}` must be a table of named keys (e.g. [{path}] in TOML, {{\"key\": value}} in \
+             JSON), not an array of values"
+        )),
+        None => Ok(()),
+    }
+}
+
+/// The path of the first entry that is an array in the document and a table in `decoded`.
+fn array_for_table(input: &Tree, decoded: &Value, path: &str) -> Option<String> {
+    match (input, decoded) {
+        (Tree::List(_), Value::Object(_)) => Some(path.to_string()),
+        (Tree::Map(m), Value::Object(o)) => m.iter().find_map(|(k, v)| {
+            let p = if path.is_empty() {
+                k.clone()
+            } else {
+                format!("{path}.{k}")
+            };
+            o.get(k).and_then(|d| array_for_table(v, d, &p))
+        }),
+        (Tree::List(a), Value::Array(b)) => a
+            .iter()
+            .zip(b)
+            .enumerate()
+            .find_map(|(i, (x, y))| array_for_table(x, y, &format!("{path}[{i}]"))),
+        _ => None,
+    }
 }
 
 /// Rewrites serde's `unknown field `x`, expected ...` / `unknown variant `x`, expected ...`
@@ -368,9 +411,9 @@ pub fn suggest<'a>(word: &str, known: &[&'a str]) -> Option<&'a str> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use serde::Deserialize;
+    use serde::{Deserialize, Serialize};
 
-    #[derive(Debug, Deserialize)]
+    #[derive(Debug, Deserialize, Serialize)]
     #[serde(deny_unknown_fields)]
     #[allow(dead_code)]
     struct Inner {
@@ -378,13 +421,13 @@ mod tests {
         #[serde(default)]
         force: Option<Kind>,
     }
-    #[derive(Debug, Deserialize)]
+    #[derive(Debug, Deserialize, Serialize)]
     #[serde(rename_all = "snake_case")]
     enum Kind {
         Mls,
         Classic,
     }
-    #[derive(Debug, Deserialize)]
+    #[derive(Debug, Deserialize, Serialize)]
     #[serde(deny_unknown_fields)]
     #[allow(dead_code)]
     struct Outer {
@@ -440,6 +483,22 @@ mod tests {
         }
         let e = parse_json_object(r#"{"a": {"b": [{"c": 1, "c": 1}]}}"#).unwrap_err();
         assert!(e.contains("duplicate key `c`"), "{e}");
+    }
+
+    #[test]
+    fn a_table_written_as_an_array_is_refused_by_path() {
+        let e = decode::<Outer>("solver = [1.0]\n", Format::Toml).unwrap_err();
+        assert!(e.contains("`solver` must be a table"), "{e}");
+        let e = decode::<Outer>(r#"{"list": [{"gravity": 1}, [2.0]]}"#, Format::Json).unwrap_err();
+        assert!(e.contains("`list[1]` must be a table"), "{e}");
+        let e = decode_value::<Outer>(serde_json::json!({"solver": [1.0, "mls"]})).unwrap_err();
+        assert!(e.contains("`solver` must be a table"), "{e}");
+        // The table forms decode.
+        decode::<Outer>(
+            "[solver]\ngravity = 1.0\n[[list]]\ngravity = 2.0\n",
+            Format::Toml,
+        )
+        .unwrap();
     }
 
     #[test]

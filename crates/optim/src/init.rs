@@ -208,6 +208,14 @@ pub trait Initializer: Sync {
         false
     }
 
+    /// At most this many candidates are evaluated at the same time when
+    /// [`Initializer::parallel`] (e.g. what fits in a memory budget; each evaluation may
+    /// still use every thread of the pool itself). Default: no limit beyond the pool's
+    /// threads.
+    fn max_concurrent(&self) -> usize {
+        usize::MAX
+    }
+
     /// [`Initializer::initialize`] with a progress hook: `on_done` is called once per
     /// candidate as soon as its evaluation finishes (from the evaluating thread, so in
     /// completion order when [`Initializer::parallel`]); candidates are collected in index
@@ -224,10 +232,13 @@ pub trait Initializer: Sync {
             on_done(&c);
             c
         };
-        let candidates: Vec<Candidate> = if self.parallel() {
+        let workers = self.max_concurrent().max(1);
+        let candidates: Vec<Candidate> = if !self.parallel() || workers == 1 {
+            points.into_iter().enumerate().map(&run).collect()
+        } else if workers >= points.len().min(rayon::current_num_threads()) {
             points.into_par_iter().enumerate().map(&run).collect()
         } else {
-            points.into_iter().enumerate().map(&run).collect()
+            run_bounded(points, workers, &run)
         };
         InitOutcome::from_candidates(candidates, self.top_k())
     }
@@ -244,6 +255,35 @@ pub trait Initializer: Sync {
     ) -> Result<InitOutcome, Error> {
         self.initialize_with(space, evaluate, &|_| {})
     }
+}
+
+/// Evaluates `points` with `workers` tasks on rayon's current pool, each taking the next
+/// point in index order when it is free (no more than `workers` evaluations at once; nested
+/// parallelism inside an evaluation uses the whole pool). Results in index order.
+fn run_bounded(
+    points: Vec<Vec<f64>>,
+    workers: usize,
+    run: &(dyn Fn((usize, Vec<f64>)) -> Candidate + Sync),
+) -> Vec<Candidate> {
+    let n = points.len();
+    let queue = std::sync::Mutex::new(points.into_iter().enumerate());
+    let done: std::sync::Mutex<Vec<Option<Candidate>>> =
+        std::sync::Mutex::new((0..n).map(|_| None).collect());
+    rayon::scope(|s| {
+        for _ in 0..workers.min(n) {
+            s.spawn(|_| loop {
+                let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
+                let Some((i, theta)) = next else { break };
+                let c = run((i, theta));
+                done.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(c);
+            });
+        }
+    });
+    done.into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .into_iter()
+        .map(|c| c.expect("every candidate evaluated"))
+        .collect()
 }
 
 /// Latin hypercube initialisation: `candidates` points of a seeded Latin hypercube
@@ -270,6 +310,10 @@ pub struct LatinHypercubeInit {
     pub top_k: usize,
     /// Evaluate candidates concurrently with rayon (default `true`).
     pub parallel: bool,
+    /// With `parallel`, at most this many evaluations at once (`None`, the default: as many
+    /// as the pool has threads). Bounds the memory when each evaluation holds a large
+    /// simulation; the outcome does not depend on it.
+    pub max_concurrent: Option<usize>,
     /// Extra candidates evaluated too, e.g. the user's starting point: each must have one
     /// positive finite value per parameter, within the bounds. Default: none.
     pub include: Vec<Vec<f64>>,
@@ -282,6 +326,7 @@ impl Default for LatinHypercubeInit {
             seed: 0,
             top_k: 4,
             parallel: true,
+            max_concurrent: None,
             include: Vec::new(),
         }
     }
@@ -341,6 +386,10 @@ impl Initializer for LatinHypercubeInit {
 
     fn parallel(&self) -> bool {
         self.parallel
+    }
+
+    fn max_concurrent(&self) -> usize {
+        self.max_concurrent.unwrap_or(usize::MAX)
     }
 }
 
@@ -526,6 +575,7 @@ mod tests {
             seed: 5,
             top_k: 6,
             parallel: false,
+            max_concurrent: None,
             include: vec![start.clone()],
         };
         // Some failures, a slow candidate so completion order differs from index order.
@@ -551,6 +601,28 @@ mod tests {
             .initialize_with(&space, &eval, &|c| order.lock().unwrap().push(c.index))
             .unwrap();
         assert_eq!(seq, par);
+        // At most two at once on a pool of four threads: the same outcome.
+        let (now, most) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        let counted = |i: usize, t: &[f64]| -> Result<f64, String> {
+            let k = now.fetch_add(1, Ordering::SeqCst) + 1;
+            most.fetch_max(k, Ordering::SeqCst);
+            std::thread::sleep(std::time::Duration::from_millis(2));
+            let r = eval(i, t);
+            now.fetch_sub(1, Ordering::SeqCst);
+            r
+        };
+        let bounded = LatinHypercubeInit {
+            parallel: true,
+            max_concurrent: Some(2),
+            ..base.clone()
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .unwrap();
+        let two = pool.install(|| bounded.initialize(&space, &counted).unwrap());
+        assert_eq!(seq, two);
+        assert!(most.load(Ordering::SeqCst) <= 2, "{most:?} at once");
         let mut order = order.into_inner().unwrap();
         order.sort();
         assert_eq!(order, (0..41).collect::<Vec<_>>());

@@ -33,7 +33,7 @@ use crate::covariance::covariance;
 use crate::error::{Error, Result};
 use crate::gaussians::Gaussians;
 use crate::link::SimLink;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 /// The finest filling grid (`particle_filling.n_grid`, cells per axis): 400^3 cells of 16
 /// bytes, about 1 GB. PhysGaussian's configs use 200 or less.
@@ -55,7 +55,7 @@ pub const MIN_SCALE: f64 = 1e-3;
 pub const MAX_SCALE: f64 = 2.0;
 
 /// PhysGaussian's `particle_filling` block (an unknown key in it is an error).
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Filling {
     /// Cells per axis of the filling grid.
@@ -100,7 +100,7 @@ impl Default for Filling {
 }
 
 /// The preprocessing keys of a PhysGaussian scene config (other keys are ignored).
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(default)]
 pub struct PrepareConfig {
     /// Keep Gaussians with opacity strictly above this.

@@ -456,6 +456,16 @@ impl FitConfig {
                     ));
                 }
             }
+            // Each end must be a valid value of its parameter (the simulator's own rule and
+            // `PARAM_LIMITS`), or every candidate beyond it would fail after simulating.
+            for (k, n) in bound_kinds(p)? {
+                for v in p.bounds[n] {
+                    let mut q = PartParams::default();
+                    crate::space::set(&mut q, k, v);
+                    q.validate(&format!("parts id {}: bounds of {n}", p.id))
+                        .map_err(|e| FitError::Input(e.to_string()))?;
+                }
+            }
         }
         self.loss
             .validate()
@@ -676,6 +686,21 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("bounds of E given twice"), "{e}");
+        // Bounds outside the values the simulator accepts are refused by name and limit.
+        for (b, limit) in [
+            ("E = [1e3, 1e20]", "1e13"),
+            ("density = [1e-9, 1e3]", "1e-6"),
+            ("nu = [0.1, 0.6]", "(-1, 0.5)"),
+        ] {
+            let e = parse(&format!("[[parts]]\nid = 0\nbounds = {{ {b} }}\n"))
+                .validate()
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("parts id 0: bounds of") && e.contains(limit),
+                "{b}: {e}"
+            );
+        }
         // Free by material (jelly: E, nu, density): bounds of its yield stress are refused
         // when the free kinds are resolved.
         let c = parse("[[parts]]\nid = 0\nbounds = { yield_stress = [1e3, 1e5] }\n");

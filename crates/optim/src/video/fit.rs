@@ -2,7 +2,7 @@
 //! and gradient clipping; a record per iteration and a resumable checkpoint.
 
 use super::config::{FitConfig, OptimizerKind};
-use super::problem::{Evaluation, Objective, VideoProblem};
+use super::problem::{Evaluation, Objective, VideoProblem, INIT_MEMORY_BUDGET_BYTES};
 use crate::descent::{self, keep_best, Rate, Stepper};
 use crate::record::{mix_json, Fingerprint, FlatProbe, Terms};
 pub use crate::record::{FitState, IterRecord, StartResult};
@@ -16,7 +16,7 @@ use crate::{
     LogDomainOptimizer, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs, ValleySearch,
 };
 use r4d_loss::bands::ReferenceVideo;
-use r4d_loss::{ssim::ms_ssim, MsSsimConfig, Video};
+use r4d_loss::{ssim::ms_ssim, Video};
 use r4d_mpm::PartParams;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -287,19 +287,7 @@ pub fn ms_ssim_score(problem: &VideoProblem, rendered: &[Video<f32>]) -> Result<
             v.video.width(),
             (0..r.frames()).map(|t| v.video.frame_f32(t)),
         )?;
-        let side = r.height().min(r.width());
-        let cfg = if side > 160 {
-            MsSsimConfig::default()
-        } else {
-            MsSsimConfig::largest_window(side).ok_or_else(|| {
-                FitError::Input(format!(
-                    "{}: frames of {}x{} are too small for MS-SSIM (need more than 32 px a side)",
-                    v.name,
-                    r.width(),
-                    r.height()
-                ))
-            })?
-        };
+        let cfg = super::problem::ms_ssim_config(&v.name, r.height(), r.width())?;
         sum += ms_ssim(r, &reference, &cfg)?.mean;
     }
     Ok(sum / rendered.len().max(1) as f64)
@@ -345,6 +333,7 @@ fn init_setup<'a>(
         seed: cfg.init.seed,
         top_k: cfg.init.top_k,
         parallel: true,
+        max_concurrent: Some((INIT_MEMORY_BUDGET_BYTES / obj.score_bytes().max(1)).max(1) as usize),
         include: if cfg.init.include_start {
             vec![space.values(parts)]
         } else {
@@ -363,8 +352,7 @@ fn score_candidate(
 ) -> Result<f64, String> {
     let mut slots = problem.config.parts.clone();
     space.apply(&mut slots, theta);
-    let videos = obj.render(&slots).map_err(|e| e.to_string())?;
-    ms_ssim_score(problem, &videos).map_err(|e| e.to_string())
+    obj.ms_ssim(&slots).map_err(|e| e.to_string())
 }
 
 /// Simulation-driven initialisation: Latin hypercube candidates in log10 space, each

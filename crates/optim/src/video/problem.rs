@@ -12,7 +12,8 @@ use crate::compute::{Compute, JobOut, MpmJob, Precision};
 use crate::FitError;
 use crate::{HeapProbe, HeapSpan};
 use r4d_loss::bands::ReferenceVideo;
-use r4d_loss::{BandedLoss, DmsConfig, DmsTerms, Video, VideoLoss};
+use r4d_loss::ssim::ms_ssim;
+use r4d_loss::{BandedLoss, DmsConfig, DmsTerms, MsSsimConfig, Video, VideoLoss};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
 use r4d_mpm::adjoint::engine::{KernelAdjoint, MpmAdjointKernels, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
@@ -217,6 +218,10 @@ pub const MAX_SUBSTEPS: u64 = 10_000_000;
 /// about 37 MB a frame) 3 of 17 frames, which keeps the iteration under 1 GB of heap.
 pub const DEFAULT_FRAME_CACHE_BYTES: usize = 128 << 20;
 
+/// The heap the initialisation's candidates may hold together: as many are evaluated at once
+/// as [`Objective::score_bytes`] fits in this (at least one, at most the pool's threads).
+pub const INIT_MEMORY_BUDGET_BYTES: u64 = 1 << 30;
+
 /// Row bands of the loss by default ([`Objective::set_band_rows`]).
 pub const DEFAULT_BAND_ROWS: usize = 128;
 
@@ -410,6 +415,40 @@ impl<'a> Objective<'a> {
         slots: &[PartParams],
     ) -> Result<(Evaluation, Vec<Video<f32>>), FitError> {
         self.dispatch(slots, Mode::Render).map(|r| (r.0, r.2))
+    }
+
+    /// The initialisation's score: MS-SSIM of every view's rendered video against its
+    /// reference, mean over frames, then over views (equal to [`ms_ssim_score`] of
+    /// [`Objective::render`]'s videos). Each video frame is rendered and compared as soon as
+    /// the simulation has produced it, so no whole video is held: the memory is the
+    /// simulation's and one frame's, whatever the number of frames.
+    ///
+    /// [`ms_ssim_score`]: crate::video::fit::ms_ssim_score
+    pub fn ms_ssim(&self, slots: &[PartParams]) -> Result<f64, FitError> {
+        self.dispatch(slots, Mode::Score).map(|r| r.0.total)
+    }
+
+    /// A generous estimate of the host memory one [`Objective::ms_ssim`] call holds: the
+    /// stored frames (48 bytes per particle and frame), the simulation's state and grids
+    /// (256 bytes per particle, 64 per grid node), one frame's projection (64 bytes per
+    /// Gaussian) and, for the largest view, its render, reference and MS-SSIM planes
+    /// (34 bytes per pixel channel).
+    pub fn score_bytes(&self) -> u64 {
+        let n = self.sim.len() as u64;
+        let frames = self.needed().iter().filter(|&&b| b).count() as u64;
+        let nodes = (self.sim.setup.n as u64).pow(3);
+        let pixels = self
+            .problem
+            .views
+            .iter()
+            .map(|v| (v.video.height() * v.video.width()) as u64)
+            .max()
+            .unwrap_or(0);
+        frames * n * 48
+            + n * 256
+            + nodes * 64
+            + self.problem.scene.len() as u64 * 64
+            + pixels * 3 * 34
     }
 
     /// The loss (no gradient).
@@ -679,6 +718,58 @@ impl<'a> Objective<'a> {
         need
     }
 
+    /// [`Mode::Score`]: per view, each video frame composed from its simulated frames' renders
+    /// (through the time map) and compared with the reference frame by MS-SSIM; a render is
+    /// dropped after the last video frame that uses it. The mean over frames, then over
+    /// views, summed in the order [`crate::video::fit::ms_ssim_score`] sums them.
+    fn score_frames(&self, frames: &[Option<Frame>]) -> Result<f64, FitError> {
+        let taps = &self.time.taps;
+        let mut last_use = vec![usize::MAX; frames.len()];
+        for (k, &(j0, j1, a)) in taps.iter().enumerate() {
+            last_use[j0] = k;
+            if a != 0.0 {
+                last_use[j1] = k;
+            }
+        }
+        let mut sum = 0.0;
+        for v in &self.problem.views {
+            let (h, w) = (v.video.height(), v.video.width());
+            let cfg = ms_ssim_config(&v.name, h, w)?;
+            let mut renders: Vec<Option<Vec<f32>>> = (0..frames.len()).map(|_| None).collect();
+            let mut per_frame = 0.0;
+            for (k, &(j0, j1, a)) in taps.iter().enumerate() {
+                let used: &[usize] = if a == 0.0 { &[j0] } else { &[j0, j1] };
+                for &j in used {
+                    if renders[j].is_none() {
+                        let what = format!("simulated frame {j}");
+                        let f = frames[j]
+                            .as_ref()
+                            .ok_or_else(|| FitError::Input(format!("{what} was not stored")))?;
+                        renders[j] = Some(self.render_frame(f, &v.camera, &what)?);
+                    }
+                }
+                let f0 = renders[j0].as_deref().expect("rendered above");
+                let data: Vec<f32> = if a == 0.0 {
+                    f0.to_vec()
+                } else {
+                    let f1 = renders[j1].as_deref().expect("rendered above");
+                    f0.iter().zip(f1).map(|(x, y)| x + a * (y - x)).collect()
+                };
+                for &j in used {
+                    if last_use[j] == k {
+                        renders[j] = None;
+                    }
+                }
+                let rendered =
+                    Video::new(1, h, w, data).map_err(|e| FitError::Input(e.to_string()))?;
+                let reference = Video::from_frames(h, w, std::iter::once(v.video.frame_f32(k)))?;
+                per_frame += ms_ssim(&rendered, &reference, &cfg)?.per_frame[0];
+            }
+            sum += per_frame / taps.len() as f64;
+        }
+        Ok(sum / self.problem.views.len().max(1) as f64)
+    }
+
     /// Renders every view at full size from the stored frames (forward-only runs).
     fn render_videos(&self, frames: &[Option<Frame>]) -> Result<Vec<Video<f32>>, FitError> {
         let mut out = Vec::new();
@@ -913,7 +1004,18 @@ impl<'a> Objective<'a> {
             p.forward_s = t_start.elapsed().as_secs_f64() - *read_time.borrow();
             let saved = self.stage_begin();
             let frames = std::mem::take(&mut *stored.borrow_mut());
-            let r = if mode != Mode::Value {
+            let r = if mode == Mode::Score {
+                let t = Instant::now();
+                let score = self.score_frames(&frames);
+                p.render_s += t.elapsed().as_secs_f64();
+                score.map(|total| {
+                    let ev = Evaluation {
+                        total,
+                        views: Vec::new(),
+                    };
+                    (ev, None, Vec::new())
+                })
+            } else if mode != Mode::Value {
                 let t = Instant::now();
                 let videos = self.render_videos(&frames);
                 p.render_s += t.elapsed().as_secs_f64();
@@ -1035,12 +1137,28 @@ impl<'a> Objective<'a> {
 pub(crate) enum Mode {
     /// Render the videos only.
     RenderOnly,
+    /// MS-SSIM against the references, frame by frame (no video kept).
+    Score,
     /// Render the videos and evaluate the loss.
     Render,
     /// The loss only.
     Value,
     /// The loss and the parameter gradient.
     Grad,
+}
+
+/// The MS-SSIM settings for frames of `h x w` of view `name`: the standard 11-tap window, or
+/// the smaller-window fallback for frames under 161 px ([`MsSsimConfig::largest_window`]).
+pub(crate) fn ms_ssim_config(name: &str, h: usize, w: usize) -> Result<MsSsimConfig, FitError> {
+    let side = h.min(w);
+    if side > 160 {
+        return Ok(MsSsimConfig::default());
+    }
+    MsSsimConfig::largest_window(side).ok_or_else(|| {
+        FitError::Input(format!(
+            "{name}: frames of {w}x{h} are too small for MS-SSIM (need more than 32 px a side)"
+        ))
+    })
 }
 
 /// What a run returns: the loss, the parameter gradient (when asked) and the rendered videos
