@@ -83,6 +83,56 @@ fn bench_scale_prints_stages_and_writes_json() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `--init N`: the initialisation's time and memory at the benchmark's scene, every candidate
+/// scored (in range, none failed within the stable bounds), the JSON keys other tools read.
+#[test]
+fn bench_scale_init_times_the_candidates() {
+    let dir = std::env::temp_dir().join(format!("r4d_bench_init_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let json = dir.join("init.json");
+    let out = r4d()
+        .args([
+            "bench-scale",
+            "--init",
+            "3",
+            "--cells",
+            "6",
+            "--gaussians",
+            "6000",
+            "--frames",
+            "2",
+            "--substeps",
+            "10",
+            "--resolution",
+            "96x64",
+            "--reference",
+            "rest",
+            "--json",
+        ])
+        .arg(&json)
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stdout.contains("whole initialisation"), "{stdout}");
+    assert_eq!(stderr.matches("bench-scale: candidate").count(), 3, "{stderr}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["candidates"], 3);
+    assert_eq!(v["failed"], 0);
+    assert_eq!(v["frames"], 2);
+    let best = v["best_score"].as_f64().unwrap();
+    assert!(best > 0.0 && best <= 1.0, "{best}");
+    assert!(v["total_s"].as_f64().unwrap() > 0.0);
+    assert!(v["concurrent"].as_u64().unwrap() >= 1);
+    assert!(v["candidate_bytes_estimate"].as_u64().unwrap() > 0);
+    assert_eq!(v["heap_measured"], true);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn bench_scale_refuses_bad_arguments() {
     for (args, want) in [
@@ -91,6 +141,8 @@ fn bench_scale_refuses_bad_arguments() {
         (vec!["--reference", "video"], "--reference"),
         (vec!["--checkpointing", "sometimes"], "checkpointing"),
         (vec!["--backend", "cuda"], "--backend"),
+        (vec!["--init", "0"], "--init 0"),
+        (vec!["--init", "10001"], "MAX_INIT_CANDIDATES"),
     ] {
         let out = r4d().arg("bench-scale").args(&args).output().unwrap();
         assert!(!out.status.success(), "{args:?}");
