@@ -266,6 +266,10 @@ class Corpus:
             "length": ["length = 0.5", ["length = 0", "length = -0.5", "length = 1e300"]],
             "typo": ["[time]", ["[tiem]", "[time]\nsubstpes_per_frame = 3"]],
             "dup": ["frames = 6", ["frames = 6\nframes = 7"]],
+            "array_table": ["[domain]\ngrid_lim = 1.0\nn_grid = 24", ["domain = [1.0, 24]"]],
+            "array_time": ["[time]\nsubstep_dt = 2e-4\nsubsteps_per_frame = 50\nframes = 6", ["time = [2e-4, 50, 6]"]],
+            "yield": ["density_kg_m3 = 1000.0", ["density_kg_m3 = 1000.0\nyield_stress_pa = 1e300", "density_kg_m3 = 1000.0\nplastic_viscosity_pa_s = 1e40", "density_kg_m3 = 1000.0\nsoftening = 1e300", "density_kg_m3 = 1e-300"]],
+            "cfl": ["youngs_modulus_pa = 2e6", ["youngs_modulus_pa = 1e12"]],
         }
         for key, (old, news) in subs.items():
             for i, new in enumerate(news):
@@ -406,10 +410,19 @@ def runs(c, repo, work):
         fit("--scene " + k, **{"--scene": str(p)})
     for k, p in c.configs.items():
         fit("--sim " + k, **{"--sim": str(p)})
+    # FIT.toml bounds beyond what the simulator accepts, and a table written as an array.
+    tiny = 'iters = 1\nprecision = "f32"\nframes = 3\n[init]\ncandidates = 2\nframes = 2\n'
+    for i, extra in enumerate(['[[parts]]\nid = 0\nbounds = { E = [1e3, 1e300] }\n',
+                               '[[parts]]\nid = 0\nbounds = { density = [1e-300, 1e3] }\n',
+                               '[[parts]]\nid = 0\nbounds = { nu = [0.1, 0.7] }\n',
+                               'parts = [[0, ["E"]]]\n']):
+        fit("--config bounds_%d" % i, **{"--config": str(c.file("fit_bounds_%d.toml" % i, tiny + extra))})
     # bench-scale: sizes at and past their limits.
     for flag in ("--cells", "--gaussians", "--frames", "--substeps", "--resolution", "--band-rows"):
         for v in EXTREME_INTS:
             out.append(("bench-scale", "%s %s" % (flag, v), ["bench-scale", flag, v, "--json", o("bench.json")]))
+    for v in EXTREME_INTS + ["10001"]:
+        out.append(("bench-scale", "--init " + v, ["bench-scale", "--init", v]))
     for k, p in c.texts.items():
         out.append(("bench-scale", "--reference " + k, ["bench-scale", "--reference", str(p), "--cells", "0"]))
     # dataset inspect, eval, ablate, merge: hostile folders.
@@ -453,8 +466,12 @@ def main():
     ap.add_argument("--timeout", type=float, default=20.0, help="seconds per run")
     ap.add_argument("--only", default=None, help="only this subcommand")
     args = ap.parse_args()
+    # The runs start in the scratch folder: a relative binary path is resolved here first.
+    args.bin = str(Path(args.bin).resolve())
+    if not os.access(args.bin, os.X_OK):
+        sys.exit("--bin %s: not an executable (build it with cargo build --release)" % args.bin)
     repo = Path(__file__).resolve().parent.parent
-    work = Path(args.work)
+    work = Path(args.work).resolve()
     shutil.rmtree(work, ignore_errors=True)
     (work / "out").mkdir(parents=True)
     corpus = Corpus(work / "corpus")
