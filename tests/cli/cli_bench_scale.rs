@@ -118,7 +118,11 @@ fn bench_scale_init_times_the_candidates() {
     );
     assert!(out.status.success(), "{stdout}\n{stderr}");
     assert!(stdout.contains("whole initialisation"), "{stdout}");
-    assert_eq!(stderr.matches("bench-scale: candidate").count(), 3, "{stderr}");
+    assert_eq!(
+        stderr.matches("bench-scale: candidate").count(),
+        3,
+        "{stderr}"
+    );
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(v["candidates"], 3);

@@ -22,6 +22,24 @@
 //! * Snow is Stomakhin et al. 2013 (PhysGaussian's snow branch computes no stress).
 //! * Fluid is our addition (weakly compressible Newtonian; not isotropic in the sense above,
 //!   handled apart, and not differentiated yet).
+//!
+//! PhysFlow's two "fluids" follow its `mpm_utils.py` (github zhuomanliu/PhysFlow at b4696871):
+//!
+//! * [`Material::NonNewtonian`](crate::Material::NonNewtonian) (its id 6):
+//!   `viscoplasticity_return_mapping_with_StVK_force` (lines 241-283) then
+//!   `kirchoff_stress_StVK` (21-37). The foam's mapping without `if y > 0`: below the yield
+//!   surface `|s|` is pushed up toward it. At `F = I` (every particle at the first substep) the
+//!   deviatoric strain is zero and PhysFlow's direction `s_trial / |s_trial|` comes from the
+//!   rounding of Warp's `svd3(I)`: singular values `(1 - 2^-24, 1 - 2^-22, 1 - 5 2^-24)` on
+//!   the simulation's z, y and x axes (the reference data's `svd3_identity.py`). An exact SVD
+//!   gives 0 / 0 there; this model uses Warp's values instead whenever the three singular
+//!   values are equal ([`WARP_SVD3_IDENTITY`]), deterministically and on every backend, so
+//!   the first substep pulls the paste as PhysFlow's CPU run does (vertical tension, lateral
+//!   compression).
+//! * [`Material::Newtonian`](crate::Material::Newtonian) (its id 5): no return mapping;
+//!   `kirchoff_stress_herschel` (82-94) in principal form,
+//!   `t_i = (lambda / 2 + mu / 3) (J^2 - 1 + 1e-8) + mu (b_i - mean b)`,
+//!   `b_i = max(J^2, 1e-8)^(-1/3) s_i^2`.
 
 use crate::material::PartConsts;
 use crate::math::{svd3, Mat3, Real, Svd3};
@@ -194,6 +212,25 @@ fn stvk_hencky<S: Scalar>(s: [S; 3], mu: S, lambda: S) -> [S; 3] {
     [0, 1, 2].map(|i| (two * mu * l[i] + lambda * tr) * s[i])
 }
 
+/// Warp 0.10.1's `svd3(I)` singular values, on the simulation's x, y and z axes (f32 bits
+/// `0x3F7FFFFB`, `0x3F7FFFFC`, `0x3F7FFFFF`): what [`Material::NonNewtonian`]'s mapping
+/// uses when all three singular values are equal (see the module docs).
+///
+/// [`Material::NonNewtonian`]: crate::Material::NonNewtonian
+pub const WARP_SVD3_IDENTITY: [f64; 3] = [
+    1.0 - 5.0 / 16_777_216.0,
+    1.0 - 4.0 / 16_777_216.0,
+    1.0 - 1.0 / 16_777_216.0,
+];
+
+/// `ln` of [`WARP_SVD3_IDENTITY`] (f64): added to the logarithms of equal singular values, so
+/// that no backend's `log` near 1 decides the direction.
+pub const WARP_SVD3_IDENTITY_LN: [f64; 3] = [
+    -2.9802326828588295e-07,
+    -2.3841860752327643e-07,
+    -5.960464655174753e-08,
+];
+
 /// The scalar part of every isotropic model: return mapping on the singular values, plastic
 /// state update and principal Kirchhoff stresses. `pc` supplies the material id and the
 /// constants that are not differentiated (snow limits); `m` the differentiable ones, metal's
@@ -337,6 +374,45 @@ pub fn scalar_model<S: Scalar>(pc: &PartConsts, m: ModelIn<S>, dt: f64) -> Model
                 unchanged: !clamped,
             }
         }
+        // PhysFlow's non_newtonian: the foam's mapping without the yield guard.
+        7 => {
+            let c = sigma.map(|x| x.max(S::cst(0.01)));
+            let equal = c[0].re() == c[1].re() && c[1].re() == c[2].re();
+            let (s, eps) = if equal {
+                (
+                    [0, 1, 2].map(|i| c[i] * S::cst(WARP_SVD3_IDENTITY[i])),
+                    [0, 1, 2].map(|i| c[i].ln() + S::cst(WARP_SVD3_IDENTITY_LN[i])),
+                )
+            } else {
+                (c, c.map(|x| x.ln()))
+            };
+            let b_tr = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]) / three;
+            let tr = eps[0] + eps[1] + eps[2];
+            let third = tr / three;
+            let s_trial = eps.map(|e| two * mu * (e - third));
+            let s_norm = norm3(s_trial);
+            let y = s_norm - S::cst((2.0f64 / 3.0).sqrt()) * m.state[0];
+            let mu_hat = mu * b_tr;
+            let s_new_norm = s_norm - y / (S::cst(1.0) + m.eta / (two * mu_hat * S::cst(dt)));
+            let kk = s_new_norm / s_norm;
+            let sigma_e = exp3(s_trial.map(|x| kk * x / (two * mu) + third));
+            ModelOut {
+                sigma_e,
+                t: stvk_hencky(sigma_e, mu, lambda),
+                state: m.state,
+                unchanged: false,
+            }
+        }
+        // PhysFlow's newtonian: compressible neo-Hookean (kirchoff_stress_herschel).
+        8 => {
+            let j = sigma[0] * sigma[1] * sigma[2];
+            let bj = (j * j).max(S::cst(1e-8));
+            let f = (bj.ln() * S::cst(-1.0 / 3.0)).exp();
+            let b = sigma.map(|x| f * x * x);
+            let mb = (b[0] + b[1] + b[2]) / three;
+            let p = (lambda / two + mu / three) * (j * j - S::cst(1.0) + S::cst(1e-8));
+            keep(b.map(|x| p + mu * (x - mb)), m.state)
+        }
         _ => keep([S::cst(0.0); 3], m.state),
     }
 }
@@ -478,6 +554,66 @@ mod tests {
             let (_, tau) = stress_update(rot(0.7), &pc, &mut st, &Mat3::zero(), 1e-4);
             assert!(tau.frobenius() < 1e-6 * pc.mu as f64, "{m:?}: {tau:?}");
         }
+    }
+
+    /// PhysFlow's non_newtonian at F = I (every particle at the first substep): the stress its
+    /// CPU run gives from Warp's svd3(I) rounding (the reference data's README, `ref_paste`:
+    /// sim E 5e5 Pa, nu 0.4, yield stress 1500 Pa, plastic viscosity 1500 Pa s, dt 2e-4 s):
+    /// deviatoric 55.73 Pa x diag(-0.566, -0.226, +0.793), in f32 and f64 alike.
+    #[test]
+    fn non_newtonian_at_rest_pulls_as_physflows_svd_rounding_does() {
+        let p = PartParams {
+            material: Material::NonNewtonian,
+            youngs_modulus_pa: 5e5,
+            poisson_ratio: 0.4,
+            yield_stress_pa: 1500.0,
+            plastic_viscosity_pa_s: 1500.0,
+            ..Default::default()
+        };
+        let pc = p.consts();
+        let check = |tau: [f64; 3]| {
+            let m = (tau[0] + tau[1] + tau[2]) / 3.0;
+            let dev = tau.map(|t| t - m);
+            let n = norm(dev);
+            assert!((n - 55.73).abs() < 0.05, "|dev tau| = {n}");
+            for (d, want) in dev.iter().zip([-0.566, -0.226, 0.793]) {
+                assert!((d / n - want).abs() < 2e-3, "{dev:?}");
+            }
+        };
+        let mut st = [pc.yield_stress as f64, 1.0];
+        let (fe, tau) = stress_update(Mat3::identity(), &pc, &mut st, &Mat3::zero(), 2e-4);
+        assert!(fe.to_array().iter().all(|v| v.is_finite()));
+        check([0, 1, 2].map(|i| tau.to_array()[4 * i]));
+        let mut st = [pc.yield_stress, 1.0f32];
+        let (_, tau) = stress_update(Mat3::<f32>::identity(), &pc, &mut st, &Mat3::zero(), 2e-4);
+        check([0, 1, 2].map(|i| tau.to_array()[4 * i] as f64));
+    }
+
+    /// PhysFlow's newtonian equals its matrix form `(lambda/2 + mu/3)(J^2 - 1 + 1e-8) I +
+    /// mu dev(J^(-2/3) F F^T)`, and keeps F.
+    #[test]
+    fn newtonian_matches_physflows_matrix_form() {
+        let p = PartParams {
+            material: Material::Newtonian,
+            youngs_modulus_pa: 5000.0,
+            poisson_ratio: 0.499,
+            ..Default::default()
+        };
+        let pc = p.consts();
+        let f = Mat3::from_array([1.1, 0.05, -0.02, 0.01, 0.95, 0.03, 0.0, -0.04, 1.02]);
+        let mut st = [0.0, 1.0];
+        let (fe, tau) = stress_update(f, &pc, &mut st, &Mat3::zero(), 1e-4);
+        assert_eq!(fe, f);
+        let (mu, la) = (pc.mu as f64, pc.lambda as f64);
+        let j: f64 = f.det();
+        let b = (f * f.transpose()).scaled((j * j).max(1e-8).powf(-1.0 / 3.0));
+        let tr = (b.to_array()[0] + b.to_array()[4] + b.to_array()[8]) / 3.0;
+        let expect = (b - Mat3::diag([tr; 3])).scaled(mu)
+            + Mat3::diag([(la / 2.0 + mu / 3.0) * (j * j - 1.0 + 1e-8); 3]);
+        assert!(
+            (tau - expect).frobenius() < 1e-9 * expect.frobenius(),
+            "{tau:?} vs {expect:?}"
+        );
     }
 
     #[test]

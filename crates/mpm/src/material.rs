@@ -35,6 +35,17 @@ pub enum Material {
     /// `K = E / (3 (1 - 2 nu))` and viscous stress `mu_v (grad v + grad v^T)` with
     /// `mu_v = plastic_viscosity` (Pa s). The deformation gradient keeps only its volume.
     Fluid,
+    /// PhysFlow's `"non_newtonian"` (its id 6; toothpaste, cream): the foam's viscoplastic
+    /// von Mises mapping on the Hencky strain **without** the yield guard (below the yield
+    /// surface the deviatoric stress is pulled toward it every substep), StVK-Hencky stress
+    /// (`viscoplasticity_return_mapping_with_StVK_force` and `kirchoff_stress_StVK` of
+    /// PhysFlow's `mpm_utils.py`). See [`crate::constitutive`] for its rule at `F = I`.
+    NonNewtonian,
+    /// PhysFlow's `"newtonian"` (its id 5; droplet, letter): no return mapping and the
+    /// compressible neo-Hookean stress of PhysFlow's `kirchoff_stress_herschel`,
+    /// `tau = (lambda / 2 + mu / 3) (J^2 - 1 + 1e-8) I + mu dev(J^(-2/3) F F^T)`: an elastic
+    /// solid of low shear and high bulk modulus (PhysFlow reads no viscosity for it).
+    Newtonian,
 }
 
 impl Material {
@@ -47,7 +58,22 @@ impl Material {
             Material::Foam => Some(3),
             Material::Snow => Some(4),
             Material::Plasticine => Some(5),
-            Material::Fluid => None,
+            Material::Fluid | Material::NonNewtonian | Material::Newtonian => None,
+        }
+    }
+
+    /// PhysFlow's integer id (`set_parameters_dict`: plasticine is 4 there; `None` for models
+    /// it does not have).
+    pub fn physflow_id(self) -> Option<u32> {
+        match self {
+            Material::Jelly => Some(0),
+            Material::Metal => Some(1),
+            Material::Sand => Some(2),
+            Material::Foam => Some(3),
+            Material::Plasticine => Some(4),
+            Material::Newtonian => Some(5),
+            Material::NonNewtonian => Some(6),
+            Material::Snow | Material::Fluid => None,
         }
     }
     /// Parses PhysGaussian's material name (`"jelly"`, `"metal"`, ...), also accepting
@@ -61,6 +87,8 @@ impl Material {
             "snow" => Material::Snow,
             "plasticine" => Material::Plasticine,
             "fluid" | "water" => Material::Fluid,
+            "non_newtonian" => Material::NonNewtonian,
+            "newtonian" => Material::Newtonian,
             _ => return None,
         })
     }
@@ -74,6 +102,8 @@ impl Material {
             Material::Snow => 4,
             Material::Plasticine => 5,
             Material::Fluid => 6,
+            Material::NonNewtonian => 7,
+            Material::Newtonian => 8,
         }
     }
     /// Inverse of [`Material::kernel_id`].
@@ -86,6 +116,8 @@ impl Material {
             4 => Material::Snow,
             5 => Material::Plasticine,
             6 => Material::Fluid,
+            7 => Material::NonNewtonian,
+            8 => Material::Newtonian,
             _ => return None,
         })
     }

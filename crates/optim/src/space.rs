@@ -72,8 +72,13 @@ pub fn reads(p: &PartParams, k: ParamKind) -> bool {
     use Material as M;
     match k {
         ParamKind::YoungsModulus | ParamKind::PoissonRatio | ParamKind::Density => true,
-        ParamKind::YieldStress => matches!(p.material, M::Metal | M::Foam | M::Plasticine),
-        ParamKind::PlasticViscosity => matches!(p.material, M::Foam | M::Fluid),
+        ParamKind::YieldStress => matches!(
+            p.material,
+            M::Metal | M::Foam | M::Plasticine | M::NonNewtonian
+        ),
+        ParamKind::PlasticViscosity => {
+            matches!(p.material, M::Foam | M::Fluid | M::NonNewtonian)
+        }
         ParamKind::FrictionAngle => p.material == M::Sand,
         ParamKind::Hardening => p.material == M::Metal && p.hardening,
         ParamKind::Softening => p.material == M::Plasticine,

@@ -454,6 +454,27 @@ mod constitutive {
                 state: [500.0, 1.0],
                 plastic: true,
             },
+            Case {
+                name: "non_newtonian beyond the yield surface",
+                part: base(Material::NonNewtonian),
+                f: near(&mut r, [1.05, 0.97, 1.0], 0.02),
+                state: [500.0, 1.0],
+                plastic: true,
+            },
+            Case {
+                name: "non_newtonian inside the yield surface (pulled toward it)",
+                part: base(Material::NonNewtonian),
+                f: near(&mut r, [1.01, 0.995, 1.0], 0.005),
+                state: [5e4, 1.0],
+                plastic: true,
+            },
+            Case {
+                name: "newtonian",
+                part: base(Material::Newtonian),
+                f: near(&mut r, [1.02, 0.99, 0.98], 0.02),
+                state: [0.0, 1.0],
+                plastic: false,
+            },
         ]
     }
 

@@ -81,7 +81,7 @@ fn cm_keep(sigma: vec3<f32>, t: vec3<f32>, state: vec2<f32>) -> ScalarOut {
     return ScalarOut(sigma, t, state, true);
 }
 
-// Rust `scalar_model` for the isotropic materials (0..=5; anything else: no stress).
+// Rust `scalar_model` for the isotropic materials (0..=5, 7, 8; anything else: no stress).
 fn scalar_model(pc: PartConsts, sigma: vec3<f32>, state: vec2<f32>, dt: f32) -> ScalarOut {
     let mu = pc.mu;
     let lambda = pc.lambda;
@@ -173,6 +173,39 @@ fn scalar_model(pc: PartConsts, sigma: vec3<f32>, state: vec2<f32>, dt: f32) -> 
                 return ScalarOut(sigma_e, stvk_hencky(sigma_e, mu, lambda), state, false);
             }
             return cm_keep(sigma, stvk_hencky(sigma, mu, lambda), state);
+        }
+        // PhysFlow's non_newtonian: the foam's mapping without the yield guard; equal
+        // singular values take Warp's svd3(I) rounding (Rust `WARP_SVD3_IDENTITY`, its logs
+        // added as constants).
+        case 7u: {
+            let c = max(sigma, vec3<f32>(0.01));
+            var s = c;
+            var eps = cm_ln3(c);
+            if c.x == c.y && c.y == c.z {
+                s = c * vec3<f32>(bitcast<f32>(0x3F7FFFFBu), bitcast<f32>(0x3F7FFFFCu), bitcast<f32>(0x3F7FFFFFu));
+                eps = eps + vec3<f32>(-2.9802326828588295e-07, -2.3841860752327643e-07, -5.960464655174753e-08);
+            }
+            let b_tr = (s.x * s.x + s.y * s.y + s.z * s.z) / 3.0;
+            let tr = eps.x + eps.y + eps.z;
+            let third = tr / 3.0;
+            let s_trial = 2.0 * mu * (eps - vec3<f32>(third));
+            let s_norm = cm_norm3(s_trial);
+            let y = s_norm - 0.816496580927726 * state.x;
+            let mu_hat = mu * b_tr;
+            let s_new_norm = s_norm - y / (1.0 + pc.plastic_viscosity / (2.0 * mu_hat * dt));
+            let kk = s_new_norm / s_norm;
+            let sigma_e = cm_exp3(kk * s_trial / (2.0 * mu) + vec3<f32>(third));
+            return ScalarOut(sigma_e, stvk_hencky(sigma_e, mu, lambda), state, false);
+        }
+        // PhysFlow's newtonian: compressible neo-Hookean (kirchoff_stress_herschel).
+        case 8u: {
+            let j = sigma.x * sigma.y * sigma.z;
+            let bj = max(j * j, 1e-8);
+            let f = exp(log(bj) * (-1.0 / 3.0));
+            let b = vec3<f32>(f * sigma.x * sigma.x, f * sigma.y * sigma.y, f * sigma.z * sigma.z);
+            let mb = (b.x + b.y + b.z) / 3.0;
+            let p = (lambda / 2.0 + mu / 3.0) * (j * j - 1.0 + 1e-8);
+            return cm_keep(sigma, vec3<f32>(p) + mu * (b - vec3<f32>(mb)), state);
         }
         // Snow: Stomakhin et al. 2013.
         case 4u: {
