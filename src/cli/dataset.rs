@@ -47,6 +47,7 @@ impl DatasetOptions {
             sim: sim.cloned(),
             fps,
             key_frames: self.key_frames,
+            video_optional: false,
         })
     }
 }
@@ -78,7 +79,12 @@ pub fn run(a: DatasetArgs) -> Result<()> {
 }
 
 fn inspect(a: InspectArgs) -> Result<()> {
-    let ds = r4d_datasets::load(&a.dir, &a.opts.load_options(a.sim.as_ref(), a.fps)?)?;
+    // A scene without a reference video can still be inspected (its views list is empty).
+    let opts = LoadOptions {
+        video_optional: true,
+        ..a.opts.load_options(a.sim.as_ref(), a.fps)?
+    };
+    let ds = r4d_datasets::load(&a.dir, &opts)?;
     let s = ds.summary();
     if a.json {
         println!("{}", serde_json::to_string_pretty(&s)?);

@@ -10,6 +10,7 @@ mod cantilever;
 mod loss_goldens;
 mod lpips;
 mod materials;
+mod physflow_fluids;
 mod physgaussian_import;
 mod physics;
 mod segment;

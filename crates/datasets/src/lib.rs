@@ -88,6 +88,9 @@ pub struct LoadOptions {
     /// PhysFlow's key-frame subsampling of `images_generated/` (its `n_key_frame`, 8 there):
     /// see [`physflow`].
     pub key_frames: Option<usize>,
+    /// Read a PhysFlow scene that has no reference video (to simulate or inspect it, not to
+    /// fit it): [`Dataset::views`] is then empty. Without it a missing video is an error.
+    pub video_optional: bool,
 }
 
 /// One supervised view: a reference video and the camera it was filmed from.

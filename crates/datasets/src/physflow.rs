@@ -260,8 +260,23 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
             ),
         ));
     }
-    let video = reference_video(dir, &cfg, opts, &mut warnings)?;
-    let camera = cameras::fit_to_video(&cams[cam_index], video.width, video.height, &video.path)?;
+    let video = match reference_video(dir, &cfg, opts, &mut warnings) {
+        Err(DatasetError::Missing { .. }) if opts.video_optional => None,
+        r => Some(r?),
+    };
+    let views = match video {
+        Some(video) => vec![ViewSource {
+            camera_index: cam_index,
+            camera: cameras::fit_to_video(
+                &cams[cam_index],
+                video.width,
+                video.height,
+                &video.path,
+            )?,
+            video,
+        }],
+        None => Vec::new(),
+    };
     Ok(Dataset {
         layout: Layout::PhysFlow,
         dir: dir.to_path_buf(),
@@ -276,11 +291,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset> {
         link,
         cameras: cams,
         background: [1.0; 3],
-        views: vec![ViewSource {
-            camera_index: cam_index,
-            camera,
-            video,
-        }],
+        views,
         ground_truth: GroundTruth::from_pcd(dir)?,
         physflow: Some(cfg.extras.clone()),
         warnings,

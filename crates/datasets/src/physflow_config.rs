@@ -3,7 +3,7 @@
 //!
 //! PhysFlow's solver is a fork of PhysGaussian's, so the config is decoded by the PhysGaussian
 //! importer ([`r4d_mpm::physgaussian`]: the same keys, defaults, boundary conditions and
-//! truncating `int(frame_dt / substep_dt)` substeps) after three PhysFlow rules are applied:
+//! truncating `int(frame_dt / substep_dt)` substeps) after four PhysFlow rules are applied:
 //!
 //! * **Scaled units.** PhysFlow's solver multiplies `E` by `1e7` (`SCALE_E`), `yield_stress` by
 //!   `1e5` (`SCALE_YS`) and `plastic_viscosity` by `1e4` (`SCALE_PV`) (`mpm_solver_warp/
@@ -13,10 +13,14 @@
 //! * **Material names and ids.** `jelly`/`elastic` 0, `metal` 1, `sand` 2, `foam` 3,
 //!   `plasticine` 4, `newtonian` 5, `non_newtonian` 6 (PhysFlow's `set_parameters_dict`; note
 //!   plasticine is 4 there, 5 in PhysGaussian). `non_newtonian` (PhysFlow's toothpaste, cream,
-//!   jam) is decoded as our `foam` (the same StVK-Hencky viscoplastic return mapping with
-//!   `SCALE_YS`/`SCALE_PV`), with a warning: PhysFlow's variant applies the viscoplastic update
-//!   also below the yield surface. `newtonian` (droplet, letter) uses PhysFlow's
-//!   `kirchoff_stress_herschel`, which this solver does not have: a typed error.
+//!   jam) and `newtonian` (droplet, letter) are our [`Material::NonNewtonian`] and
+//!   [`Material::Newtonian`], PhysFlow's models as its solver computes them (see
+//!   [`r4d_mpm::constitutive`]).
+//! * **Every surface collider holds.** PhysFlow's `add_surface_collider` computes the slip or
+//!   frictional velocity and then writes zero for every surface but its special `"cut"`: its
+//!   scenes move as if every collider were `sticky`, so they are read that way (friction 0),
+//!   without a warning (the PhysGaussian importer, for PhysGaussian's own scenes, applies
+//!   `slip` and `friction` as intended and says so).
 //! * **PhysFlow-only keys** are read with the decoder's defaults and kept in
 //!   [`PhysFlowExtras`]: `opt_frame_dt` (1e-2), `mu_N` (5), `lam_N` (5), `viscosity` (0.1),
 //!   `pic_damping`, `line`, `bbox_2d`, `reduction` ("sum"), `lr`, and the camera keys
@@ -210,23 +214,8 @@ pub fn decode(text: &str, path: &Path) -> Result<PhysFlowConfig> {
         "sand" => (2, "sand"),
         "foam" => (3, "foam"),
         "plasticine" => (4, "plasticine"),
-        "newtonian" => {
-            return Err(DatasetError::invalid(
-                path,
-                "material: 'newtonian' (PhysFlow id 5) uses PhysFlow's kirchoff_stress_herschel, \
-                 which this solver does not implement (supported: jelly/elastic, metal, sand, foam, \
-                 plasticine, non_newtonian)",
-            ))
-        }
-        "non_newtonian" => {
-            warnings.push(
-                "material: 'non_newtonian' (PhysFlow id 6) is simulated as foam: the same \
-                 viscoplastic StVK-Hencky return mapping, applied only above the yield surface \
-                 (PhysFlow's variant also applies it below)"
-                    .to_string(),
-            );
-            (6, "foam")
-        }
+        "newtonian" => (5, "newtonian"),
+        "non_newtonian" => (6, "non_newtonian"),
         other => {
             return Err(DatasetError::invalid(
                 path,
@@ -248,6 +237,16 @@ pub fn decode(text: &str, path: &Path) -> Result<PhysFlowConfig> {
         }
     };
     map.insert("material".into(), Value::from(ours));
+    if let Some(Value::Array(list)) = map.get_mut("boundary_conditions") {
+        for bc in list.iter_mut().filter_map(Value::as_object_mut) {
+            let collider = bc.get("type").and_then(Value::as_str) == Some("surface_collider");
+            let cut = bc.get("surface").and_then(Value::as_str) == Some("cut");
+            if collider && !cut && bc.get("surface").is_some_and(Value::is_string) {
+                bc.insert("surface".into(), Value::from("sticky"));
+                bc.insert("friction".into(), Value::from(0.0));
+            }
+        }
+    }
     scale_key(&mut map, "E", SCALE_E, "", path)?;
     // PhysFlow's decoder default E = 1e5 is also in scaled units.
     if map.get("E").is_none_or(Value::is_null) {
@@ -423,17 +422,54 @@ mod tests {
         let back = PhysFlowUnits::from_si(&p);
         assert!((back.e - 0.01).abs() < 1e-15 && (back.yield_stress - 0.05).abs() < 1e-15);
         assert!((back.plastic_viscosity - 0.01).abs() < 1e-15 && back.density == 75.0);
-        // Defaults of the decoder: E = 1e5 in scaled units, opt_frame_dt 1e-2, reduction sum.
-        let d = decode(r#"{"g": [0, 0, -9.8]}"#, Path::new("d.json")).unwrap();
+        // Defaults of the decoder: E = 1e5 in scaled units, opt_frame_dt 1e-2, reduction sum
+        // (so stiff that only a substep under the CFL bound of 3.9e-7 s simulates it).
+        let stable = r#""substep_dt": 1e-7, "frame_dt": 1e-5"#;
+        let e = decode(r#"{"g": [0, 0, -9.8]}"#, Path::new("d.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("d.json") && e.contains("CFL"), "{e}");
+        let d = decode(
+            &format!(r#"{{"g": [0, 0, -9.8], {stable}}}"#),
+            Path::new("d.json"),
+        )
+        .unwrap();
         assert!((d.config.parts[0].youngs_modulus_pa - 1e12).abs() < 1.0);
         assert_eq!(d.extras.opt_frame_dt, 1e-2);
         assert_eq!(d.extras.reduction, "sum");
         assert_eq!(d.config.time.frames, 100);
-        let n = decode(r#"{"g": [0, 0, 0], "E": null}"#, Path::new("n.json")).unwrap();
+        let n = decode(
+            &format!(r#"{{"g": [0, 0, 0], "E": null, {stable}}}"#),
+            Path::new("n.json"),
+        )
+        .unwrap();
         assert!(
             (n.config.parts[0].youngs_modulus_pa - 1e12).abs() < 1.0,
             "null E = default"
         );
+    }
+
+    /// PhysFlow's solver holds every surface collider (it writes zero velocity after computing
+    /// the slip one): its scenes are read that way, without a warning.
+    #[test]
+    fn every_surface_collider_holds_as_in_physflows_solver() {
+        let c = decode(
+            r#"{"material": "jelly", "E": 1e-3, "g": [0, 0, -9.8], "boundary_conditions": [
+                {"type": "surface_collider", "point": [1, 1, 0.5], "normal": [0, 0, 1],
+                 "surface": "slip", "friction": 0.3, "start_time": 0, "end_time": 1e3}]}"#,
+            Path::new("slip.json"),
+        )
+        .unwrap();
+        assert!(c.warnings.is_empty(), "{:?}", c.warnings);
+        match &c.config.boundary[..] {
+            [r4d_mpm::BoundaryCondition::SurfaceCollider {
+                surface, friction, ..
+            }] => {
+                assert_eq!(*surface, r4d_mpm::Surface::Sticky);
+                assert_eq!(*friction, 0.0);
+            }
+            b => panic!("{b:?}"),
+        }
     }
 
     #[test]
@@ -443,21 +479,23 @@ mod tests {
             Path::new("t.json"),
         )
         .unwrap();
-        assert_eq!(nn.config.parts[0].material, Material::Foam);
+        assert_eq!(nn.config.parts[0].material, Material::NonNewtonian);
         assert_eq!(nn.extras.material_id, 6);
+        assert!(nn.warnings.is_empty(), "{:?}", nn.warnings);
         let pl = decode(
-            r#"{"material": "plasticine", "g": [0,-9.8,0]}"#,
+            r#"{"material": "plasticine", "E": 1e-3, "g": [0,-9.8,0]}"#,
             Path::new("c.json"),
         )
         .unwrap();
         assert_eq!(pl.extras.material_id, 4);
-        let e = decode(
-            r#"{"material": "newtonian", "g": [0,0,0]}"#,
+        let nw = decode(
+            r#"{"material": "newtonian", "E": 5e-4, "nu": 0.499, "density": 800, "g": [0,0,0]}"#,
             Path::new("drop.json"),
         )
-        .unwrap_err()
-        .to_string();
-        assert!(e.contains("drop.json") && e.contains("newtonian"), "{e}");
+        .unwrap();
+        assert_eq!(nw.config.parts[0].material, Material::Newtonian);
+        assert_eq!(nw.extras.material_id, 5);
+        assert!(nw.warnings.is_empty(), "{:?}", nw.warnings);
         let e = decode(
             r#"{"material": "honey", "g": [0,0,0]}"#,
             Path::new("h.json"),

@@ -182,8 +182,18 @@ const KNOWN_KEYS: &[&str] = &[
     "additional_material_params",
 ];
 
-/// PhysGaussian's material names.
-const MATERIALS: &[&str] = &["jelly", "metal", "sand", "foam", "snow", "plasticine"];
+/// PhysGaussian's material names, and PhysFlow's two fluids (its configs are PhysGaussian's
+/// dialect).
+const MATERIALS: &[&str] = &[
+    "jelly",
+    "metal",
+    "sand",
+    "foam",
+    "snow",
+    "plasticine",
+    "non_newtonian",
+    "newtonian",
+];
 
 /// PhysGaussian's boundary condition types.
 const BOUNDARY_TYPES: &[&str] = &[
@@ -278,7 +288,7 @@ pub fn import_str(text: &str, file: &str) -> Result<Import> {
         Some(_) => return Err(r.err("material", "expected a string")),
     };
     let material = Material::from_name(&mat_name)
-        .filter(|m| m.physgaussian_id().is_some())
+        .filter(|m| m.physgaussian_id().is_some() || m.physflow_id().is_some())
         .ok_or_else(|| {
             Error::config(
                 file,
