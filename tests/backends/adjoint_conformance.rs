@@ -339,6 +339,21 @@ fn plastic_materials() -> Vec<(&'static str, PartParams)> {
                 ..base(Material::Plasticine)
             },
         ),
+        (
+            "non_newtonian",
+            PartParams {
+                yield_stress_pa: 20.0,
+                plastic_viscosity_pa_s: 2.0,
+                ..base(Material::NonNewtonian)
+            },
+        ),
+        (
+            "newtonian",
+            PartParams {
+                poisson_ratio: 0.45,
+                ..base(Material::Newtonian)
+            },
+        ),
     ]
 }
 

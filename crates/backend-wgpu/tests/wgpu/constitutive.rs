@@ -253,6 +253,26 @@ fn parts() -> Vec<Part> {
             },
             state: yield_jitter,
         },
+        Part {
+            name: "non_newtonian",
+            params: PartParams {
+                material: Material::NonNewtonian,
+                yield_stress_pa: 3e3,
+                plastic_viscosity_pa_s: 20.0,
+                ..Default::default()
+            },
+            state: yield_jitter,
+        },
+        Part {
+            name: "newtonian",
+            params: PartParams {
+                material: Material::Newtonian,
+                youngs_modulus_pa: 5e3,
+                poisson_ratio: 0.45,
+                ..Default::default()
+            },
+            state: |_, _, _| [0.0, 1.0],
+        },
     ]
 }
 
@@ -316,7 +336,7 @@ fn wgsl_constitutive_models_match_the_rust_reference() {
     let ids: std::collections::BTreeSet<u32> = consts.iter().map(|c| c.material).collect();
     assert_eq!(
         ids.into_iter().collect::<Vec<_>>(),
-        (0..=6).collect::<Vec<_>>()
+        (0..=8).collect::<Vec<_>>()
     );
 
     let mut rng = Rng(0x5eed_c0de);
@@ -383,11 +403,25 @@ fn wgsl_constitutive_models_match_the_rust_reference() {
     let st_gpu = ctx.download(&plastic_out_buf).unwrap();
 
     let mut stats: Vec<Stats> = parts.iter().map(|_| Stats::default()).collect();
+    let mut undefined = 0;
     for i in 0..n {
         let pi = part_of[i] as usize;
         let pc = &consts[pi];
         let s = &mut stats[pi];
         let f = Mat3::<f32>::from_array(f_trial[i]);
+        // PhysFlow's non_newtonian has no stress direction where all three singular values
+        // are equal (s_trial = 0): exactly equal ones take Warp's rounding (deterministic for
+        // a diagonal F, whose frame is the axes), but a rotated a R has them equal only up to
+        // each SVD's own rounding and an arbitrary frame, so no two implementations agree
+        // there (nor do f32 and f64): those particles are skipped.
+        if pc.material == Material::NonNewtonian.kernel_id() {
+            let sv = svd3(f.cast::<f64>()).sigma;
+            let diagonal = (0..9).all(|e| e % 4 == 0 || f_trial[i][e] == 0.0);
+            if !diagonal && (sv[0] - sv[2]).abs() < 1e-5 * sv[0].abs() {
+                undefined += 1;
+                continue;
+            }
+        }
         let gv = Mat3::<f32>::from_array(grad_v[i]);
         let mut st = plastic[i];
         let (fe, tau) = stress_update::<f32>(f, pc, &mut st, &gv, DT);
@@ -462,6 +496,8 @@ fn wgsl_constitutive_models_match_the_rust_reference() {
         }
     }
 
+    eprintln!("non_newtonian: {undefined} particles with equal singular values in a rotated frame skipped");
+    assert!(undefined < PER_PART / 4, "{undefined} skipped");
     eprintln!(
         "{:<18} {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} | {:>6} {:>6} {:>5} {:>5} {:>5}",
         "part",
@@ -541,7 +577,9 @@ fn wgsl_constitutive_models_match_the_rust_reference() {
             // The fluid keeps only the volume of F (F_trial unchanged only when it is already
             // an isotropic scaling, e.g. the identity).
             6 => assert!(s.mapped > PER_PART * 3 / 4, "fluid: {}", s.mapped),
-            _ => assert_eq!(s.mapped, 0, "jelly"),
+            // PhysFlow's non_newtonian maps every particle (no yield guard).
+            7 => assert_eq!(s.mapped, PER_PART - undefined, "{}", p.name),
+            _ => assert_eq!(s.mapped, 0, "{}", p.name),
         }
         if pc.material == 1 && pc.hardening_xi != 0.0 || pc.material == 5 {
             assert!(

@@ -911,6 +911,36 @@ mod trajectory {
             true,
         );
     }
+    #[test]
+    fn trajectory_gradients_match_finite_differences_non_newtonian() {
+        // PhysFlow's paste: the mapping runs at every substep (from F = I at the first, with
+        // Warp's rounding), inside and beyond the yield surface.
+        check_material(
+            "non_newtonian",
+            PartParams {
+                // A viscosity near eta = 2 mu dt, where the mapping is most sensitive to it,
+                // so that its gradient stands well above the finite difference's round-off.
+                yield_stress_pa: 20.0,
+                plastic_viscosity_pa_s: 20.0,
+                ..base(Material::NonNewtonian)
+            },
+            ForceForm::Mls,
+            true,
+        );
+    }
+    #[test]
+    fn trajectory_gradients_match_finite_differences_newtonian() {
+        // PhysFlow's drop: an elastic solid of low shear and high bulk modulus.
+        check_material(
+            "newtonian",
+            PartParams {
+                poisson_ratio: 0.45,
+                ..base(Material::Newtonian)
+            },
+            ForceForm::Mls,
+            false,
+        );
+    }
 }
 
 mod precision {
