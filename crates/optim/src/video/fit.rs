@@ -278,7 +278,7 @@ pub struct FitOutcome {
 }
 
 /// MS-SSIM of rendered videos against the problem's references (mean over views), with the
-/// smaller-window fallback for frames under 161 px (see [`MsSsimConfig::largest_window`]).
+/// smaller-window fallback for frames under 161 px (see [`r4d_loss::MsSsimConfig::largest_window`]).
 pub fn ms_ssim_score(problem: &VideoProblem, rendered: &[Video<f32>]) -> Result<f64, FitError> {
     let mut sum = 0.0;
     for (v, r) in problem.views.iter().zip(rendered) {
