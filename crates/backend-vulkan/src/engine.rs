@@ -408,6 +408,10 @@ impl GpuEngine for VulkanEngine {
     type Raw = VkBuffer;
     type Error = VulkanError;
 
+    fn unsupported(&self, what: String) -> VulkanError {
+        VulkanError::Unsupported(what)
+    }
+
     fn name(&self) -> &'static str {
         "vulkan"
     }

@@ -55,6 +55,19 @@ pub(crate) struct ReverseRecords<E: GpuEngine> {
 }
 
 impl<E: GpuEngine> MpmAdjointKernels for GpuMpm<E> {
+    /// The device's reverse stages cover every isotropic model, not yet the fluid (whose
+    /// viscous stress reads the APIC matrix).
+    fn check_differentiable(&self, materials: &[u32]) -> Result<(), E::Error> {
+        if materials.contains(&r4d_mpm::Material::Fluid.kernel_id()) {
+            return Err(self.engine().unsupported(
+                "the fluid model's adjoint (it runs on the cpu backend; the device's reverse \
+                 stages cover the other materials)"
+                    .into(),
+            ));
+        }
+        Ok(())
+    }
+
     fn g2p_vjp(
         &self,
         before: &StateBufs<Self>,

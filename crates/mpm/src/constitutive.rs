@@ -331,17 +331,28 @@ pub fn scalar_model<S: Scalar>(pc: &PartConsts, m: ModelIn<S>, dt: f64) -> Model
                 unchanged: false,
             }
         }
-        // Foam: viscoplastic von Mises with StVK-Hencky stress.
-        3 => {
-            let s = sigma.map(|x| x.max(S::cst(0.01)));
+        // Foam: viscoplastic von Mises with StVK-Hencky stress; PhysFlow's non_newtonian (7)
+        // is the same mapping without the yield guard, with Warp's svd3(I) rounding where
+        // the three singular values are equal (see the module docs).
+        3 | 7 => {
+            let paste = pc.material == 7;
+            let c = sigma.map(|x| x.max(S::cst(0.01)));
+            let equal = paste && c[0].re() == c[1].re() && c[1].re() == c[2].re();
+            let (s, eps) = if equal {
+                (
+                    [0, 1, 2].map(|i| c[i] * S::cst(WARP_SVD3_IDENTITY[i])),
+                    [0, 1, 2].map(|i| c[i].ln() + S::cst(WARP_SVD3_IDENTITY_LN[i])),
+                )
+            } else {
+                (c, c.map(|x| x.ln()))
+            };
             let b_tr = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]) / three;
-            let eps = s.map(|x| x.ln());
             let tr = eps[0] + eps[1] + eps[2];
             let third = tr / three;
             let s_trial = eps.map(|e| two * mu * (e - third));
             let s_norm = norm3(s_trial);
             let y = s_norm - S::cst((2.0f64 / 3.0).sqrt()) * m.state[0];
-            if y.re() > 0.0 {
+            if paste || y.re() > 0.0 {
                 let mu_hat = mu * b_tr;
                 let s_new_norm = s_norm - y / (S::cst(1.0) + m.eta / (two * mu_hat * S::cst(dt)));
                 let kk = s_new_norm / s_norm;
@@ -372,35 +383,6 @@ pub fn scalar_model<S: Scalar>(pc: &PartConsts, m: ModelIn<S>, dt: f64) -> Model
                 t: fixed_corotated(sigma_e, mu * h, lambda * h),
                 state: [m.state[0], jp],
                 unchanged: !clamped,
-            }
-        }
-        // PhysFlow's non_newtonian: the foam's mapping without the yield guard.
-        7 => {
-            let c = sigma.map(|x| x.max(S::cst(0.01)));
-            let equal = c[0].re() == c[1].re() && c[1].re() == c[2].re();
-            let (s, eps) = if equal {
-                (
-                    [0, 1, 2].map(|i| c[i] * S::cst(WARP_SVD3_IDENTITY[i])),
-                    [0, 1, 2].map(|i| c[i].ln() + S::cst(WARP_SVD3_IDENTITY_LN[i])),
-                )
-            } else {
-                (c, c.map(|x| x.ln()))
-            };
-            let b_tr = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]) / three;
-            let tr = eps[0] + eps[1] + eps[2];
-            let third = tr / three;
-            let s_trial = eps.map(|e| two * mu * (e - third));
-            let s_norm = norm3(s_trial);
-            let y = s_norm - S::cst((2.0f64 / 3.0).sqrt()) * m.state[0];
-            let mu_hat = mu * b_tr;
-            let s_new_norm = s_norm - y / (S::cst(1.0) + m.eta / (two * mu_hat * S::cst(dt)));
-            let kk = s_new_norm / s_norm;
-            let sigma_e = exp3(s_trial.map(|x| kk * x / (two * mu) + third));
-            ModelOut {
-                sigma_e,
-                t: stvk_hencky(sigma_e, mu, lambda),
-                state: m.state,
-                unchanged: false,
             }
         }
         // PhysFlow's newtonian: compressible neo-Hookean (kirchoff_stress_herschel).
@@ -468,7 +450,7 @@ pub fn stress_update_from_svd<T: Real>(
     dt: T,
 ) -> (Mat3<T>, Mat3<T>) {
     if pc.material == 6 {
-        return fluid(svd, pc, grad_v);
+        return fluid(svd, MaterialParams::of(pc), grad_v);
     }
     stress_update_with_svd(f_trial, svd, pc, state, MaterialParams::of(pc), dt)
 }
@@ -516,15 +498,16 @@ pub fn stress_update_with_svd<T: Real>(
 }
 
 /// The weakly compressible Newtonian fluid: F keeps only its volume change; pressure
-/// `K J (J - 1)`, viscous stress `mu_v J (C + C^T)`.
-fn fluid<T: Real>(svd: &Svd3<T>, pc: &PartConsts, grad_v: &Mat3<T>) -> (Mat3<T>, Mat3<T>) {
+/// `K J (J - 1)` with the bulk modulus `K = lambda + 2 mu / 3` (= `E / (3 (1 - 2 nu))`),
+/// viscous stress `eta J (C + C^T)` (`eta` the plastic viscosity, `C = grad_v` the APIC
+/// matrix). Returns `(F_elastic, tau)`.
+pub fn fluid<T: Real>(svd: &Svd3<T>, p: MaterialParams<T>, grad_v: &Mat3<T>) -> (Mat3<T>, Mat3<T>) {
     let j = svd.sigma[0] * svd.sigma[1] * svd.sigma[2];
     let c = num_traits::Float::cbrt(num_traits::Float::abs(j)) * num_traits::Float::signum(j);
-    let k = T::c(pc.bulk as f64);
-    let eta = T::c(pc.plastic_viscosity as f64);
-    let p = k * j * (j - T::one());
-    let visc = (*grad_v + grad_v.transpose()).scaled(eta * j);
-    (Mat3::diag([c; 3]), visc + Mat3::diag([p; 3]))
+    let k = p.lambda + T::c(2.0 / 3.0) * p.mu;
+    let p_ = k * j * (j - T::one());
+    let visc = (*grad_v + grad_v.transpose()).scaled(p.eta * j);
+    (Mat3::diag([c; 3]), visc + Mat3::diag([p_; 3]))
 }
 
 #[cfg(test)]

@@ -180,6 +180,7 @@ impl<S: Real> SlotTables<S> {
                 yield_stress: p.yield_stress.f64() as f32,
                 hardening_xi: p.hardening.f64() as f32,
                 softening: p.softening.f64() as f32,
+                bulk: (m.lambda + S::c(2.0 / 3.0) * m.mu).f64() as f32,
                 ..*base
             });
         }

@@ -13,7 +13,7 @@
 //! `(i n + j) n + k` as `[momentum or velocity (3), mass]`.
 
 use crate::boundary::{BC_BOUNDING_BOX, BC_CUBOID, BC_SURFACE, PBC_IMPULSE, PBC_VELOCITY};
-use crate::constitutive::{stress_update_from_svd, stress_update_with_svd};
+use crate::constitutive::stress_update_with_svd;
 use crate::kernels::{
     GridBc, Health, ParticleBc, StepConsts, FORCE_MLS, HEALTH_NAN, HEALTH_OUT_OF_DOMAIN,
     HEALTH_SPEED, OUT_OF_DOMAIN_CLAMP,
@@ -182,8 +182,8 @@ pub fn particle_stress_svd<T: Real>(
 ) -> [T; 9] {
     let f_trial = Mat3::from_array(*f);
     let (fe, tau) = if pc.material == crate::Material::Fluid.kernel_id() {
-        let grad_v = Mat3::from_array(*c_affine);
-        stress_update_from_svd(f_trial, svd, pc, plastic, &grad_v, k(c.dt))
+        // The fluid's constants from the slot's table (the differentiable ones, in `T`).
+        crate::constitutive::fluid(svd, material_of(mat), &Mat3::from_array(*c_affine))
     } else {
         stress_update_with_svd(f_trial, svd, pc, plastic, material_of(mat), k(c.dt))
     };

@@ -394,6 +394,63 @@ fn stress_update_vjp_inner<T: Real>(
     }
 }
 
+/// Adjoints of the inputs of the fluid model ([`crate::constitutive::fluid`]).
+#[derive(Clone, Copy, Debug)]
+pub struct FluidBar<T> {
+    /// Adjoint of F_trial.
+    pub f_trial: Mat3<T>,
+    /// Adjoint of the APIC matrix `C` the viscous stress reads.
+    pub grad_v: Mat3<T>,
+    /// Adjoints of the material constants: `mu` and `lambda` through the bulk modulus
+    /// `K = lambda + 2 mu / 3`, and the viscosity `eta` (alpha and h are 0).
+    pub params: MaterialParams<T>,
+}
+
+/// Reverse of [`crate::constitutive::fluid`] given `svd`, the SVD of F_trial: from the
+/// adjoints of `F_elastic = cbrt(J) I` and of `tau = eta J (C + C^T) + K J (J - 1) I`
+/// (`J = det F_trial = s_0 s_1 s_2`) to those of F_trial (`dJ/dF = cof F = U diag(s_1 s_2,
+/// s_0 s_2, s_0 s_1) V^T`), of `C` and of the constants.
+pub fn fluid_vjp<T: Real>(
+    svd: &Svd3<T>,
+    p: MaterialParams<T>,
+    grad_v: &Mat3<T>,
+    fe_bar: Mat3<T>,
+    tau_bar: Mat3<T>,
+) -> FluidBar<T> {
+    let s = svd.sigma;
+    let j = s[0] * s[1] * s[2];
+    let (one, two, three) = (T::one(), T::c(2.0), T::c(3.0));
+    let k = p.lambda + T::c(2.0 / 3.0) * p.mu;
+    let sym = (*grad_v + grad_v.transpose()).to_array();
+    let tb = tau_bar.to_array();
+    let contract = (0..9).fold(T::zero(), |a, e| a + tb[e] * sym[e]);
+    let tr_tb = tb[0] + tb[4] + tb[8];
+    let fe = fe_bar.to_array();
+    let tr_fe = fe[0] + fe[4] + fe[8];
+    // d cbrt(J) / dJ = cbrt(J) / (3 J) (taken as 0 at J = 0, where the forward's cbrt has
+    // no derivative).
+    let dc = if j == T::zero() {
+        T::zero()
+    } else {
+        num_traits::Float::cbrt(num_traits::Float::abs(j)) * num_traits::Float::signum(j)
+            / (three * j)
+    };
+    let j_bar = tr_fe * dc + p.eta * contract + k * (two * j - one) * tr_tb;
+    let cof = svd.compose([s[1] * s[2], s[0] * s[2], s[0] * s[1]]);
+    let k_bar = j * (j - one) * tr_tb;
+    FluidBar {
+        f_trial: cof.scaled(j_bar),
+        grad_v: (tau_bar + tau_bar.transpose()).scaled(p.eta * j),
+        params: MaterialParams {
+            mu: T::c(2.0 / 3.0) * k_bar,
+            lambda: k_bar,
+            eta: j * contract,
+            alpha: T::zero(),
+            h: T::zero(),
+        },
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -457,6 +514,78 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// The fluid's VJP against central differences of the forward model in f64, for every
+    /// entry of F_trial and C and every constant, at stretched, compressed and inverted F.
+    #[test]
+    fn fluid_vjp_matches_finite_differences() {
+        use crate::constitutive::fluid;
+        let mut seed = 11u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for case in 0..6 {
+            let mut fa: [f64; 9] =
+                std::array::from_fn(|e| (if e % 4 == 0 { 1.0 } else { 0.0 }) + 0.3 * rnd());
+            if case == 5 {
+                fa[8] = -fa[8]; // inverted
+            }
+            let f = Mat3::from_array(fa);
+            let c = Mat3::from_array(std::array::from_fn(|_| 20.0 * rnd()));
+            let p = MaterialParams {
+                mu: 1e3 * (1.5 + rnd()),
+                lambda: 3e4 * (1.5 + rnd()),
+                eta: 0.5 + rnd(),
+                alpha: 0.0,
+                h: 0.0,
+            };
+            let wf = Mat3::from_array(std::array::from_fn(|_| rnd()));
+            let wt = Mat3::from_array(std::array::from_fn(|_| 1e-4 * rnd()));
+            let loss = |f: Mat3<f64>, c: Mat3<f64>, p: MaterialParams<f64>| {
+                let (fe, tau) = fluid(&svd3(f), p, &c);
+                let (fe, tau, a, b) = (fe.to_array(), tau.to_array(), wf.to_array(), wt.to_array());
+                (0..9).map(|e| fe[e] * a[e] + tau[e] * b[e]).sum::<f64>()
+            };
+            let bar = fluid_vjp(&svd3(f), p, &c, wf, wt);
+            let fd = |g: &dyn Fn(f64) -> f64, x: f64| {
+                let h = 1e-6 * x.abs().max(1.0);
+                (g(x + h) - g(x - h)) / (2.0 * h)
+            };
+            // Relative 1e-6, above the differences' round-off (the loss is O(10): about 1e-10
+            // absolute at these steps).
+            let check = |what: String, a: f64, n: f64| {
+                let scale = a.abs().max(n.abs());
+                assert!(
+                    (a - n).abs() < 1e-6 * scale + 1e-9,
+                    "case {case}: {what}: {a:e} vs fd {n:e}"
+                );
+            };
+            for e in 0..9 {
+                let g = |t: f64| {
+                    let mut a = fa;
+                    a[e] = t;
+                    loss(Mat3::from_array(a), c, p)
+                };
+                check(format!("dF[{e}]"), bar.f_trial.to_array()[e], fd(&g, fa[e]));
+                let ca = c.to_array();
+                let g = |t: f64| {
+                    let mut a = ca;
+                    a[e] = t;
+                    loss(f, Mat3::from_array(a), p)
+                };
+                check(format!("dC[{e}]"), bar.grad_v.to_array()[e], fd(&g, ca[e]));
+            }
+            let g = |t: f64| loss(f, c, MaterialParams { mu: t, ..p });
+            check("dmu".into(), bar.params.mu, fd(&g, p.mu));
+            let g = |t: f64| loss(f, c, MaterialParams { lambda: t, ..p });
+            check("dlambda".into(), bar.params.lambda, fd(&g, p.lambda));
+            let g = |t: f64| loss(f, c, MaterialParams { eta: t, ..p });
+            check("deta".into(), bar.params.eta, fd(&g, p.eta));
         }
     }
 }

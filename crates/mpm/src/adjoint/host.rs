@@ -6,10 +6,10 @@
 //! The substep and its reverse sweep are not here: they run on any backend through
 //! [`super::engine::KernelAdjoint`] (the f64 reference backend is the gradient oracle). The
 //! out-of-domain clamp is not differentiated (a particle outside the grid is skipped by the
-//! transfers, never indexed out of bounds), and the fluid model has no adjoint yet.
+//! transfers, never indexed out of bounds).
 
 use crate::config::SimConfig;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::material::PartConsts;
 use crate::math::Real;
 pub use crate::params::PhysParams;
@@ -65,20 +65,11 @@ pub struct HostSim {
 }
 
 impl HostSim {
-    /// Builds the host simulator; the config must be valid. Fluid parts are refused.
+    /// Builds the host simulator; the config must be valid. (A backend whose reverse stages do
+    /// not cover a part's model refuses it in [`super::engine::KernelAdjoint::new`].)
     pub fn new(config: &SimConfig, scene: &ParticleSet) -> Result<Self> {
         let setup = SimSetup::new(config);
         scene.validate("host simulation", setup.dx, setup.n, config.parts.len())?;
-        if let Some(i) = config
-            .parts
-            .iter()
-            .position(|p| p.material == crate::Material::Fluid)
-        {
-            return Err(Error::config(
-                format!("parts[{i}]"),
-                "the fluid model has no adjoint yet",
-            ));
-        }
         Ok(HostSim {
             consts: config.parts.iter().map(|p| p.consts()).collect(),
             x0: scene.x.clone(),

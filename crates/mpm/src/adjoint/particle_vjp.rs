@@ -2,8 +2,9 @@
 //! stress, scatter) as one per-particle function, written once and called by every host
 //! backend's `p2g_vjp` kernel.
 
-use super::constitutive_vjp::stress_update_vjp_svd;
+use super::constitutive_vjp::{fluid_vjp, stress_update_vjp_svd, ConstitutiveBar};
 use super::transfer_vjp::{damped_affine_vjp, particle_bcs_vjp, scatter_vjp, ScatterBar};
+use crate::constitutive::MaterialParams;
 use crate::kernels::{ParticleBc, StepConsts};
 use crate::material::PartConsts;
 use crate::math::{svd3, Mat3, Real, Svd3};
@@ -117,23 +118,60 @@ pub fn particle_stage_vjp_svd<T: Real>(
         &mut sb,
     );
     let tau_bar = Mat3::from_array(sb.s).scaled(stress_scale(fw.vol0, c));
-    let cb = stress_update_vjp_svd(
-        svd,
-        fw.pc,
-        fw.plastic,
-        material_of(fw.mat),
-        k(c.dt),
-        Mat3::from_array(*fe_bar),
-        tau_bar,
-        *plastic_bar,
-    );
+    let mut c_bar = damped_affine_vjp(&sb.a, c.rpic_damping);
+    let cb = if fw.pc.material == crate::Material::Fluid.kernel_id() {
+        // The fluid reads the APIC matrix itself (its viscous stress) and keeps the plastic
+        // state; the forward symmetrises tau, so its adjoint is symmetrised first.
+        let m = material_of(fw.mat);
+        let f64m = |x: T| x.f64();
+        let fb = fluid_vjp::<f64>(
+            svd,
+            MaterialParams {
+                mu: f64m(m.mu),
+                lambda: f64m(m.lambda),
+                eta: f64m(m.eta),
+                alpha: 0.0,
+                h: 0.0,
+            },
+            &Mat3::from_array(*fw.c).cast(),
+            Mat3::from_array(*fe_bar).cast(),
+            tau_bar.sym().cast(),
+        );
+        let cf = fb.grad_v.to_array();
+        for (a, &b) in c_bar.iter_mut().zip(&cf) {
+            *a += T::c(b);
+        }
+        let t = |x: f64| T::c(x);
+        ConstitutiveBar {
+            f_trial: fb.f_trial.cast(),
+            state: *plastic_bar,
+            params: MaterialParams {
+                mu: t(fb.params.mu),
+                lambda: t(fb.params.lambda),
+                eta: t(fb.params.eta),
+                alpha: T::zero(),
+                h: T::zero(),
+            },
+        }
+    } else {
+        stress_update_vjp_svd(
+            svd,
+            fw.pc,
+            fw.plastic,
+            material_of(fw.mat),
+            k(c.dt),
+            Mat3::from_array(*fe_bar),
+            tau_bar,
+            *plastic_bar,
+        )
+    };
     let mut v_bar = sb.v;
     let mut m_bar = sb.mass;
     particle_bcs_vjp(fw.x0, fw.mass, pbcs, c, &mut v_bar, &mut m_bar);
     let bar = ParticleBar {
         x: std::array::from_fn(|q| x_bar_g2p[q] + sb.x[q]),
         v: v_bar,
-        c: damped_affine_vjp(&sb.a, c.rpic_damping),
+        c: c_bar,
         f: cb.f_trial.to_array(),
         plastic: cb.state,
     };

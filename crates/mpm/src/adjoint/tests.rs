@@ -929,6 +929,20 @@ mod trajectory {
         );
     }
     #[test]
+    fn trajectory_gradients_match_finite_differences_fluid() {
+        // The weakly compressible fluid: pressure from the bulk modulus (E, nu), viscous
+        // stress from the APIC matrix (plastic viscosity); F keeps only its volume.
+        check_material(
+            "fluid",
+            PartParams {
+                plastic_viscosity_pa_s: 2.0,
+                ..base(Material::Fluid)
+            },
+            ForceForm::Mls,
+            false,
+        );
+    }
+    #[test]
     fn trajectory_gradients_match_finite_differences_newtonian() {
         // PhysFlow's drop: an elastic solid of low shear and high bulk modulus.
         check_material(

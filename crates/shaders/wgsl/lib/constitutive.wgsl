@@ -154,34 +154,15 @@ fn scalar_model(pc: PartConsts, sigma: vec3<f32>, state: vec2<f32>, dt: f32) -> 
             }
             return ScalarOut(sigma_e, dp_stress(sigma_e, mu, lambda), state, false);
         }
-        // Foam: viscoplastic von Mises with StVK-Hencky stress.
-        case 3u: {
-            let s = max(sigma, vec3<f32>(0.01));
-            let b_tr = (s.x * s.x + s.y * s.y + s.z * s.z) / 3.0;
-            let eps = cm_ln3(s);
-            let tr = eps.x + eps.y + eps.z;
-            let third = tr / 3.0;
-            let s_trial = 2.0 * mu * (eps - vec3<f32>(third));
-            let s_norm = cm_norm3(s_trial);
-            // sqrt(2/3), an f64 constant in Rust, rounded to f32.
-            let y = s_norm - 0.816496580927726 * state.x;
-            if y > 0.0 {
-                let mu_hat = mu * b_tr;
-                let s_new_norm = s_norm - y / (1.0 + pc.plastic_viscosity / (2.0 * mu_hat * dt));
-                let kk = s_new_norm / s_norm;
-                let sigma_e = cm_exp3(kk * s_trial / (2.0 * mu) + vec3<f32>(third));
-                return ScalarOut(sigma_e, stvk_hencky(sigma_e, mu, lambda), state, false);
-            }
-            return cm_keep(sigma, stvk_hencky(sigma, mu, lambda), state);
-        }
-        // PhysFlow's non_newtonian: the foam's mapping without the yield guard; equal
-        // singular values take Warp's svd3(I) rounding (Rust `WARP_SVD3_IDENTITY`, its logs
-        // added as constants).
-        case 7u: {
+        // Foam (3) and PhysFlow's non_newtonian (7: no yield guard; equal singular values
+        // take Warp's svd3(I) rounding, Rust `WARP_SVD3_IDENTITY`, its logs added as
+        // constants).
+        case 3u, 7u: {
+            let paste = pc.material == 7u;
             let c = max(sigma, vec3<f32>(0.01));
             var s = c;
             var eps = cm_ln3(c);
-            if c.x == c.y && c.y == c.z {
+            if paste && c.x == c.y && c.y == c.z {
                 s = c * vec3<f32>(bitcast<f32>(0x3F7FFFFBu), bitcast<f32>(0x3F7FFFFCu), bitcast<f32>(0x3F7FFFFFu));
                 eps = eps + vec3<f32>(-2.9802326828588295e-07, -2.3841860752327643e-07, -5.960464655174753e-08);
             }
@@ -190,12 +171,16 @@ fn scalar_model(pc: PartConsts, sigma: vec3<f32>, state: vec2<f32>, dt: f32) -> 
             let third = tr / 3.0;
             let s_trial = 2.0 * mu * (eps - vec3<f32>(third));
             let s_norm = cm_norm3(s_trial);
+            // sqrt(2/3), an f64 constant in Rust, rounded to f32.
             let y = s_norm - 0.816496580927726 * state.x;
-            let mu_hat = mu * b_tr;
-            let s_new_norm = s_norm - y / (1.0 + pc.plastic_viscosity / (2.0 * mu_hat * dt));
-            let kk = s_new_norm / s_norm;
-            let sigma_e = cm_exp3(kk * s_trial / (2.0 * mu) + vec3<f32>(third));
-            return ScalarOut(sigma_e, stvk_hencky(sigma_e, mu, lambda), state, false);
+            if paste || y > 0.0 {
+                let mu_hat = mu * b_tr;
+                let s_new_norm = s_norm - y / (1.0 + pc.plastic_viscosity / (2.0 * mu_hat * dt));
+                let kk = s_new_norm / s_norm;
+                let sigma_e = cm_exp3(kk * s_trial / (2.0 * mu) + vec3<f32>(third));
+                return ScalarOut(sigma_e, stvk_hencky(sigma_e, mu, lambda), state, false);
+            }
+            return cm_keep(sigma, stvk_hencky(sigma, mu, lambda), state);
         }
         // PhysFlow's newtonian: compressible neo-Hookean (kirchoff_stress_herschel).
         case 8u: {
@@ -227,7 +212,8 @@ fn scalar_model(pc: PartConsts, sigma: vec3<f32>, state: vec2<f32>, dt: f32) -> 
 }
 
 // The weakly compressible Newtonian fluid: F keeps only its volume change; pressure
-// K J (J - 1), viscous stress mu_v J (C + C^T). The plastic state is left as it is.
+// K J (J - 1), K = lambda + 2 mu / 3, viscous stress mu_v J (C + C^T). The plastic state is
+// left as it is.
 fn cm_fluid(svd: Svd3, pc: PartConsts, grad_v: mat3x3<f32>, plastic: vec2<f32>) -> StressOut {
     let j = svd.sigma.x * svd.sigma.y * svd.sigma.z;
     // Rust: cbrt(|J|) * signum(J); WGSL has no cbrt (pow of 0 avoided).
@@ -236,7 +222,8 @@ fn cm_fluid(svd: Svd3, pc: PartConsts, grad_v: mat3x3<f32>, plastic: vec2<f32>) 
         cb = pow(abs(j), 1.0 / 3.0);
     }
     let c = cb * select(1.0, -1.0, j < 0.0);
-    let k = pc.bulk;
+    // Rust `fluid`: K = lambda + 2 mu / 3 from the slot's constants.
+    let k = pc.lambda + (2.0 / 3.0) * pc.mu;
     let eta = pc.plastic_viscosity;
     let p = k * j * (j - 1.0);
     let visc = (grad_v + transpose(grad_v)) * (eta * j);

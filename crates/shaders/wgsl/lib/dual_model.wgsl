@@ -269,40 +269,13 @@ fn dual_scalar_model(pc: PartConsts, sigma: array<Dual, 3>, state: array<Dual, 2
             }
             return DualOut(sigma_e, ddp_stress(sigma_e, mu, lambda), state, false);
         }
-        case 3u: {
-            var s: array<Dual, 3>;
-            var eps: array<Dual, 3>;
-            for (var i = 0u; i < 3u; i++) {
-                s[i] = dmax(sigma[i], dcst(0.01));
-                eps[i] = dln(s[i]);
-            }
-            let b_tr = ddiv(dadd(dadd(dmul(s[0], s[0]), dmul(s[1], s[1])), dmul(s[2], s[2])), three);
-            let tr = dadd(dadd(eps[0], eps[1]), eps[2]);
-            let third = ddiv(tr, three);
-            var s_trial: array<Dual, 3>;
-            for (var i = 0u; i < 3u; i++) {
-                s_trial[i] = dmul(dmul(two, mu), dsub(eps[i], third));
-            }
-            let s_norm = dnorm3(s_trial);
-            let y = dsub(s_norm, dmul(dcst(0.816496580927726), state[0]));
-            if y.v > 0.0 {
-                let mu_hat = dmul(mu, b_tr);
-                let s_new_norm = dsub(s_norm, ddiv(y, dadd(one, ddiv(eta, dmul(dmul(two, mu_hat), dcst(dt))))));
-                let kk = ddiv(s_new_norm, s_norm);
-                var sigma_e: array<Dual, 3>;
-                for (var i = 0u; i < 3u; i++) {
-                    sigma_e[i] = dexp(dadd(ddiv(dmul(kk, s_trial[i]), dmul(two, mu)), third));
-                }
-                return DualOut(sigma_e, dstvk_hencky(sigma_e, mu, lambda), state, false);
-            }
-            return dkeep(sigma, dstvk_hencky(sigma, mu, lambda), state);
-        }
-        case 7u: {
+        case 3u, 7u: {
+            let paste = pc.material == 7u;
             var c: array<Dual, 3>;
             for (var i = 0u; i < 3u; i++) {
                 c[i] = dmax(sigma[i], dcst(0.01));
             }
-            let equal = c[0].v == c[1].v && c[1].v == c[2].v;
+            let equal = paste && c[0].v == c[1].v && c[1].v == c[2].v;
             let w = array<f32, 3>(bitcast<f32>(0x3F7FFFFBu), bitcast<f32>(0x3F7FFFFCu), bitcast<f32>(0x3F7FFFFFu));
             let lw = array<f32, 3>(-2.9802326828588295e-07, -2.3841860752327643e-07, -5.960464655174753e-08);
             var s: array<Dual, 3>;
@@ -325,14 +298,17 @@ fn dual_scalar_model(pc: PartConsts, sigma: array<Dual, 3>, state: array<Dual, 2
             }
             let s_norm = dnorm3(s_trial);
             let y = dsub(s_norm, dmul(dcst(0.816496580927726), state[0]));
-            let mu_hat = dmul(mu, b_tr);
-            let s_new_norm = dsub(s_norm, ddiv(y, dadd(one, ddiv(eta, dmul(dmul(two, mu_hat), dcst(dt))))));
-            let kk = ddiv(s_new_norm, s_norm);
-            var sigma_e: array<Dual, 3>;
-            for (var i = 0u; i < 3u; i++) {
-                sigma_e[i] = dexp(dadd(ddiv(dmul(kk, s_trial[i]), dmul(two, mu)), third));
+            if paste || y.v > 0.0 {
+                let mu_hat = dmul(mu, b_tr);
+                let s_new_norm = dsub(s_norm, ddiv(y, dadd(one, ddiv(eta, dmul(dmul(two, mu_hat), dcst(dt))))));
+                let kk = ddiv(s_new_norm, s_norm);
+                var sigma_e: array<Dual, 3>;
+                for (var i = 0u; i < 3u; i++) {
+                    sigma_e[i] = dexp(dadd(ddiv(dmul(kk, s_trial[i]), dmul(two, mu)), third));
+                }
+                return DualOut(sigma_e, dstvk_hencky(sigma_e, mu, lambda), state, false);
             }
-            return DualOut(sigma_e, dstvk_hencky(sigma_e, mu, lambda), state, false);
+            return dkeep(sigma, dstvk_hencky(sigma, mu, lambda), state);
         }
         case 8u: {
             let j = dmul(dmul(sigma[0], sigma[1]), sigma[2]);
