@@ -651,18 +651,25 @@ impl<'a> Objective<'a> {
             .deformation_vjp(&gr, &mut out.x, &mut out.f)?)
     }
 
-    /// A video (or a band of one, `len` values per frame) from per-simulated-frame renders
-    /// through the time map, moving frames out of `frames` (each freed once no later video
-    /// frame needs it).
-    fn assemble(&self, frames: &mut [Option<Vec<f32>>], len: usize) -> Vec<f32> {
-        let taps = &self.time.taps;
-        let mut last_use = vec![usize::MAX; frames.len()];
-        for (k, &(j0, j1, a)) in taps.iter().enumerate() {
+    /// For each of `n` simulated frames, the last video frame (tap) that reads it
+    /// (`usize::MAX` for none).
+    fn last_uses(&self, n: usize) -> Vec<usize> {
+        let mut last_use = vec![usize::MAX; n];
+        for (k, &(j0, j1, a)) in self.time.taps.iter().enumerate() {
             last_use[j0] = k;
             if a != 0.0 {
                 last_use[j1] = k;
             }
         }
+        last_use
+    }
+
+    /// A video (or a band of one, `len` values per frame) from per-simulated-frame renders
+    /// through the time map, moving frames out of `frames` (each freed once no later video
+    /// frame needs it).
+    fn assemble(&self, frames: &mut [Option<Vec<f32>>], len: usize) -> Vec<f32> {
+        let taps = &self.time.taps;
+        let last_use = self.last_uses(frames.len());
         let mut get = |j: usize, k: usize| -> Vec<f32> {
             if last_use[j] == k {
                 frames[j].take().expect("rendered frame")
@@ -724,13 +731,7 @@ impl<'a> Objective<'a> {
     /// views, summed in the order [`crate::video::fit::ms_ssim_score`] sums them.
     fn score_frames(&self, frames: &[Option<Frame>]) -> Result<f64, FitError> {
         let taps = &self.time.taps;
-        let mut last_use = vec![usize::MAX; frames.len()];
-        for (k, &(j0, j1, a)) in taps.iter().enumerate() {
-            last_use[j0] = k;
-            if a != 0.0 {
-                last_use[j1] = k;
-            }
-        }
+        let last_use = self.last_uses(frames.len());
         let mut sum = 0.0;
         for v in &self.problem.views {
             let (h, w) = (v.video.height(), v.video.width());
