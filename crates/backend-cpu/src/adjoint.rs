@@ -23,11 +23,6 @@ use rayon::prelude::*;
 use std::convert::Infallible;
 
 impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
-    /// Every material is differentiated on the CPU.
-    fn check_differentiable(&self, _materials: &[u32]) -> Result<(), Infallible> {
-        Ok(())
-    }
-
     fn g2p_vjp(
         &self,
         before: &StateBufs<Self>,

@@ -408,10 +408,6 @@ impl GpuEngine for VulkanEngine {
     type Raw = VkBuffer;
     type Error = VulkanError;
 
-    fn unsupported(&self, what: String) -> VulkanError {
-        VulkanError::Unsupported(what)
-    }
-
     fn name(&self) -> &'static str {
         "vulkan"
     }

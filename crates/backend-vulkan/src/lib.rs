@@ -85,9 +85,6 @@ pub enum VulkanError {
     /// The allocator could not be created.
     #[error("Vulkan memory allocator: {0}")]
     Alloc(String),
-    /// A computation this backend does not provide.
-    #[error("not on the Vulkan backend: {0}")]
-    Unsupported(String),
     /// A host access to a buffer that is not host-visible (an engine bug).
     #[error("a Vulkan buffer is not host-visible")]
     NotMapped,

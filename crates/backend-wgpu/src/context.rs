@@ -43,9 +43,6 @@ pub enum WgpuError {
     /// Reading a buffer back failed.
     #[error("reading buffer '{0}' back from the device failed")]
     Readback(String),
-    /// A computation this backend does not provide.
-    #[error("not on the wgpu backend: {0}")]
-    Unsupported(String),
     /// A dispatch bound another number of buffers than the kernel declares (a bug).
     #[error("kernel '{kernel}' binds {expected} buffers, the dispatch gave {given}")]
     Bindings {

@@ -46,10 +46,6 @@ impl GpuEngine for WgpuEngine {
     type Raw = GpuBuffer<u8>;
     type Error = WgpuError;
 
-    fn unsupported(&self, what: String) -> WgpuError {
-        WgpuError::Unsupported(what)
-    }
-
     fn name(&self) -> &'static str {
         "wgpu"
     }

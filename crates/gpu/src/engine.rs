@@ -17,8 +17,6 @@ pub trait GpuEngine: Send + Sync + 'static {
 
     /// A short name for reports (`"wgpu"`).
     fn name(&self) -> &'static str;
-    /// The error for a computation this engine does not provide (`what` says which).
-    fn unsupported(&self, what: String) -> Self::Error;
     /// A zero-filled buffer of at least `bytes` bytes (`label` names it in errors and memory
     /// reports).
     fn alloc(&self, label: &'static str, bytes: u64) -> Result<Self::Raw, Self::Error>;

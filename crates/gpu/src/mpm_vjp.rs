@@ -55,19 +55,6 @@ pub(crate) struct ReverseRecords<E: GpuEngine> {
 }
 
 impl<E: GpuEngine> MpmAdjointKernels for GpuMpm<E> {
-    /// The device's reverse stages cover every isotropic model, not yet the fluid (whose
-    /// viscous stress reads the APIC matrix).
-    fn check_differentiable(&self, materials: &[u32]) -> Result<(), E::Error> {
-        if materials.contains(&r4d_mpm::Material::Fluid.kernel_id()) {
-            return Err(self.engine().unsupported(
-                "the fluid model's adjoint (it runs on the cpu backend; the device's reverse \
-                 stages cover the other materials)"
-                    .into(),
-            ));
-        }
-        Ok(())
-    }
-
     fn g2p_vjp(
         &self,
         before: &StateBufs<Self>,
@@ -194,6 +181,8 @@ impl<E: GpuEngine> MpmAdjointKernels for GpuMpm<E> {
             sbar,
             af,
             ap,
+            r.buf(&before.c.raw),
+            r.buf(&adj.c.raw),
         ];
         r.dispatch(&k::STRESS_VJP, np as u32, &stress);
         let (ax, x_bar) = (r.buf(&adj.x.raw), r.buf(&s.x_bar.raw));

@@ -37,10 +37,6 @@ impl GpuEngine for TraceEngine {
         "trace"
     }
 
-    fn unsupported(&self, what: String) -> TraceError {
-        TraceError(what)
-    }
-
     fn alloc(&self, _label: &'static str, bytes: u64) -> Result<Self::Raw, TraceError> {
         Ok(Mutex::new(vec![0; bytes as usize]))
     }

@@ -155,11 +155,6 @@ impl<T: Real> MpmKernels for ReferenceBackend<T> {
 }
 
 impl<T: Real> MpmAdjointKernels for ReferenceBackend<T> {
-    /// Every material is differentiated by the reference kernels.
-    fn check_differentiable(&self, _materials: &[u32]) -> Result<(), Infallible> {
-        Ok(())
-    }
-
     fn g2p_vjp(
         &self,
         before: &StateBufs<Self>,

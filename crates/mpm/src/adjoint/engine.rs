@@ -149,10 +149,6 @@ impl<B: MpmKernels> AdjointScratch<B> {
 /// VJP functions of [`super::transfer_vjp`], [`super::constitutive_vjp`] and
 /// [`super::particle_vjp`].
 pub trait MpmAdjointKernels: MpmKernels {
-    /// Refuses a simulation with a part whose model this backend's reverse stages do not
-    /// differentiate (`materials`: the parts' [`crate::Material::kernel_id`]s);
-    /// [`KernelAdjoint::new`] calls it.
-    fn check_differentiable(&self, materials: &[u32]) -> Result<(), Self::Error>;
     /// Reverse of G2P: from the adjoint `adj` of the state after the substep, writes the node
     /// velocity adjoints into `s.grid_bar` (cleared first, at least on the active blocks) and each particle's position and
     /// F_elastic adjoints into `s.x_bar`, `s.fe_bar`. `before` is the state at the start of
@@ -238,8 +234,6 @@ pub struct KernelAdjoint<'a, B: MpmAdjointKernels> {
 impl<'a, B: MpmAdjointKernels> KernelAdjoint<'a, B> {
     /// The stepper of `sim` on backend `b` (allocates the working buffers).
     pub fn new(b: B, sim: &'a HostSim) -> Result<Self, B::Error> {
-        let materials: Vec<u32> = sim.consts.iter().map(|c| c.material).collect();
-        b.check_differentiable(&materials)?;
         let np = sim.len();
         let n = sim.setup.n;
         let slots = sim.slots().max(1);

@@ -63,8 +63,9 @@ fn finish(i: u32, dens: ptr<function, f32>, hard: ptr<function, f32>) -> vec4<f3
     }
     // The damping map is linear and its transpose has the same form.
     let cb = mat3_to_rows(damped_affine(mat3_from_rows(r), c.rpic_damping));
+    // stress_vjp left the stress's share of C's adjoint here (the fluid's; 0 otherwise).
     for (var e = 0u; e < 9u; e++) {
-        adj_c[9u * i + e] = cb[e];
+        adj_c[9u * i + e] = adj_c[9u * i + e] + cb[e];
     }
     *dens = m_bar * vol0;
     *hard = sbar[o + SBAR_HARDENING];

@@ -26,6 +26,8 @@
 @group(0) @binding(6) var<storage, read_write> sbar: array<f32>;
 @group(0) @binding(7) var<storage, read_write> adj_f: array<f32>;
 @group(0) @binding(8) var<storage, read_write> adj_plastic: array<f32>;
+@group(0) @binding(9) var<storage, read> c_in: array<f32>;
+@group(0) @binding(10) var<storage, read_write> adj_c: array<f32>;
 
 fn cofactor(m: mat3x3<f32>) -> mat3x3<f32> {
     return mat3x3<f32>(cross(m[1], m[2]), cross(m[2], m[0]), cross(m[0], m[1]));
@@ -70,6 +72,26 @@ fn jelly_vjp(f: mat3x3<f32>, pc: PartConsts, tb: mat3x3<f32>, fe_bar: mat3x3<f32
     let polar_bar = u * g * transpose(vv);
     let fbar = (tb * f * 2.0 - tb * rot - polar_bar) * (2.0 * pc.mu) + cofactor(f) * (pc.lambda * trb * (2.0 * j - 1.0));
     return StressBar(fe_bar + fbar, state_bar, vec4<f32>(mu_bar, lambda_bar, 0.0, 0.0), 0.0);
+}
+
+// The fluid (Rust `fluid_vjp`): tau = eta J (C + C^T) + K J (J - 1) I, K = lambda + 2 mu / 3,
+// F_e = cbrt(J) I. Returns the F_trial and constants' adjoints; C's goes to `c_bar`.
+fn fluid_vjp(f: mat3x3<f32>, pc: PartConsts, cm: mat3x3<f32>, tb: mat3x3<f32>, fe_bar: mat3x3<f32>, state_bar: vec2<f32>, c_bar: ptr<function, mat3x3<f32>>) -> StressBar {
+    let j = determinant(f);
+    let k = pc.lambda + (2.0 / 3.0) * pc.mu;
+    let eta = pc.plastic_viscosity;
+    let contract = frob(tb, cm + transpose(cm));
+    let tr_tb = tb[0][0] + tb[1][1] + tb[2][2];
+    let tr_fe = fe_bar[0][0] + fe_bar[1][1] + fe_bar[2][2];
+    var dc = 0.0;
+    if j != 0.0 {
+        let cb = pow(abs(j), 1.0 / 3.0) * select(1.0, -1.0, j < 0.0);
+        dc = cb / (3.0 * j);
+    }
+    let j_bar = tr_fe * dc + eta * contract + k * (2.0 * j - 1.0) * tr_tb;
+    *c_bar = (tb + transpose(tb)) * (eta * j);
+    let k_bar = j * (j - 1.0) * tr_tb;
+    return StressBar(cofactor(f) * j_bar, state_bar, vec4<f32>((2.0 / 3.0) * k_bar, k_bar, j * contract, 0.0), 0.0);
 }
 
 // 4 sqrt(f32 epsilon).
@@ -177,14 +199,24 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let fe_bar = mat3_from_rows(r);
     let state_bar = vec2<f32>(adj_plastic[2u * i], adj_plastic[2u * i + 1u]);
     var res: StressBar;
-    if pc.material == MAT_JELLY {
+    // The adjoint of C before the substep from the stress (the fluid's viscous term; 0
+    // otherwise): particle_vjp adds the scatter's to it.
+    var c_bar = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    if pc.material == MAT_FLUID {
+        for (var e = 0u; e < 9u; e++) {
+            r[e] = c_in[9u * i + e];
+        }
+        res = fluid_vjp(f, pc, mat3_from_rows(r), tb, fe_bar, state_bar, &c_bar);
+    } else if pc.material == MAT_JELLY {
         res = jelly_vjp(f, pc, tb, fe_bar, state_bar);
     } else {
         res = general_vjp(f, pc, vec2<f32>(plastic_in[2u * i], plastic_in[2u * i + 1u]), tb, fe_bar, state_bar);
     }
     let fb = mat3_to_rows(res.f);
+    let cbr = mat3_to_rows(c_bar);
     for (var e = 0u; e < 9u; e++) {
         adj_f[9u * i + e] = fb[e];
+        adj_c[9u * i + e] = cbr[e];
     }
     adj_plastic[2u * i] = res.state.x;
     adj_plastic[2u * i + 1u] = res.state.y;
