@@ -744,8 +744,9 @@ pub fn run_init(
         },
         ..Default::default()
     };
-    let estimate = Objective::new(p, Some(s.frames), &cfg.loss, false)?.score_bytes();
-    let concurrent = (r4d_optim::video::INIT_MEMORY_BUDGET_BYTES / estimate.max(1)).max(1) as usize;
+    let obj = Objective::new(p, Some(s.frames), &cfg.loss, false)?;
+    let (estimate, concurrent) = (obj.score_bytes(), obj.init_concurrency());
+    drop(obj);
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let span = heap.as_ref().map(|h| h.start());
     let t = Instant::now();

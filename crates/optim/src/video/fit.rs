@@ -2,7 +2,7 @@
 //! and gradient clipping; a record per iteration and a resumable checkpoint.
 
 use super::config::{FitConfig, OptimizerKind};
-use super::problem::{Evaluation, Objective, VideoProblem, INIT_MEMORY_BUDGET_BYTES};
+use super::problem::{Evaluation, Objective, VideoProblem};
 use crate::descent::{self, keep_best, Rate, Stepper};
 use crate::record::{mix_json, Fingerprint, FlatProbe, Terms};
 pub use crate::record::{FitState, IterRecord, StartResult};
@@ -333,7 +333,7 @@ fn init_setup<'a>(
         seed: cfg.init.seed,
         top_k: cfg.init.top_k,
         parallel: true,
-        max_concurrent: Some((INIT_MEMORY_BUDGET_BYTES / obj.score_bytes().max(1)).max(1) as usize),
+        max_concurrent: Some(obj.init_concurrency()),
         include: if cfg.init.include_start {
             vec![space.values(parts)]
         } else {

@@ -451,6 +451,12 @@ impl<'a> Objective<'a> {
             + pixels * 3 * 34
     }
 
+    /// How many initialisation candidates may run at once: as many [`Objective::score_bytes`]
+    /// as fit in [`INIT_MEMORY_BUDGET_BYTES`], at least one.
+    pub fn init_concurrency(&self) -> usize {
+        (INIT_MEMORY_BUDGET_BYTES / self.score_bytes().max(1)).max(1) as usize
+    }
+
     /// The loss (no gradient).
     pub fn value(&self, slots: &[PartParams]) -> Result<Evaluation, FitError> {
         self.dispatch(slots, Mode::Value).map(|r| r.0)
