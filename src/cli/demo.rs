@@ -12,8 +12,10 @@ use std::path::{Path, PathBuf};
 pub struct DemoArgs {
     /// The scene: plant (two jelly parts, E and density), metal (a cantilever bent past
     /// yield: E, nu, yield stress, density), sand (a slumping column: friction angle ...),
-    /// foam (a pressed block: yield stress, plastic viscosity ...) or plasticine (a blob
-    /// thrown onto the floor).
+    /// foam (a pressed block: yield stress, plastic viscosity ...), plasticine (a blob
+    /// thrown onto the floor), paste (a slumping column of PhysFlow's non_newtonian: E, yield
+    /// stress, plastic viscosity) or fluid (a viscous drop spreading: bulk modulus as E,
+    /// viscosity).
     #[arg(long, default_value = "plant")]
     scene: String,
     /// Run folder (the reference videos, the inputs as files, the fit's outputs and

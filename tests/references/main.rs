@@ -7,6 +7,7 @@
 mod common;
 
 mod cantilever;
+mod fluids_physics;
 mod loss_goldens;
 mod lpips;
 mod materials;

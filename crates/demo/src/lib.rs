@@ -1,4 +1,4 @@
-//! The built-in demos (`r4d demo --scene plant|metal|sand|foam|plasticine`): procedurally
+//! The built-in demos (`r4d demo --scene plant|metal|sand|foam|plasticine|paste|fluid`): procedurally
 //! generated scenes with known parameters, rendered to reference videos and fitted back from
 //! the videos alone.
 //!
@@ -9,6 +9,8 @@
 //! * `sand`: a sand column slumping into a pile on a rough floor ([`sand`]).
 //! * `foam`: a foam block squeezed by a push on its top and released ([`foam`]).
 //! * `plasticine`: a plasticine blob thrown onto the floor ([`plasticine`]).
+//! * `paste`: a column of paste slumping under its own weight ([`paste`]).
+//! * `fluid`: a viscous drop landing and spreading ([`fluid`]).
 //!
 //! Every scene is a [`SceneSpec`]: the simulation with its true parameters, the cameras, the
 //! free parameters and their bounds, and the parameter pairs whose 2-D loss profile is
@@ -17,8 +19,10 @@
 //! a Latin hypercube over every free parameter, fits with AdamW on the DMS loss, and returns a
 //! [`DemoSummary`]. [`Size::Small`] gives a few-second version of each scene for tests.
 
+pub mod fluid;
 pub mod foam;
 pub mod metal;
+pub mod paste;
 pub mod plant;
 pub mod plasticine;
 pub mod profiles;
@@ -54,16 +58,22 @@ pub enum DemoScene {
     Foam,
     /// A plasticine blob thrown onto the floor: `E`, `nu`, yield stress, density.
     Plasticine,
+    /// A column of paste (`non_newtonian`) slumping: `E`, yield stress, plastic viscosity.
+    Paste,
+    /// A viscous drop (`fluid`) landing and spreading: `E` (the bulk modulus), viscosity.
+    Fluid,
 }
 
 impl DemoScene {
     /// Every scene.
-    pub const ALL: [DemoScene; 5] = [
+    pub const ALL: [DemoScene; 7] = [
         DemoScene::Plant,
         DemoScene::Metal,
         DemoScene::Sand,
         DemoScene::Foam,
         DemoScene::Plasticine,
+        DemoScene::Paste,
+        DemoScene::Fluid,
     ];
 
     /// The name on the command line.
@@ -74,6 +84,8 @@ impl DemoScene {
             DemoScene::Sand => "sand",
             DemoScene::Foam => "foam",
             DemoScene::Plasticine => "plasticine",
+            DemoScene::Paste => "paste",
+            DemoScene::Fluid => "fluid",
         }
     }
 
@@ -84,7 +96,7 @@ impl DemoScene {
             .find(|d| d.name().eq_ignore_ascii_case(s.trim()))
             .ok_or_else(|| {
                 FitError::Input(format!(
-                    "--scene '{s}': use one of plant, metal, sand, foam, plasticine"
+                    "--scene '{s}': use one of plant, metal, sand, foam, plasticine, paste, fluid"
                 ))
             })
     }
@@ -97,6 +109,8 @@ impl DemoScene {
             DemoScene::Sand => sand::spec(size),
             DemoScene::Foam => foam::spec(size),
             DemoScene::Plasticine => plasticine::spec(size),
+            DemoScene::Paste => paste::spec(size),
+            DemoScene::Fluid => fluid::spec(size),
         }
     }
 }

@@ -13,7 +13,7 @@ fn dc(c: [f32; 3]) -> [f32; 3] {
 /// Two colours per part, alternating on a 0.0625-m 3D checker.
 pub type Palette = [[f32; 3]; 2];
 
-/// Green stem, red-gold head, steel, sand, foam, clay.
+/// Green stem, red-gold head, steel, sand, foam, clay, paste, water.
 pub const GREEN: Palette = [[0.16, 0.55, 0.22], [0.78, 0.86, 0.30]];
 /// The plant's head.
 pub const RED_GOLD: Palette = [[0.86, 0.20, 0.36], [0.98, 0.78, 0.22]];
@@ -25,6 +25,10 @@ pub const SAND: Palette = [[0.62, 0.45, 0.20], [0.95, 0.82, 0.50]];
 pub const FOAM: Palette = [[0.90, 0.55, 0.15], [0.98, 0.93, 0.70]];
 /// Plasticine.
 pub const CLAY: Palette = [[0.50, 0.20, 0.70], [0.35, 0.80, 0.75]];
+/// Paste.
+pub const PASTE: Palette = [[0.92, 0.92, 0.95], [0.20, 0.55, 0.85]];
+/// Fluid.
+pub const WATER: Palette = [[0.10, 0.35, 0.75], [0.45, 0.80, 0.95]];
 
 struct Builder(Gaussians);
 
