@@ -227,24 +227,25 @@ fn column(material: Material, yield_stress_pa: f64, secs: f64) -> (f64, f64) {
 #[test]
 fn a_paste_below_its_yield_stress_rests_in_shape_and_above_it_flows() {
     // The weight at the column's foot is rho g h = 2450 Pa of uniaxial stress: von Mises
-    // yields there above a yield stress of 2450 Pa.
-    for material in [Material::Foam] {
-        let (h_elastic, _) = column(material, 1e9, 1.0);
-        let (h_rest, v_rest) = column(material, 2e4, 1.0);
-        let (h_flow, v_flow) = column(material, 600.0, 1.0);
-        eprintln!(
-            "{material:?}: after 1 s, height / initial height: never yielding {h_elastic:.4}; \
-             yield stress 20 kPa {h_rest:.4} (speed {v_rest:.2e} m/s); 600 Pa {h_flow:.3} \
-             ({v_flow:.2e} m/s)"
-        );
-        // Below: the elastic column's sag only, and still.
-        assert!(
-            (h_rest - h_elastic).abs() < 0.005 && v_rest < 0.01,
-            "{h_rest} {v_rest}"
-        );
-        // Above: a permanent slump to a lower mound, then rest.
-        assert!(h_flow < 0.8 && v_flow < 0.05, "{h_flow} {v_flow}");
-    }
+    // yields there below a yield stress of 2450 Pa. Gravity switched on at once doubles it
+    // for a moment and the corners on the sticky floor concentrate it: at 8 kPa the column
+    // still yields a little (height 0.959 against 0.9705), so "below" is 20 kPa here.
+    let material = Material::Foam;
+    let (h_elastic, _) = column(material, 1e9, 1.0);
+    let (h_rest, v_rest) = column(material, 2e4, 1.0);
+    let (h_flow, v_flow) = column(material, 600.0, 1.0);
+    eprintln!(
+        "{material:?}: after 1 s, height / initial height: never yielding {h_elastic:.4}; \
+         yield stress 20 kPa {h_rest:.4} (speed {v_rest:.2e} m/s); 600 Pa {h_flow:.3} \
+         ({v_flow:.2e} m/s)"
+    );
+    // Below: the elastic column's sag only, and still.
+    assert!(
+        (h_rest - h_elastic).abs() < 0.005 && v_rest < 0.01,
+        "{h_rest} {v_rest}"
+    );
+    // Above: a permanent slump to a lower mound, then rest.
+    assert!(h_flow < 0.8 && v_flow < 0.05, "{h_flow} {v_flow}");
     // PhysFlow's paste (`non_newtonian`) has no yield guard: below the yield surface its
     // stress is pulled up to it every substep (docs/materials.md), so the same column far
     // below its yield stress does not keep its shape (height 0.745 after 1 s, measured).
