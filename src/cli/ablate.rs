@@ -714,9 +714,31 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
                 recs[0].1.display()
             )
         })?;
+    // The bounds the shards sampled in (`bounds`, one `[lo, hi]` per name); a record
+    // without them is checked against the settings' bounds.
+    let bounds: Option<Vec<(f64, f64)>> = match first.get("bounds") {
+        None => None,
+        Some(b) => {
+            let b: Vec<(f64, f64)> = serde_json::from_value(b.clone()).with_context(|| {
+                format!(
+                    "{}: 'bounds' is not a list of [lo, hi] pairs",
+                    recs[0].1.display()
+                )
+            })?;
+            if b.len() != names.len() {
+                bail!(
+                    "{}: {} bounds for {} names",
+                    recs[0].1.display(),
+                    b.len(),
+                    names.len()
+                );
+            }
+            Some(b)
+        }
+    };
     for c in &candidates {
         let path = &recs[c.index % n].1;
-        check_candidate(c, &names, &cfg)
+        check_candidate(c, &names, bounds.as_deref(), &cfg)
             .with_context(|| format!("{}: candidate #{}", path.display(), c.index))?;
     }
     let top_k = match first["top_k"].as_u64() {
@@ -755,9 +777,15 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
 }
 
 /// Checks an initialisation candidate of a shard: its MS-SSIM score in [0, 1] (or none: a
-/// failed evaluation), one value per name, each finite and within the bounds the fit
-/// settings give the parameter it names (`part{P}.{kind}` or `object.{kind}`).
-fn check_candidate(c: &r4d_optim::Candidate, names: &[String], cfg: &FitConfig) -> Result<()> {
+/// failed evaluation), one value per name, each finite and within `bounds` (the shard's
+/// search space), else within the bounds the fit settings give the parameter it names
+/// (`part{P}.{kind}` or `object.{kind}`) by default.
+fn check_candidate(
+    c: &r4d_optim::Candidate,
+    names: &[String],
+    bounds: Option<&[(f64, f64)]>,
+    cfg: &FitConfig,
+) -> Result<()> {
     if let Some(s) = c.score {
         if !(0.0..=1.0).contains(&s) {
             bail!("score (MS-SSIM) {s} is outside [0, 1]");
@@ -771,7 +799,7 @@ fn check_candidate(c: &r4d_optim::Candidate, names: &[String], cfg: &FitConfig) 
             names.join(", ")
         );
     }
-    for (name, &v) in names.iter().zip(&c.theta) {
+    for (i, (name, &v)) in names.iter().zip(&c.theta).enumerate() {
         let (part, kind) = match name.split_once('.') {
             Some(("object", k)) => (None, k),
             Some((p, k)) => match p.strip_prefix("part").map(str::parse::<usize>) {
@@ -782,7 +810,10 @@ fn check_candidate(c: &r4d_optim::Candidate, names: &[String], cfg: &FitConfig) 
         };
         let kind =
             r4d_optim::ParamKind::parse(kind).map_err(|e| anyhow::anyhow!("'{name}': {e}"))?;
-        let (lo, hi) = cfg.bounds(part, kind);
+        let (lo, hi) = match bounds {
+            Some(b) => b[i],
+            None => cfg.bounds(&[], part, kind),
+        };
         // The candidates are sampled in log space: allow the rounding of exp(ln x).
         let slack = 1e-9;
         if !(v.is_finite() && v >= lo * (1.0 - slack) && v <= hi * (1.0 + slack)) {

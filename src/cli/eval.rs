@@ -97,8 +97,12 @@ fn fitted_slots(dir: &Path, problem: &VideoProblem, cfg: &FitConfig) -> Result<F
             parts.get(i)
         }
         .context("the config has no parts")?;
-        let material = format!("{:?}", base.material).to_lowercase();
-        if r.material != material {
+        let material = base.material.name();
+        // Runs written before the material names were shared spelled PhysFlow's paste
+        // "nonnewtonian".
+        let same = r4d_mpm::Material::from_name(&r.material) == Some(base.material)
+            || (r.material == "nonnewtonian" && base.material == r4d_mpm::Material::NonNewtonian);
+        if !same {
             bail!(
                 "{}: entry {i} is {}, the scene's part is {material}: the run folder is from another scene or config",
                 path.display(),
@@ -118,7 +122,7 @@ fn fitted_slots(dir: &Path, problem: &VideoProblem, cfg: &FitConfig) -> Result<F
         (0..parts.len() as u32).collect()
     };
     let space = r4d_optim::space::ParamSpace::new(cfg.granularity, &free, &slot_parts, |p, k| {
-        cfg.bounds(p, k)
+        cfg.bounds(parts, p, k)
     });
     let slack = 1e-9;
     for ((name, v), (lo, hi)) in space

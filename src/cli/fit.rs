@@ -466,7 +466,7 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
     write_json(&out.join("invocation.json"), &whole)?;
     write_json(&out.join("fit_config.json"), &cfg)?;
     let mut hooks = resonance4d::video_fit::fit::NoHooks;
-    let (names, total, candidates) = resonance4d::video_fit::fit::initialize_shard(
+    let (search, total, candidates) = resonance4d::video_fit::fit::initialize_shard(
         &problem,
         &cfg,
         (shard.i, shard.n),
@@ -477,7 +477,8 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
         "fingerprint": resonance4d::video_fit::fingerprint(&problem, &cfg),
         "shard": shard.i,
         "of": shard.n,
-        "names": names,
+        "names": search.names,
+        "bounds": search.bounds,
         "total": total,
         "top_k": cfg.init.top_k,
         "fit_config": cfg,

@@ -23,14 +23,14 @@ fn expected(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("expected.json")).unwrap()).unwrap()
 }
 
-fn tmp(name: &str) -> PathBuf {
+pub(crate) fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("r4d_datasets_{name}_{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
 }
 
-fn r4d(args: &[&str]) -> std::process::Output {
+pub(crate) fn r4d(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_r4d"))
         .args(args)
         .output()
@@ -398,7 +398,7 @@ fn broken_folders_are_typed_errors_naming_the_file() {
 
 /// Renders the dataset's views with its own config's parameters into its video files (the
 /// fixtures' frames are test patterns).
-fn render_references(ds: &Dataset) {
+pub(crate) fn render_references(ds: &Dataset) {
     let problem =
         resonance4d::video_fit::problem_from_dataset(ds, resonance4d::compute::cpu()).unwrap();
     let obj = resonance4d::video_fit::Objective::new(
@@ -599,11 +599,11 @@ fn mp4_videos_are_read_where_the_layouts_put_them() {
     );
 }
 
-fn json_of(path: &Path) -> serde_json::Value {
+pub(crate) fn json_of(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
-fn run_ok(args: &[&str]) -> std::process::Output {
+pub(crate) fn run_ok(args: &[&str]) -> std::process::Output {
     let out = r4d(args);
     assert!(
         out.status.success(),

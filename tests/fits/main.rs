@@ -10,4 +10,5 @@ mod ablate;
 mod datasets;
 mod demo_recovery;
 mod fit_trajectory;
+mod fluid_eval;
 mod video_fit;

@@ -104,7 +104,7 @@ fn space(cfg: &FitConfig, truth: &[PartParams]) -> Result<ParamSpace, FitError> 
     let free = cfg.free_kinds(truth)?;
     let ids: Vec<u32> = (0..truth.len() as u32).collect();
     Ok(ParamSpace::new(cfg.granularity, &free, &ids, |p, k| {
-        cfg.bounds(p, k)
+        cfg.bounds(truth, p, k)
     }))
 }
 

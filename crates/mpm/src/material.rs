@@ -76,6 +76,22 @@ impl Material {
             Material::Snow | Material::Fluid => None,
         }
     }
+    /// The name configs, `params.json` and messages use (`"jelly"`, ..., `"non_newtonian"`,
+    /// `"newtonian"`); [`Material::from_name`] reads it back.
+    pub fn name(self) -> &'static str {
+        match self {
+            Material::Jelly => "jelly",
+            Material::Metal => "metal",
+            Material::Sand => "sand",
+            Material::Foam => "foam",
+            Material::Snow => "snow",
+            Material::Plasticine => "plasticine",
+            Material::Fluid => "fluid",
+            Material::NonNewtonian => "non_newtonian",
+            Material::Newtonian => "newtonian",
+        }
+    }
+
     /// Parses PhysGaussian's material name (`"jelly"`, `"metal"`, ...), also accepting
     /// `"water"`/`"fluid"`.
     pub fn from_name(name: &str) -> Option<Material> {
@@ -402,6 +418,19 @@ impl PartConsts {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One name per material, the one serde writes and `from_name` reads.
+    #[test]
+    fn names_round_trip() {
+        for id in 0..9 {
+            let m = Material::from_kernel_id(id).unwrap();
+            assert_eq!(Material::from_name(m.name()), Some(m));
+            assert_eq!(
+                serde_json::to_value(m).unwrap(),
+                serde_json::Value::from(m.name())
+            );
+        }
+    }
 
     #[test]
     fn validation_names_the_field() {

@@ -129,7 +129,7 @@ impl SimSetup {
                     dx_m: self.dx,
                     wave_speed: c,
                     part: i,
-                    material: format!("{:?}", p.material).to_lowercase(),
+                    material: p.material.name().to_string(),
                 });
             }
         }

@@ -209,6 +209,16 @@ impl ParamKind {
             ParamKind::Softening => (1.0, 1e6),
         }
     }
+
+    /// The default bounds for a part of `material`: [`ParamKind::default_bounds`], except
+    /// Poisson's ratio of PhysFlow's nearly incompressible `newtonian` (its scenes use 0.499 to
+    /// 0.4995), [0.3, 0.4999].
+    pub fn default_bounds_for(self, material: r4d_mpm::Material) -> (f64, f64) {
+        match (self, material) {
+            (ParamKind::PoissonRatio, r4d_mpm::Material::Newtonian) => (0.3, 0.4999),
+            _ => self.default_bounds(),
+        }
+    }
 }
 
 /// AdamW hyper-parameters.

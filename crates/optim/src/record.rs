@@ -375,7 +375,7 @@ impl PartRecord {
         let read = |k| reads(p, k).then(|| get(p, k));
         PartRecord {
             id,
-            material: format!("{:?}", p.material).to_lowercase(),
+            material: p.material.name().to_string(),
             e: p.youngs_modulus_pa,
             nu: p.poisson_ratio,
             density: p.density_kg_m3,

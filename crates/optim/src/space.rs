@@ -136,7 +136,7 @@ pub fn check_free(
             return Err(format!(
                 "free parameter {} of part {i}: the {} model does not read it (it reads: {}){}",
                 k.name(),
-                format!("{:?}", p.material).to_lowercase(),
+                p.material.name(),
                 names(p),
                 hint(p, k)
             ));

@@ -529,22 +529,82 @@ impl FitConfig {
             })
     }
 
-    /// Bounds of `kind` for `part` (the override, else the kind's default).
-    pub fn bounds(&self, part: Option<usize>, kind: ParamKind) -> (f64, f64) {
-        part.and_then(|i| self.parts.iter().find(|o| o.id == i))
+    /// Bounds of `kind` for `part` of `parts` (the fit's starting parameters): the override
+    /// when `[[parts]]` gives one, else the default for the part's material
+    /// ([`ParamKind::default_bounds_for`]) widened to hold the part's starting value, so that a
+    /// default never moves a value the inputs give (PhysFlow's `nu = 0.4995`, a density of
+    /// 2e4). For the object (`part` = `None`): the default, widened to hold every part's value.
+    pub fn bounds(&self, parts: &[PartParams], part: Option<usize>, kind: ParamKind) -> (f64, f64) {
+        let given = part
+            .and_then(|i| self.parts.iter().find(|o| o.id == i))
             .and_then(|o| {
                 o.bounds
                     .iter()
                     .find(|(n, _)| ParamKind::parse(n).ok() == Some(kind))
             })
-            .map(|(_, b)| (b[0], b[1]))
-            .unwrap_or_else(|| kind.default_bounds())
+            .map(|(_, b)| (b[0], b[1]));
+        if let Some(b) = given {
+            return b;
+        }
+        let starts: Vec<&PartParams> = match part {
+            Some(i) => parts.get(i).into_iter().collect(),
+            None => parts.iter().collect(),
+        };
+        let (mut lo, mut hi) = match starts.as_slice() {
+            [p] => kind.default_bounds_for(p.material),
+            _ => kind.default_bounds(),
+        };
+        for p in starts {
+            let v = crate::space::get(p, kind);
+            if v.is_finite() && v > 0.0 {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+        (lo, hi)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A default never moves a starting value the inputs give; an override is kept as given.
+    #[test]
+    fn default_bounds_hold_the_starting_values() {
+        let newtonian = PartParams {
+            material: r4d_mpm::Material::Newtonian,
+            poisson_ratio: 0.4995,
+            density_kg_m3: 2e4,
+            ..Default::default()
+        };
+        let jelly = PartParams {
+            poisson_ratio: 0.3,
+            ..Default::default()
+        };
+        let parts = [newtonian, jelly];
+        let c = FitConfig::default();
+        assert_eq!(
+            c.bounds(&parts, Some(0), ParamKind::PoissonRatio),
+            (0.3, 0.4999)
+        );
+        assert_eq!(
+            c.bounds(&parts, Some(1), ParamKind::PoissonRatio),
+            (0.01, 0.49)
+        );
+        assert_eq!(c.bounds(&parts, Some(0), ParamKind::Density), (1e2, 2e4));
+        assert_eq!(c.bounds(&parts, None, ParamKind::Density), (1e2, 2e4));
+        let mut given = FitConfig::default();
+        given.parts.push(PartFit {
+            id: 0,
+            free: None,
+            bounds: [("density".to_string(), [500.0, 1500.0])].into(),
+        });
+        assert_eq!(
+            given.bounds(&parts, Some(0), ParamKind::Density),
+            (500.0, 1500.0)
+        );
+    }
 
     /// Issue 23: settings that used to be silently changed or ignored are errors.
     #[test]

@@ -303,7 +303,9 @@ fn init_space(cfg: &FitConfig, parts: &[PartParams]) -> Result<ParamSpace, FitEr
         Granularity::Part
     };
     let ids: Vec<u32> = (0..parts.len() as u32).collect();
-    Ok(ParamSpace::new(g, &free, &ids, |p, k| cfg.bounds(p, k)))
+    Ok(ParamSpace::new(g, &free, &ids, |p, k| {
+        cfg.bounds(parts, p, k)
+    }))
 }
 
 /// The initialisation's objective (first `init.frames` frames), search space and sampler.
@@ -390,8 +392,9 @@ pub fn initialize(
 }
 
 /// One shard of the initialisation (for a cluster): the candidates whose index is
-/// `shard mod of`, evaluated exactly as [`initialize`] evaluates them. Returns the free
-/// parameters' names, the number of candidates in all shards, and this shard's candidates.
+/// `shard mod of`, evaluated exactly as [`initialize`] evaluates them. Returns the search
+/// space (the free parameters' names and bounds), the number of candidates in all shards, and
+/// this shard's candidates.
 /// [`InitOutcome::from_candidates`] on the union of every shard's candidates (in index order)
 /// gives what [`initialize`] gives.
 pub fn initialize_shard(
@@ -399,7 +402,7 @@ pub fn initialize_shard(
     cfg: &FitConfig,
     (shard, of): (usize, usize),
     hooks: &mut dyn FitHooks,
-) -> Result<(Vec<String>, usize, Vec<Candidate>), FitError> {
+) -> Result<(SearchSpace, usize, Vec<Candidate>), FitError> {
     if of == 0 || shard >= of {
         return Err(FitError::Input(format!(
             "shard {shard} of {of}: need 0 <= I < N"
@@ -423,7 +426,7 @@ pub fn initialize_shard(
     for c in &candidates {
         hooks.on_candidate(c);
     }
-    Ok((search.names, total, candidates))
+    Ok((search, total, candidates))
 }
 
 /// The fingerprint of a video fit ([`FitState::fingerprint`]): the simulation settings and
@@ -486,7 +489,9 @@ pub fn run_fit(
     obj.set_band_rows(cfg.band_rows)?;
     let slot_parts = obj.slot_parts();
     let free = cfg.free_kinds(&problem.config.parts)?;
-    let space = ParamSpace::new(cfg.granularity, &free, &slot_parts, |p, k| cfg.bounds(p, k));
+    let space = ParamSpace::new(cfg.granularity, &free, &slot_parts, |p, k| {
+        cfg.bounds(&problem.config.parts, p, k)
+    });
     if !cfg.shear_restarts.is_off() {
         // Refused before any simulation runs.
         restart_entries(&space, cfg)?;
