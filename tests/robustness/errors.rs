@@ -31,6 +31,32 @@ fn a_substep_beyond_the_cfl_bound_is_refused_up_front() {
 }
 
 #[test]
+fn a_viscosity_beyond_the_explicit_stability_bound_is_refused_up_front() {
+    // Measured: this block explodes from viscosity dt / (rho dx^2) = 0.66 (7000 Pa s here);
+    // the bound is 0.5 (4883 Pa s).
+    let fluid = |eta: f64| PartParams {
+        material: r4d_mpm::Material::Fluid,
+        youngs_modulus_pa: 1.2e5,
+        plastic_viscosity_pa_s: eta,
+        density_kg_m3: 1000.0,
+        ..Default::default()
+    };
+    let cfg = config(32, 1e-4, 1, fluid(7000.0));
+    let scene = boxed(&cfg, [0.4; 3], [0.6; 3]);
+    let e = MpmSim::new(CpuBackend::default(), &cfg, scene.clone(), "t")
+        .err()
+        .unwrap();
+    assert!(matches!(e, Error::ViscousStability { part: 0, .. }), "{e}");
+    let e = cfg.validate("fluid.toml").unwrap_err().to_string();
+    assert!(
+        e.contains("fluid.toml") && e.contains("parts[0].plastic_viscosity_pa_s"),
+        "{e}"
+    );
+    let ok = config(32, 1e-4, 1, fluid(4800.0));
+    assert!(MpmSim::new(CpuBackend::default(), &ok, scene, "t").is_ok());
+}
+
+#[test]
 fn an_exploding_simulation_stops_with_frame_and_substep() {
     // max_cfl 20 lets an unstable dt through the up-front check; the run must then stop.
     let mut cfg = config(32, 2e-3, 50, jelly(1e6));

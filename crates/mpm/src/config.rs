@@ -397,6 +397,25 @@ impl SimConfig {
                     ),
                 ));
             }
+            if p.material == crate::Material::Fluid && p.plastic_viscosity_pa_s > 0.0 {
+                let bound =
+                    s.max_cfl * crate::VISCOUS_STABILITY * p.density_kg_m3 * d.dx() * d.dx()
+                        / p.plastic_viscosity_pa_s;
+                if dt > bound {
+                    return Err(bad(
+                        &format!("parts[{i}].plastic_viscosity_pa_s"),
+                        p.plastic_viscosity_pa_s,
+                        &format!(
+                            "the fluid's explicit viscous stress needs substep_dt <= max_cfl {} \
+                             rho dx^2 / viscosity = {bound:e} s (density {:e} kg/m^3, dx {:e} \
+                             m), the config has {dt:e} s: lower time.substep_dt or the viscosity",
+                            crate::VISCOUS_STABILITY,
+                            p.density_kg_m3,
+                            d.dx()
+                        ),
+                    ));
+                }
+            }
         }
         Ok(())
     }

@@ -71,6 +71,34 @@ pub enum Error {
         /// The material name.
         material: String,
     },
+    /// The substep is too long for the explicit viscous stress of a `fluid` part (refused
+    /// before running).
+    #[error(
+        "substep_dt = {dt_s:e} s is too long for the viscosity of part {part} ({material}, \
+         plastic_viscosity_pa_s = {viscosity:e} Pa s): the explicit viscous stress is stable \
+         for dt <= {cfl} * {factor} * rho dx^2 / viscosity = {bound_s:e} s (rho = {density} \
+         kg/m^3, dx = {dx_m} m); use a smaller substep_dt, a coarser grid or a lower viscosity"
+    )]
+    ViscousStability {
+        /// The requested substep (s).
+        dt_s: f64,
+        /// The largest allowed substep (s).
+        bound_s: f64,
+        /// The CFL number used (`max_cfl`).
+        cfl: f64,
+        /// The stability factor ([`crate::VISCOUS_STABILITY`]).
+        factor: f64,
+        /// Grid spacing (m).
+        dx_m: f64,
+        /// The part's viscosity (Pa s).
+        viscosity: f64,
+        /// The part's density (kg/m^3).
+        density: f64,
+        /// The part index.
+        part: usize,
+        /// The material name.
+        material: String,
+    },
     /// A substep produced NaN or infinity.
     #[error("simulation diverged: non-finite state of particle {particle} in frame {frame}, substep {substep} (global substep {global_substep})")]
     NonFinite {

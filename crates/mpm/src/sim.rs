@@ -114,11 +114,30 @@ impl SimSetup {
         }
     }
 
-    /// Refuses a substep that violates the CFL bound `dt <= max_cfl dx / c_p` of any part.
+    /// Refuses a substep that violates the CFL bound `dt <= max_cfl dx / c_p` of any part,
+    /// or, for a `fluid`, the explicit viscous stress's bound
+    /// `dt <= max_cfl VISCOUS_STABILITY rho dx^2 / viscosity`.
     pub fn check_cfl(&self, params: &[PartParams]) -> Result<()> {
         let dt = self.config.time.substep_dt;
         let cfl = self.config.solver.max_cfl;
         for (i, p) in params.iter().enumerate() {
+            if p.material == crate::Material::Fluid && p.plastic_viscosity_pa_s > 0.0 {
+                let bound = cfl * crate::VISCOUS_STABILITY * p.density_kg_m3 * self.dx * self.dx
+                    / p.plastic_viscosity_pa_s;
+                if dt > bound {
+                    return Err(Error::ViscousStability {
+                        dt_s: dt,
+                        bound_s: bound,
+                        cfl,
+                        factor: crate::VISCOUS_STABILITY,
+                        dx_m: self.dx,
+                        viscosity: p.plastic_viscosity_pa_s,
+                        density: p.density_kg_m3,
+                        part: i,
+                        material: p.material.name().to_string(),
+                    });
+                }
+            }
             let c = p.p_wave_speed();
             let bound = cfl * self.dx / c;
             if dt > bound {
