@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Writes small synthetic scenes in the three dataset layouts r4d-datasets reads, plus
 `expected.json` per scene: what an independent implementation of each layout's conventions
-(written here, from the original projects' code as ../shared/ref/datasets/README.md records it)
+(written here, from the original projects' code as tests/fixtures/datasets/README.md records it)
 says the loader must find. Pure Python (no numpy), deterministic.
 
     python3 scripts/make_dataset_fixtures.py tests/fixtures/datasets

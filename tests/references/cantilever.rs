@@ -6,7 +6,7 @@
 //! with a sine to get the frequency. Stubby beam (L/h = 4, 6 cells thick): within 3% of
 //! Timoshenko (shear coefficient 0.85, computed here by shooting on the Timoshenko equations);
 //! slender beam (L/h = 10, 4 cells thick): within 5% of Euler-Bernoulli. See
-//! `../shared/ref/mpm/README.md` for what PhysGaussian's solver gets on the same stubby beam
+//! `tests/fixtures/mpm/README.md` for what PhysGaussian's solver gets on the same stubby beam
 //! (-1.1% against Timoshenko).
 
 use crate::common;
@@ -230,7 +230,7 @@ fn measured_frequency_hz(
 
 #[test]
 fn timoshenko_solver_reproduces_the_reference_figure() {
-    // ../shared/ref/mpm/README.md: L = 0.5 m, h = 0.125 m, kappa 0.85 -> 2.439 Hz; EB 2.554 Hz.
+    // tests/fixtures/mpm/README.md: L = 0.5 m, h = 0.125 m, kappa 0.85 -> 2.439 Hz; EB 2.554 Hz.
     let f = timoshenko_hz(0.5, 0.125, 0.85);
     assert!((f - 2.439).abs() < 0.002, "{f}");
     assert!((euler_bernoulli_hz(0.5, 0.125) - 2.554).abs() < 0.001);

@@ -1,5 +1,5 @@
-//! r4d-loss against the golden values of `../shared/ref/loss/` (copied to
-//! `tests/fixtures/loss/`): PSNR, L1, SSIM, MS-SSIM, the DMS terms with every variant of the
+//! r4d-loss against the golden values in `tests/fixtures/loss/` (copied from the project's
+//! reference data): PSNR, L1, SSIM, MS-SSIM, the DMS terms with every variant of the
 //! README's ambiguity table, and the stored gradients. Tolerances are the README's: for the
 //! f64 implementation 1e-8 relative on scalars and gradients within 1e-6 of each stored
 //! array's abs-max; for f32 videos (f32 SSIM, f64 spectral part) 1e-5 absolute on L_spatial

@@ -1,5 +1,5 @@
 //! LPIPS with the real pretrained weights against the official `lpips` package's golden values
-//! (`tests/fixtures/loss/lpips_goldens.json`, copied from `../shared/ref/loss/`): every case,
+//! (`tests/fixtures/loss/lpips_goldens.json`, copied from the project's reference data): every case,
 //! AlexNet and VGG16, per frame within 1e-4 absolute and 1e-3 relative; and `r4d metrics
 //! --lpips-weights`.
 //!

@@ -1,5 +1,5 @@
 //! The PhysGaussian import reproduces the trajectories of PhysGaussian's own Warp solver
-//! (`tests/fixtures/physgaussian/`, copied from `../shared/ref/mpm/physgaussian/`).
+//! (`tests/fixtures/physgaussian/`, copied from the project's reference data).
 //!
 //! Jelly: every particle within 0.05 dx at every frame. Metal, sand, plasticine (path
 //! dependent): centroid within 0.25 dx and bounding box within 0.5 dx at every frame.

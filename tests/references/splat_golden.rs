@@ -1,5 +1,5 @@
 //! The renderer against gsplat's golden renders and autograd gradients
-//! (`tests/fixtures/splat`, copied from `../shared/ref/splat`; conventions and tolerances in
+//! (`tests/fixtures/splat`, copied from the project's reference data; conventions and tolerances in
 //! its README): images by the README's acceptance rule, projection intermediates, and every
 //! gradient array within 5e-3 relative L2 with matching sign patterns. Run for the
 //! single-threaded reference (f32 and f64) and the parallel CPU backend.

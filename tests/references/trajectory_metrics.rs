@@ -1,4 +1,4 @@
-//! Point-trajectory metrics against `../shared/ref/metrics` (numpy + scipy cKDTree goldens,
+//! Point-trajectory metrics against `tests/fixtures/metrics` (numpy + scipy cKDTree goldens,
 //! copied to `tests/fixtures/metrics`): every variant, every pair, the trajectory means.
 
 use crate::common;

@@ -1,6 +1,6 @@
 //! # r4d-gpu: GPU stages recorded once, executed by any engine
 //!
-//! vello's shape (`../shared/STYLE.md`, "record once, execute per engine"): what a GPU stage
+//! vello's shape (`docs/STYLE.md`, "record once, execute per engine"): what a GPU stage
 //! dispatches is written once, as a [`Recording`] of commands (dispatch a kernel of
 //! `r4d-shaders` over bound buffers, clear, copy) over buffer handles; a [`GpuEngine`]
 //! (wgpu today, Vulkan/ash next) allocates buffers, moves bytes and executes recordings, and

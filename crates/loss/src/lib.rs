@@ -5,7 +5,7 @@
 //!
 //! * [`Dms`]: Dual-domain Motion Supervision (Section 3.1 of the paper),
 //!   `L_spatial + L_mag + L_phase`, with every ambiguity of the paper fixed as
-//!   `../shared/ref/loss/README.md` does and each choice configurable ([`DmsConfig`]:
+//!   `tests/fixtures/loss/README.md` does and each choice configurable ([`DmsConfig`]:
 //!   patch size, DFT normalisation, reduction, eps, a phase mask, the SSIM flavour, term
 //!   weights including the paper's ablation [`Ablation`]).
 //! * [`L1Loss`], [`SsimLoss`] (`1 - SSIM`, pytorch-msssim's valid filtering or the 3DGS

@@ -1,7 +1,7 @@
 //! The spectral half of Dual-domain Motion Supervision: log-magnitude and phase agreement of
 //! the per-patch 3-D DFT of the frame differences, and its exact gradient.
 //!
-//! Conventions (`../shared/ref/loss/README.md`, "DMS loss"): BT.601 gray
+//! Conventions (`tests/fixtures/loss/README.md`, "DMS loss"): BT.601 gray
 //! `Y = 0.299 R + 0.587 G + 0.114 B` of the stored values; differences `D_t = Y_{t+1} - Y_t`;
 //! non-overlapping `ph x pw` patches (16 x 16) of the frames cropped to whole patches at the
 //! top-left; per patch the unnormalised forward DFT over `(t, h, w)` of its

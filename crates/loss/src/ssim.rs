@@ -1,7 +1,7 @@
 //! SSIM and MS-SSIM with pytorch-msssim's conventions, the 3DGS training-style same-padded
 //! SSIM, and the gradient of SSIM with respect to the rendered video.
 //!
-//! Conventions (`../shared/ref/loss/README.md`): an 11-tap Gaussian window with sigma 1.5
+//! Conventions (`tests/fixtures/loss/README.md`): an 11-tap Gaussian window with sigma 1.5
 //! whose taps are evaluated and normalised **in float32** ([`GAUSS_11`]; their f64 sum is
 //! 0.999999969, not 1), applied separably, first along rows (H) then columns (W), as a
 //! "valid" filter (maps of `(H - 10) x (W - 10)`), or with [`Padding::Same`] after zero

@@ -1,6 +1,6 @@
 //! Point-trajectory metrics: Chamfer distance, Hausdorff distance and its 95th percentile, and
 //! F-score between a simulated (predicted) point cloud P and a ground-truth cloud Q, per frame
-//! and over a sequence, with every variant of `../shared/ref/metrics/README.md`.
+//! and over a sequence, with every variant of `tests/fixtures/metrics/README.md`.
 //!
 //! With `d_PQ(p) = min_q |p - q|` (exact Euclidean nearest neighbours from a kd-tree, the
 //! `kiddo` crate) and `d_QP` likewise:

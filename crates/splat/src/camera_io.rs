@@ -1,6 +1,6 @@
 //! Camera files. [`load_cameras`] detects the format:
 //!
-//! * **r4d / reference JSON** (`../shared/ref/splat/*/cameras.json`): an object with `cameras`
+//! * **r4d / reference JSON** (`tests/fixtures/splat/*/cameras.json`): an object with `cameras`
 //!   (each `name, width, height, fx, fy, cx, cy, world_to_camera` (4x4 row by row), optional
 //!   `near`, `far`) and optional `background` and `rasterize_mode`.
 //! * **INRIA `cameras.json`** (3DGS training output): an array of `{id, img_name, width,

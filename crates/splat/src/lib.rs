@@ -4,7 +4,7 @@
 //! (PhysGaussian: `Sigma' = F Sigma F^T`, SH evaluated at `R^T d` with `F = R S`), and
 //! differentiates the image with respect to every raw parameter and `F`. The conventions
 //! (camera, projection with the 0.3 px low-pass, culling, SH basis, depth sort, compositing
-//! thresholds) are gsplat 1.5.3's, as `../shared/ref/splat/README.md` states them.
+//! thresholds) are gsplat 1.5.3's, as `tests/fixtures/splat/README.md` states them.
 //!
 //! Activations applied to the stored (raw) values: scale `exp(s)`, rotation from the
 //! normalised quaternion `(w, x, y, z)`, opacity `sigmoid(o)`, colour
