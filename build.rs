@@ -2,11 +2,16 @@
 //! are present, so that without them they are reported as *ignored* (with the reason), never
 //! as passed. The weights are looked for in `$R4D_LPIPS_DIR`, else `target/lpips/` (where
 //! `scripts/lpips_weights.sh` puts them); `R4D_REQUIRE_LPIPS=1` (CI) makes their absence a
-//! build error.
+//! build error. It also decides whether the GPU tests can run here (`cfg(r4d_gpu)`,
+//! `build/gpu_probe.rs`): without an expected adapter they are reported as ignored.
 
 use std::path::PathBuf;
 
+include!("build/gpu_probe.rs");
+
 fn main() {
+    println!("cargo:rerun-if-changed=build/gpu_probe.rs");
+    probe_gpu();
     println!("cargo::rustc-check-cfg=cfg(r4d_lpips_weights)");
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-env-changed=R4D_LPIPS_DIR");

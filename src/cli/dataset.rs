@@ -57,7 +57,7 @@ impl DatasetOptions {
 pub struct InspectArgs {
     /// The dataset folder (e.g. PhysFlow's model/phys_dreamer/telephone).
     dir: PathBuf,
-    /// Print the report as JSON (keys documented in the README).
+    /// Print the report as JSON (keys documented in docs/cli/data.md).
     #[arg(long)]
     json: bool,
     /// The physics config (default: where the layout keeps it).

@@ -56,7 +56,7 @@ pub struct FitArgs {
     /// Run folder: params.json, log.jsonl, checkpoint.json, the fitted video and diagnostics.
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Fit settings (TOML; see the README's `r4d fit` section).
+    /// Fit settings (TOML; see `docs/cli/fit.md`).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Where the simulation, its reverse sweep and the rendering run: cpu (all cores, f64 by

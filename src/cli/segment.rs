@@ -24,7 +24,7 @@ pub struct SegmentArgs {
     /// Mask folder: one mask per camera, named after the camera's image (or its index):
     /// NAME.png (label map: 0 background, k part k-1), NAME.npy (M x H x W probabilities) or
     /// NAME/CLASS.png or NAME/CLASS.npy (one probability map per class); optional
-    /// classes.json (see the README).
+    /// classes.json (see docs/cli/segment.md).
     #[arg(long)]
     masks: PathBuf,
     /// Output parts file (JSON). Beside it: the scene with a `part` property (same name,

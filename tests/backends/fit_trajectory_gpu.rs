@@ -28,6 +28,10 @@ fn rel(a: f64, b: f64) -> f64 {
 }
 
 #[test]
+#[cfg_attr(
+    not(r4d_gpu),
+    ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+)]
 fn wgpu_fit_matches_the_cpu_fit() {
     let Some(ctx) = common::gpu::wgpu("wgpu_fit_matches_the_cpu_fit") else {
         return;
@@ -37,6 +41,10 @@ fn wgpu_fit_matches_the_cpu_fit() {
 
 /// The same on the Vulkan engine (ash): the recordings of wgpu, executed through Vulkan.
 #[test]
+#[cfg_attr(
+    not(r4d_gpu),
+    ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+)]
 fn vulkan_fit_matches_the_cpu_fit() {
     let Some(e) = common::gpu::vulkan("vulkan_fit_matches_the_cpu_fit") else {
         return;
@@ -103,6 +111,10 @@ fn gpu_fit_matches_the_cpu_fit(gpu: std::sync::Arc<dyn Compute>) {
 /// The yield stress gradient (through the initial state, `HostSim::init_vjp` on the downloaded
 /// adjoint) of a metal beam that yields under its own weight.
 #[test]
+#[cfg_attr(
+    not(r4d_gpu),
+    ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+)]
 fn wgpu_yield_stress_gradient_matches_the_cpu() {
     let Some(ctx) = common::gpu::wgpu("wgpu_yield_stress_gradient_matches_the_cpu") else {
         return;

@@ -9,9 +9,10 @@
 //! releases it for the next. Validation messages accumulate on the shared Vulkan engine, so
 //! one message fails every later check on it, never none.
 //!
-//! Without an adapter or Vulkan device these return `None` (the test returns early), unless
-//! `R4D_REQUIRE_GPU=1`, where every test that asks panics, as with `gpu_or_skip` and
-//! `vulkan_or_skip`, which make the engines.
+//! Without an adapter or Vulkan device these return `None` (the test returns early; where the
+//! build found no GPU driver the GPU tests are `#[ignore]`d anyway, `cfg(r4d_gpu)`); where it
+//! found one, or with `R4D_REQUIRE_GPU=1`, every test that asks panics, as with `gpu_or_skip`
+//! and `vulkan_or_skip`, which make the engines.
 #![allow(dead_code)]
 
 use r4d_backend_vulkan::VulkanEngine;

@@ -13,8 +13,10 @@ pub fn assert_validation_clean(engine: &VulkanEngine, test: &str) {
 }
 
 /// The engine for a Vulkan test, or `None` (the test then returns early) when there is no
-/// Vulkan loader or device. With `R4D_REQUIRE_GPU=1` (set in CI, where Mesa's lavapipe is
-/// installed) a missing device panics instead, so Vulkan tests can never pass by skipping.
+/// Vulkan loader or device and the build expected none (then the GPU tests are compiled
+/// `#[ignore]`d: `cfg(r4d_gpu)`, `build/gpu_probe.rs`). Where the build found a driver, or with
+/// `R4D_REQUIRE_GPU=1` (set in CI, where Mesa's lavapipe is installed), a missing device
+/// panics instead, so Vulkan tests can never pass by skipping.
 pub fn vulkan_or_skip(test: &str) -> Option<VulkanEngine> {
     vulkan_or_skip_with(
         test,
@@ -37,6 +39,14 @@ pub fn vulkan_or_skip_with(test: &str, float_atomics: bool) -> Option<VulkanEngi
         Err(e) => {
             if std::env::var("R4D_REQUIRE_GPU").is_ok_and(|v| v == "1") {
                 panic!("{test}: R4D_REQUIRE_GPU=1 but {e}");
+            }
+            if cfg!(r4d_gpu) {
+                // The build found a driver (build/gpu_probe.rs) and compiled the GPU tests to
+                // run: one that cannot is a failure, never a pass.
+                panic!(
+                    "{test}: a GPU driver was found when this was built, but {e}; rebuild with \
+                     R4D_NO_GPU=1 to report the GPU tests as ignored"
+                );
             }
             eprintln!("{test}: skipped: {e}");
             None

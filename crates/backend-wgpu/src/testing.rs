@@ -2,9 +2,10 @@
 
 use crate::WgpuContext;
 
-/// The device for a GPU test, or `None` (the test then returns early) when no adapter exists.
-/// With `R4D_REQUIRE_GPU=1` (set in CI) a missing adapter panics instead, so GPU tests can
-/// never pass by skipping. Native float atomics are used where the adapter has them, unless
+/// The device for a GPU test, or `None` (the test then returns early) when no adapter exists
+/// and the build expected none (then the GPU tests are compiled `#[ignore]`d: `cfg(r4d_gpu)`,
+/// `build/gpu_probe.rs`). Where the build found a driver, or with `R4D_REQUIRE_GPU=1` (set in
+/// CI), a missing adapter panics instead, so GPU tests can never pass by skipping. Native float atomics are used where the adapter has them, unless
 /// `R4D_WGPU_NO_FLOAT_ATOMICS` is set (as [`WgpuContext::new`]), so a whole suite can be run
 /// on the compare-exchange scatter.
 pub fn gpu_or_skip(test: &str) -> Option<WgpuContext> {
@@ -29,6 +30,14 @@ pub fn gpu_or_skip_with(test: &str, float_atomics: bool) -> Option<WgpuContext> 
         Err(e) => {
             if std::env::var("R4D_REQUIRE_GPU").is_ok_and(|v| v == "1") {
                 panic!("{test}: R4D_REQUIRE_GPU=1 but {e}");
+            }
+            if cfg!(r4d_gpu) {
+                // The build found a driver (build/gpu_probe.rs) and compiled the GPU tests to
+                // run: one that cannot is a failure, never a pass.
+                panic!(
+                    "{test}: a GPU driver was found when this was built, but {e}; rebuild with \
+                     R4D_NO_GPU=1 to report the GPU tests as ignored"
+                );
             }
             eprintln!("{test}: skipped: {e}");
             None

@@ -268,7 +268,7 @@ impl Dataset {
         Ok(())
     }
 
-    /// The `dataset inspect --json` report (keys documented in the README).
+    /// The `dataset inspect --json` report (keys documented in `docs/cli/data.md`).
     pub fn summary(&self) -> serde_json::Value {
         summary::summary(self)
     }

@@ -1,4 +1,4 @@
-//! The `r4d dataset inspect --json` report. Its keys are a contract (see the README):
+//! The `r4d dataset inspect --json` report. Its keys are a contract (see `docs/cli/data.md`):
 //! `layout`, `gaussians_in_file`, `gaussians_after_opacity_filter`, `simulated_particles`,
 //! `static_gaussians`, `normalisation` (`rotation`, `mean`, `scale`, `shift`, `formula`),
 //! `parts` (`id`, `material`, `particles`, `E_Pa`, `nu`, `density_kg_m3`, `yield_stress_Pa`,

@@ -223,6 +223,10 @@ fn grad_arrays(g: &GaussianGrads, deformed: bool) -> Vec<(&'static str, Vec<f64>
 // ---- golden renders -------------------------------------------------------------------------
 
 #[test]
+#[cfg_attr(
+    not(r4d_gpu),
+    ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+)]
 fn golden_renders_match_gsplat_and_cpu() {
     let Some(ctx) = gpu("golden_renders_match_gsplat_and_cpu") else {
         return;
@@ -307,6 +311,10 @@ fn golden_renders_match_gsplat_and_cpu() {
 /// gradients (the README's rule), on every golden scene and camera, with native float atomics
 /// (where the adapter has them) and with the compare-exchange scatter.
 #[test]
+#[cfg_attr(
+    not(r4d_gpu),
+    ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+)]
 fn gradients_match_cpu_and_gsplat() {
     for float_atomics in [true, false] {
         let Some(ctx) = gpu_or_skip_with("gradients_match_cpu_and_gsplat", float_atomics) else {
@@ -442,6 +450,10 @@ fn bins_of<B: SplatKernels>(b: &B, t: &TileBufs<B>) -> (Vec<u32>, Vec<u32>) {
 }
 
 #[test]
+#[cfg_attr(
+    not(r4d_gpu),
+    ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+)]
 fn projection_and_tile_lists_match_cpu() {
     let Some(ctx) = gpu("projection_and_tile_lists_match_cpu") else {
         return;
@@ -551,6 +563,10 @@ fn synthetic(n: usize, w: f32, h: f32, seed: u64) -> Vec<Projected<f32>> {
 }
 
 #[test]
+#[cfg_attr(
+    not(r4d_gpu),
+    ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+)]
 fn large_synthetic_binning_and_compositing_match_cpu() {
     let Some(ctx) = gpu("large_synthetic_binning_and_compositing_match_cpu") else {
         return;
@@ -621,6 +637,10 @@ fn large_synthetic_binning_and_compositing_match_cpu() {
 /// 11th Gaussian nearly opaque, so alpha hits the 0.999 cap), per field of `ProjectedGrad`,
 /// with both scatter variants.
 #[test]
+#[cfg_attr(
+    not(r4d_gpu),
+    ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+)]
 fn synthetic_rasterize_vjp_matches_cpu() {
     for float_atomics in [true, false] {
         let Some(ctx) = gpu_or_skip_with("synthetic_rasterize_vjp_matches_cpu", float_atomics)
@@ -700,6 +720,10 @@ fn synthetic_rasterize_vjp_matches_cpu() {
 /// whole image's VJP (within 1e-3 relative L2: the float atomics add in another order, which
 /// the needles of `aniso_near_bg` amplify to ~1e-4, as on the CPU), on every golden scene.
 #[test]
+#[cfg_attr(
+    not(r4d_gpu),
+    ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+)]
 fn prepared_frames_render_and_differentiate_bands_as_the_whole_image() {
     let Some(ctx) = gpu("prepared_frames_render_and_differentiate_bands_as_the_whole_image") else {
         return;
@@ -748,6 +772,10 @@ fn prepared_frames_render_and_differentiate_bands_as_the_whole_image() {
 }
 
 #[test]
+#[cfg_attr(
+    not(r4d_gpu),
+    ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+)]
 fn empty_renders_are_background_with_zero_gradients() {
     let Some(ctx) = gpu("empty_renders_are_background_with_zero_gradients") else {
         return;
