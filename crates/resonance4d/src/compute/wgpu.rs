@@ -1,0 +1,74 @@
+//! A GPU through wgpu as a [`Compute`].
+
+use r4d_backend_cpu::splat::CpuSplat;
+use r4d_backend_wgpu::{WgpuContext, WgpuSplat};
+use r4d_optim::compute::{Compute, JobOut, MpmJob, Precision};
+use r4d_optim::FitError;
+use r4d_splat::{Renderer, SplatRenderer};
+use std::sync::{Arc, Mutex};
+
+/// A GPU through wgpu: `WgpuMpm` (f32, state and gradients on the device) and, by default,
+/// the wgpu renderer (built once, reused by every render).
+pub struct WgpuCompute {
+    ctx: Arc<WgpuContext>,
+    /// Render (and differentiate the renderer) on the GPU (default); `false`: on the CPU.
+    pub render_on_gpu: bool,
+    renderer: Mutex<Option<SplatRenderer<WgpuSplat>>>,
+}
+
+impl std::fmt::Debug for WgpuCompute {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WgpuCompute")
+            .field("render_on_gpu", &self.render_on_gpu)
+            .finish_non_exhaustive()
+    }
+}
+
+impl WgpuCompute {
+    /// On the device of `ctx`.
+    pub fn new(ctx: Arc<WgpuContext>) -> Self {
+        WgpuCompute {
+            ctx,
+            render_on_gpu: true,
+            renderer: Mutex::new(None),
+        }
+    }
+
+    /// The device.
+    pub fn context(&self) -> &Arc<WgpuContext> {
+        &self.ctx
+    }
+}
+
+impl Compute for WgpuCompute {
+    fn name(&self) -> &str {
+        "wgpu"
+    }
+
+    fn run_mpm(&self, _precision: Precision, job: MpmJob<'_>) -> Result<JobOut, FitError> {
+        job.run_on(r4d_backend_wgpu::WgpuMpm::new(self.ctx.clone()))
+    }
+
+    fn with_renderer(
+        &self,
+        f: &mut dyn FnMut(&mut dyn Renderer) -> Result<(), FitError>,
+    ) -> Result<(), FitError> {
+        if !self.render_on_gpu {
+            return f(&mut SplatRenderer::new(CpuSplat));
+        }
+        let mut guard = self
+            .renderer
+            .lock()
+            .map_err(|_| FitError::backend_msg("wgpu", "the GPU renderer panicked earlier"))?;
+        let r = guard.get_or_insert_with(|| SplatRenderer::new(WgpuSplat::new(self.ctx.clone())));
+        f(r)
+    }
+
+    fn reset_device_peak(&self) {
+        self.ctx.reset_peak();
+    }
+
+    fn device_peak_bytes(&self) -> Option<u64> {
+        Some(self.ctx.peak_bytes())
+    }
+}

@@ -1,0 +1,28 @@
+//! What a program embedding resonance4d usually needs, in one `use`:
+//!
+//! ```
+//! use resonance4d::prelude::*;
+//! let jelly = PartParams { material: Material::Jelly, ..Default::default() };
+//! assert!(jelly.validate("jelly").is_ok());
+//! ```
+//!
+//! The card's four interfaces are here: [`Simulator`] (the MPM simulation on any backend),
+//! [`Renderer`] (Gaussian splatting), [`Loss`] (DMS, SSIM, L1) and [`Initializer`] (the Latin
+//! hypercube), with the types they take.
+
+pub use crate::compute::{Compute, Precision};
+pub use r4d_loss::{Dms, DmsConfig, L1Loss, Loss, SsimLoss, Video};
+pub use r4d_mpm::{
+    BoundaryCondition, Material, MpmKernels, MpmSim, PartParams, ParticleSet, Shape, SimConfig,
+    SimState, Simulator, Surface,
+};
+pub use r4d_optim::video::{run_fit, FitConfig, FitOutcome, Objective, VideoProblem, View};
+pub use r4d_optim::{FitError, Initializer, LatinHypercubeInit, ParamKind};
+pub use r4d_splat::{Camera, Gaussians, RenderSettings, Renderer, SimLink, SplatRenderer};
+
+#[cfg(feature = "cpu")]
+pub use r4d_backend_cpu::{splat::CpuSplat, CpuBackend};
+#[cfg(feature = "vulkan")]
+pub use r4d_backend_vulkan::VulkanEngine;
+#[cfg(feature = "wgpu")]
+pub use r4d_backend_wgpu::WgpuContext;
