@@ -19,8 +19,12 @@ pub trait BandedLoss: Send + Sync {
     /// The image rows each band reads, top to bottom (bands may overlap).
     fn band_rows(&self) -> Vec<Range<usize>>;
     /// Band `b`'s share of the terms for `rendered`: rows `band_rows()[b]` of the first
-    /// `frames()` frames.
-    fn band_terms(&self, b: usize, rendered: &Video<f32>) -> Result<DmsTerms, LossError>;
+    /// `frames()` frames. By default [`BandedLoss::band_terms_and_grad_into`] with the
+    /// gradient discarded; a loss whose value alone is cheaper overrides it.
+    fn band_terms(&self, b: usize, rendered: &Video<f32>) -> Result<DmsTerms, LossError> {
+        let mut grad = vec![0.0; rendered.data().len()];
+        self.band_terms_and_grad_into(b, rendered, &mut grad)
+    }
     /// As [`BandedLoss::band_terms`], and writes band `b`'s share of `d total / d rendered`
     /// to `grad` (the band video's layout, overwritten).
     fn band_terms_and_grad_into(

@@ -51,6 +51,7 @@
 //! ```
 
 pub mod alloc;
+pub mod builder;
 pub mod compute;
 pub mod fit_trajectory;
 pub mod prelude;

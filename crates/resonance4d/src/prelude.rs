@@ -10,13 +10,17 @@
 //! [`Renderer`] (Gaussian splatting), [`Loss`] (DMS, SSIM, L1) and [`Initializer`] (the Latin
 //! hypercube), with the types they take.
 
+pub use crate::builder::ProblemBuilder;
 pub use crate::compute::{Compute, Precision};
 pub use r4d_loss::{Dms, DmsConfig, L1Loss, Loss, SsimLoss, Video};
 pub use r4d_mpm::{
     BoundaryCondition, Material, MpmKernels, MpmSim, PartParams, ParticleSet, Shape, SimConfig,
     SimState, Simulator, Surface,
 };
-pub use r4d_optim::video::{run_fit, FitConfig, FitOutcome, Objective, VideoProblem, View};
+pub use r4d_optim::video::fit::NoHooks;
+pub use r4d_optim::video::{
+    run_fit, run_fit_with_loss, FitConfig, FitOutcome, Objective, VideoProblem, View,
+};
 pub use r4d_optim::{FitError, Initializer, LatinHypercubeInit, ParamKind};
 pub use r4d_splat::{Camera, Gaussians, RenderSettings, Renderer, SimLink, SplatRenderer};
 

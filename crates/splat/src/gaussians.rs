@@ -28,6 +28,27 @@ pub struct Gaussians {
 }
 
 impl Gaussians {
+    /// Appends one Gaussian of SH degree 0 (the scene's degree must be 0): centre `mean`,
+    /// standard deviations `scales` along the axes rotated by `quat` (`(w, x, y, z)`),
+    /// `opacity` in (0, 1) and colour `rgb` in [0, 1].
+    pub fn push_rgb(
+        &mut self,
+        mean: [f32; 3],
+        scales: [f32; 3],
+        quat: [f32; 4],
+        opacity: f32,
+        rgb: [f32; 3],
+    ) {
+        debug_assert_eq!(self.sh_degree, 0, "push_rgb appends degree-0 Gaussians");
+        self.means.push(mean);
+        self.log_scales.push(scales.map(f32::ln));
+        self.quats.push(quat);
+        let o = opacity.clamp(1e-6, 1.0 - 1e-6);
+        self.opacity_logits.push((o / (1.0 - o)).ln());
+        self.sh
+            .extend(rgb.map(|v| (v - 0.5) / crate::sh::SH_C0 as f32));
+    }
+
     /// Number of Gaussians.
     pub fn len(&self) -> usize {
         self.means.len()

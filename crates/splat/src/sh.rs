@@ -3,7 +3,9 @@
 
 use crate::real::{Real, V3};
 
-const C0: f64 = 0.282_094_791_773_878_14;
+/// The degree-0 SH basis constant `1 / (2 sqrt(pi))`: colour = `SH_C0 c + 0.5`.
+pub const SH_C0: f64 = 0.282_094_791_773_878_14;
+const C0: f64 = SH_C0;
 const C1: f64 = 0.488_602_511_902_919_9;
 const C2A: f64 = 1.092_548_430_592_079_2;
 const C6: f64 = 0.315_391_565_252_520_05;

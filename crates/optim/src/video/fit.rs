@@ -16,9 +16,10 @@ use crate::{
     LogDomainOptimizer, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs, ValleySearch,
 };
 use r4d_loss::bands::ReferenceVideo;
-use r4d_loss::{ssim::ms_ssim, Video};
+use r4d_loss::{ssim::ms_ssim, Video, VideoLoss};
 use r4d_mpm::PartParams;
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// One evaluation and step of the fit loop.
@@ -479,10 +480,23 @@ pub fn run_fit(
     resume: Option<FitState>,
     hooks: &mut dyn FitHooks,
 ) -> Result<FitOutcome, FitError> {
+    run_fit_with_loss(problem, cfg, Arc::new(cfg.loss.clone()), resume, hooks)
+}
+
+/// [`run_fit`] on any video loss instead of `cfg.loss` (the DMS): the iterations minimise
+/// `loss` ([`VideoLoss`]; the initialisation still scores candidates by MS-SSIM). A resumed
+/// state is checked against `cfg`, not against `loss`: resume with the loss it started with.
+pub fn run_fit_with_loss(
+    problem: &VideoProblem,
+    cfg: &FitConfig,
+    loss: Arc<dyn VideoLoss>,
+    resume: Option<FitState>,
+    hooks: &mut dyn FitHooks,
+) -> Result<FitOutcome, FitError> {
     cfg.validate()?;
     let fit_span = hooks.heap().map(|h| h.start());
     let per_particle = cfg.granularity == Granularity::Particle;
-    let mut obj = Objective::new(problem, cfg.frames, &cfg.loss, per_particle)?;
+    let mut obj = Objective::with_loss(problem, cfg.frames, loss, per_particle)?;
     obj.heap = hooks.heap();
     obj.checkpointing = cfg.checkpointing()?;
     obj.precision = cfg.precision;

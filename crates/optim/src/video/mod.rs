@@ -21,7 +21,10 @@ pub use crate::sampling::{GradientSampling, SamplingConfig, SamplingRound};
 pub use crate::space::{Granularity, ParamSpace};
 pub use crate::valley::{ValleyConfig, ValleyRound, ValleySearch};
 pub use config::{FitConfig, InitConfig, OptimizerKind};
-pub use fit::{fingerprint, run_fit, FitHooks, FitOutcome, FitState, IterRecord, StartResult};
+pub use fit::{
+    fingerprint, run_fit, run_fit_with_loss, FitHooks, FitOutcome, FitState, IterRecord,
+    StartResult,
+};
 pub use problem::{
     Evaluation, Objective, StageProfile, TimeMap, VideoProblem, View, INIT_MEMORY_BUDGET_BYTES,
 };
