@@ -27,7 +27,7 @@ impl BandedLoss for BandedMse<'_> {
         self.1
     }
     fn band_rows(&self) -> Vec<Range<usize>> {
-        vec![0..self.0.height()]
+        std::iter::once(0..self.0.height()).collect()
     }
     fn band_terms_and_grad_into(
         &self,
