@@ -134,7 +134,7 @@ impl ProblemBuilder {
     /// of each part); the config's own parameters stay the fit's start.
     pub fn rendered_from(self, truth: &[PartParams]) -> Result<VideoProblem, FitError> {
         let mut p = self.build()?;
-        let videos = Objective::new(&p, None, &Default::default(), false)?.render(truth)?;
+        let videos = Objective::builder(&p).build()?.render(truth)?;
         for (v, video) in p.views.iter_mut().zip(videos) {
             v.video = video.into();
         }

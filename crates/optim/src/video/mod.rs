@@ -26,5 +26,6 @@ pub use fit::{
     StartResult,
 };
 pub use problem::{
-    Evaluation, Objective, StageProfile, TimeMap, VideoProblem, View, INIT_MEMORY_BUDGET_BYTES,
+    Evaluation, Objective, ObjectiveBuilder, StageProfile, TimeMap, VideoProblem, View,
+    INIT_MEMORY_BUDGET_BYTES,
 };

@@ -282,14 +282,74 @@ fn stage_end(span: Stage) -> usize {
     span.map_or(0, |s| s.peak())
 }
 
+/// The settings of an [`Objective`] by name ([`Objective::builder`]).
+#[derive(Clone)]
+pub struct ObjectiveBuilder<'a> {
+    problem: &'a VideoProblem,
+    frames: Option<usize>,
+    loss: Arc<dyn VideoLoss>,
+    per_particle: bool,
+}
+
+impl<'a> ObjectiveBuilder<'a> {
+    /// Only the first `n` video frames (default: all).
+    pub fn frames(mut self, n: usize) -> Self {
+        self.frames = Some(n);
+        self
+    }
+
+    /// The paper's DMS with these settings (default: [`DmsConfig::default`]).
+    pub fn dms(mut self, dms: &DmsConfig) -> Self {
+        self.loss = Arc::new(dms.clone());
+        self
+    }
+
+    /// Any row-banded video loss instead of the DMS.
+    pub fn loss(mut self, loss: Arc<dyn VideoLoss>) -> Self {
+        self.loss = loss;
+        self
+    }
+
+    /// One parameter set per particle ([`Granularity::Particle`]) or per part (the others;
+    /// the object level is the fit's choice of free parameters, not the objective's).
+    pub fn granularity(mut self, g: crate::space::Granularity) -> Self {
+        self.per_particle = g == crate::space::Granularity::Particle;
+        self
+    }
+
+    /// The objective ([`Objective::with_loss`]'s checks).
+    pub fn build(self) -> Result<Objective<'a>, FitError> {
+        Objective::with_loss(self.problem, self.frames, self.loss, self.per_particle)
+    }
+}
+
 impl<'a> Objective<'a> {
     /// Starts measuring a stage's heap peak with [`Objective::heap`].
     fn stage_begin(&self) -> Stage {
         self.heap.as_ref().map(|h| h.start())
     }
 
+    /// The objective of `problem` with named settings: the paper's DMS on every video frame
+    /// and part-level parameters unless [`ObjectiveBuilder`] says otherwise.
+    ///
+    /// ```no_run
+    /// # fn f(problem: &r4d_optim::video::VideoProblem) -> Result<(), r4d_optim::FitError> {
+    /// use r4d_optim::video::{Granularity, Objective};
+    /// let obj = Objective::builder(problem).frames(8).granularity(Granularity::Particle).build()?;
+    /// # Ok(()) }
+    /// ```
+    pub fn builder(problem: &'a VideoProblem) -> ObjectiveBuilder<'a> {
+        ObjectiveBuilder {
+            problem,
+            frames: None,
+            loss: Arc::new(DmsConfig::default()),
+            per_particle: false,
+        }
+    }
+
     /// The objective of `problem` on its first `frames` video frames (all when `None`), with
     /// per-particle parameter slots when `per_particle`, on the DMS loss `dms` (the paper's).
+    /// [`Objective::builder`] names these settings.
     pub fn new(
         problem: &'a VideoProblem,
         frames: Option<usize>,
