@@ -4,7 +4,7 @@
 //! `r4d fit --dataset` and `r4d dataset inspect` load it. Reports the time per load and, from
 //! the counting allocator, the peak heap of one load.
 //!
-//! Target (issue 17): <= 10 s and <= 1 GB for 1M Gaussians on 2 cores.
+//! Target: <= 10 s and <= 1 GB for 1M Gaussians on 2 cores.
 
 #![expect(
     missing_docs,

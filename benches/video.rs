@@ -3,7 +3,7 @@
 //! 8-bit RGB (as the fit stores a reference video). Reports frames per second (`Throughput::Elements` = frames) and, from the counting
 //! allocator, the decoder's peak host memory. Also the encoder's speed at the same size.
 //!
-//! Target (issue 17): >= 60 frames/s at 1080p on 2 cores.
+//! Target: >= 60 frames/s at 1080p on 2 cores.
 
 #![expect(
     missing_docs,

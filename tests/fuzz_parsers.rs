@@ -1,5 +1,5 @@
 //! A mutation fuzzer for every file parser, on the stable toolchain and the standard library
-//! only (issue 23): seeds from the repository's fixtures plus small synthetic files, mutated by
+//! only: seeds from the repository's fixtures plus small synthetic files, mutated by
 //! bit flips, interesting bytes, inserted huge/negative/non-finite numbers, deletions,
 //! duplications and truncation; every parser must answer each input with `Ok` or a typed
 //! error — never a panic, never a single allocation above 256 MiB, never a hang.

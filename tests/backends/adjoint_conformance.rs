@@ -1,7 +1,7 @@
 //! The device adjoint against the parallel CPU adjoint, one suite for every GPU engine (wgpu
 //! and Vulkan: `wgpu::*`, `vulkan::*`): the one stepper (`KernelAdjoint`) on `WgpuMpm` /
 //! `VulkanMpm` and on `CpuBackend<f32>`, driven by the same checkpointing
-//! driver: parameter gradients (issue 9's bound for elastic scenes: 1e-3 relative) and the
+//! driver: parameter gradients (the bound for elastic scenes: 1e-3 relative) and the
 //! adjoint of the initial state.
 
 use crate::common::gpu::{self, Lease};

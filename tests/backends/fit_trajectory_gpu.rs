@@ -1,6 +1,6 @@
 //! `fit_trajectory` on the wgpu backend (and on the Vulkan engine) (f32, `KernelAdjoint<WgpuMpm>`) against the CPU backend (f64,
 //! `KernelAdjoint<CpuBackend<f64>>`): the first iteration's loss and gradient agree to 1e-3 relative and the
-//! fitted parameters to 1% (issue 9's CPU-vs-wgpu bound). Skipped without an adapter unless
+//! fitted parameters to 1% (the CPU-vs-wgpu bound). Skipped without an adapter unless
 //! `R4D_REQUIRE_GPU=1`.
 
 use crate::common;

@@ -7,7 +7,7 @@ use resonance4d::video_fit::{run_fit, Objective, Precision};
 
 /// The video fit on the GPU: simulation and reverse sweep (`KernelAdjoint<WgpuMpm>`, f32), rendering and
 /// render VJP (`WgpuSplat`), the loss on the CPU. Loss and every parameter gradient agree with
-/// the CPU's f32 run, and a few fit iterations reach the same parameters within 1% (issue 9's
+/// the CPU's f32 run, and a few fit iterations reach the same parameters within 1% (the
 /// bound).
 #[test]
 #[cfg_attr(

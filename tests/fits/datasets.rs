@@ -1,4 +1,4 @@
-//! Dataset loaders (issue 17) on the fixtures of `scripts/make_dataset_fixtures.py`, whose
+//! Dataset loaders on the fixtures of `scripts/make_dataset_fixtures.py`, whose
 //! `expected.json` holds what an independent implementation of each layout's conventions (the
 //! script's) says: counts, the moving-part rule, unit scaling, PhysFlow's normalisation, and
 //! the pixel coordinates of known points in every camera convention. Then `dataset inspect

@@ -1,4 +1,4 @@
-//! The video fit (issue 7): gradient of the whole pipeline (simulate -> render -> DMS)
+//! The video fit: gradient of the whole pipeline (simulate -> render -> DMS)
 //! against finite differences, a fit that lowers the loss and approaches the truth, resume
 //! after an interruption, and a recovery from a Latin hypercube start.
 

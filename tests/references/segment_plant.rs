@@ -4,7 +4,7 @@
 //! analytic primitives). Accuracy is per part, over the Gaussians some view sees
 //! (compositing weight >= 0.05 pixel-equivalents), after the KNN pass.
 //!
-//! The targets (>= 99.5% with clean masks; >= 97% and no part below 93% with
+//! The targets (>= 99.5% with clean masks; >= 97% and no part below 93% with
 //! corrupted ones) are reached on every seed tested here; every stage (label propagation,
 //! the visibility-aware lift, the region prior, its appearance term) keeps or improves every
 //! seed, and the region prior costs little where parts share a smooth surface.
@@ -193,7 +193,7 @@ fn corrupted_masks_per_part_table() {
             worst(&new.0),
             worst(&lift.0)
         );
-        // The target: 97%, and no part under 93%.
+        // The target: 97%, and no part under 93%.
         assert!(new.1 >= 0.97, "seed {seed}: {}", new.1);
         assert!(worst(&new.0) >= 0.93, "seed {seed}: {:?}", new.0);
         // The static floor survives the corruption.
@@ -212,7 +212,7 @@ fn corrupted_masks_per_part_table() {
 }
 
 /// The appearance term of the region prior on the seeds where the region prior alone misses
-/// the target (corrupted masks): the pot's inner wall, which most views' dilated soil
+/// the target (corrupted masks): the pot's inner wall, which most views' dilated soil
 /// masks cover (seeds 1, 9), a leaf that most views erode into the soil behind it (seed 12),
 /// a leaf given to the soil on another (seed 14). Without it each misses (a part under 93% or
 /// the total under 97%); with it each reaches the target, and no part loses more than half a

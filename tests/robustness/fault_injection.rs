@@ -1,4 +1,4 @@
-//! Fault injection (issue 23): runs killed with SIGKILL at random instants and resumed end
+//! Fault injection: runs killed with SIGKILL at random instants and resumed end
 //! byte-identical to uninterrupted runs; a full disk is a typed error that leaves no torn
 //! file; one and two threads give byte-identical outputs.
 //!

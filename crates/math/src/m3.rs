@@ -81,7 +81,7 @@ pub fn sub<T: Real>(a: &M3<T>, b: &M3<T>) -> M3<T> {
 #[inline(always)]
 pub fn scaled<T: Real>(a: &M3<T>, s: T) -> M3<T> {
     // Written out: `array::map` is not always inlined, and an out-of-line call per row in a
-    // per-node loop cost the reverse sweep 10-20% (issue 21's microbench).
+    // per-node loop cost the reverse sweep 10-20% (measured by a microbench).
     let r = |i: usize| [a[i][0] * s, a[i][1] * s, a[i][2] * s];
     [r(0), r(1), r(2)]
 }

@@ -488,7 +488,7 @@ impl LrSchedule {
 mod tests {
     use super::*;
 
-    /// A checkpoint's optimiser is checked before it is stepped (issue 23: a vector of the
+    /// A checkpoint's optimiser is checked before it is stepped (a vector of the
     /// wrong length used to hit an `assert!`), and the hyper-parameters go through the one
     /// check every command uses.
     #[test]

@@ -1,5 +1,5 @@
 //! Fitting part parameters to target particle trajectories with exact adjoint gradients
-//! (issue 3's trajectory supervision; `r4d fit-trajectory` is its command line), on any
+//! (trajectory supervision; `r4d fit-trajectory` is its command line), on any
 //! simulator backend.
 //!
 //! Each iteration runs the simulation forward with checkpoints, evaluates a

@@ -419,7 +419,7 @@ mod tests {
         assert_eq!(q.get("y").unwrap(), &[3.0, 4.0]);
     }
 
-    /// Issue 23: an element before `vertex` whose declared size overflows (or exceeds the
+    /// An element before `vertex` whose declared size overflows (or exceeds the
     /// file) is an error; it used to wrap the offset and read the wrong bytes, exit 0.
     #[test]
     fn huge_elements_before_vertex_are_errors() {

@@ -89,7 +89,7 @@ pub struct SmoothConfig {
     /// outweighs the static scene in it, each of its Gaussians' background evidence is
     /// scaled by `(R_0 / R_max)^q` (elsewhere untouched; 0: off). Default 2. Measured on the
     /// potted plant with corrupted masks and the appearance term, 30 seeds: the one seed
-    /// that missed the target (a petal's rim, which the eroded masks of most views
+    /// that missed the target (a petal's rim, which the eroded masks of most views
     /// give to the static scene: petals 86.0%) reaches 97.3% at 1 and 100% at 2 and 4, the
     /// worst part over the seeds rising from 86.0% to 99.1%; the static scene stays 100%
     /// right on every seed; clean masks lose 0.2 points of one seed's stem.
@@ -99,7 +99,7 @@ pub struct SmoothConfig {
     /// `1 - s + s A_c`, `A_c` how well its Gaussians' base colours fit the part's robust
     /// colour model (1 inside its 99% ellipsoid), so colour overturns at most a `1 / (1 - s)`
     /// lead of the masks (0: off). Default 0.8. Measured on the potted plant with corrupted
-    /// masks, 30 seeds: the target (97%, no part under 93%) missed on six seeds
+    /// masks, 30 seeds: the target (97%, no part under 93%) missed on six seeds
     /// without it (the pot's inner wall under dilated soil masks, leaves eroded into the
     /// soil, a stem), on one with it (a petal given to the static scene, which the term
     /// leaves alone and [`SmoothConfig::region_static_power`] keeps); on seeds 0-19, 0.5

@@ -326,7 +326,7 @@ pub mod consts {
 mod limit_tests {
     use super::*;
 
-    /// Issue 23: a camera too large to render in memory and a mirrored pose are refused when
+    /// A camera too large to render in memory and a mirrored pose are refused when
     /// the camera is checked, with the camera's name and the limit in the message.
     #[test]
     fn huge_images_and_mirror_poses_are_refused() {

@@ -606,7 +606,7 @@ mod tests {
         );
     }
 
-    /// Issue 23: settings that used to be silently changed or ignored are errors.
+    /// Settings that used to be silently changed or ignored are errors.
     #[test]
     fn silent_settings_are_refused() {
         let ok = FitConfig::default();
