@@ -310,7 +310,7 @@ impl<'a> ObjectiveBuilder<'a> {
         self
     }
 
-    /// One parameter set per particle ([`Granularity::Particle`]) or per part (the others;
+    /// One parameter set per particle ([`Granularity::Particle`](crate::space::Granularity::Particle)) or per part (the others;
     /// the object level is the fit's choice of free parameters, not the objective's).
     pub fn granularity(mut self, g: crate::space::Granularity) -> Self {
         self.per_particle = g == crate::space::Granularity::Particle;
