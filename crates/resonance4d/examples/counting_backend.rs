@@ -31,7 +31,8 @@ impl Compute for Counting {
     }
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// Runs the example.
+pub fn main() -> Result<(), Box<dyn std::error::Error>> {
     let text = include_str!("jelly_on_floor.toml");
     let mut config = SimConfig::parse(text, "jelly_on_floor.toml".as_ref())?;
     let truth = config.parts.clone();

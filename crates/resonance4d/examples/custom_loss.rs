@@ -1,6 +1,5 @@
-//! A loss of your own in the video fit: the mean squared colour error instead of the paper's
-//! DMS, recovering a jelly block's stiffness from a video rendered with the true one:
-//! `cargo run --release -p resonance4d --example custom_loss`
+//! A loss of your own in the video fit: mean squared error instead of the paper's DMS, recovering
+//! a jelly block's stiffness: `cargo run --release -p resonance4d --example custom_loss`
 
 use resonance4d::loss::{bands::ReferenceVideo, BandedLoss, DmsTerms, LossError, VideoLoss};
 use resonance4d::prelude::*;
@@ -50,7 +49,8 @@ impl BandedLoss for BandedMse<'_> {
     }
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// Runs the example.
+pub fn main() -> Result<(), Box<dyn std::error::Error>> {
     let text = include_str!("jelly_on_floor.toml");
     let mut config = SimConfig::parse(text, "jelly_on_floor.toml".as_ref())?;
     let truth = config.parts.clone();

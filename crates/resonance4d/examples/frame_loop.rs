@@ -1,6 +1,6 @@
 //! An engine's frame loop, headless: each frame steps the simulation and draws its Gaussians
 //! (positions and covariances deformed by the particles' F), then writes the frame as a PNG:
-//! `cargo run --release -p resonance4d --example frame_loop [OUT_DIR]`
+//! `cargo run --release -p resonance4d --example frame_loop [OUT_DIR (default: a temp dir)]`
 
 use resonance4d::loss::{io::write_png_dir, Video};
 use resonance4d::prelude::*;
@@ -29,8 +29,10 @@ normal = [0.0, 0.0, 1.0]
 surface = "sticky"
 "#;
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let out = std::env::args().nth(1).unwrap_or("out/frame_loop".into());
+/// Runs the example.
+pub fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let tmp = std::env::temp_dir().join("r4d_frame_loop");
+    let out = std::env::args().nth(1).unwrap_or(tmp.display().to_string());
     let config = SimConfig::parse(SCENE, "jelly.toml".as_ref())?;
     let dx = config.domain.dx() as f32;
     let particles = ParticleSet::from_shapes(&config.shapes, config.domain.dx());
@@ -43,14 +45,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         gaussians.push_rgb(*x, [0.3 * dx; 3], [1.0, 0.0, 0.0, 0.0], 0.95, rgb);
     }
     let link = SimLink::identity(gaussians.len());
-    let camera = Camera::look_at(
-        160,
-        120,
-        40.0,
-        [0.5, -0.4, 0.7],
-        [0.5, 0.5, 0.35],
-        [0.0, 0.0, 1.0],
-    );
+    let (eye, target) = ([0.5, -0.4, 0.7], [0.5, 0.5, 0.35]);
+    let camera = Camera::look_at(160, 120, 40.0, eye, target, [0.0, 0.0, 1.0]);
     let settings = RenderSettings {
         background: [0.93, 0.92, 0.86],
         ..Default::default()
