@@ -344,7 +344,7 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
 /// gsplat rendered, 8-bit PNG frames of camera 0): E/density within 10%. Minutes: run with
 /// `cargo test --release --test cli -- cli_fit:: --ignored`.
 #[test]
-#[ignore]
+#[ignore = "minutes of fitting: run with `cargo test --release --test cli -- cli_fit:: --ignored`"]
 fn physgaussian_fit_jelly_arch_recovers_e_over_density() {
     let f = common::fixture("physgaussian/fit_jelly_arch");
     let d = tmp("arch");
