@@ -8,6 +8,7 @@ use crate::common;
 
 use common::scenes::{bbox, config};
 use r4d_backend_cpu::CpuBackend;
+use r4d_mpm::math::Mat3;
 use r4d_mpm::{
     BoundaryCondition, Material, MpmSim, PartParams, ParticleSet, Shape, SimConfig, SimState,
     Simulator, Surface,
@@ -67,10 +68,8 @@ fn volume(st: &SimState<CpuBackend>) -> f64 {
     p.f.iter()
         .zip(&p.vol0)
         .map(|(f, &v0)| {
-            let f: Vec<f64> = f.iter().map(|&x| x as f64).collect();
-            let det = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6])
-                + f[2] * (f[3] * f[7] - f[4] * f[6]);
-            det * v0 as f64
+            let m = [0, 1, 2].map(|i| [0, 1, 2].map(|j| f[3 * i + j] as f64));
+            Mat3(m).det() * v0 as f64
         })
         .sum()
 }

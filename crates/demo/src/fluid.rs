@@ -6,7 +6,7 @@
 //! the bulk modulus and the density together changes nothing, so the density is fixed.
 //! Free: `E` (the bulk modulus), viscosity (`plastic_viscosity`). Two views.
 
-use super::{bounds_around, sim_config, stage, SceneSpec, Size};
+use super::{bounds_around, floor_collider, stage, stage_config, SceneSpec, Size};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
 use r4d_optim::video::{FitConfig, OptimizerKind};
 use r4d_optim::ParamKind;
@@ -33,29 +33,8 @@ pub fn spec(size: Size) -> SceneSpec {
         Size::Full => (24, 20, (256, 192)),
         Size::Small => (16, 12, (96, 72)),
     };
-    let text = format!(
-        r#"
-[domain]
-grid_lim = 1.0
-n_grid = {n_grid}
-[time]
-substep_dt = 5e-4
-frame_dt = 0.025
-frames = {frames}
-[solver]
-gravity = [0.0, 0.0, -9.8]
-[[parts]]
-material = "fluid"
-[[boundary]]
-type = "bounding_box"
-[[boundary]]
-type = "surface_collider"
-point = [0.0, 0.0, {FLOOR}]
-normal = [0.0, 0.0, 1.0]
-surface = "sticky"
-"#
-    );
-    let config = sim_config(&text, vec![truth()]);
+    let floor = floor_collider(FLOOR, "surface = \"sticky\"");
+    let config = stage_config(n_grid, 5e-4, frames, vec![truth()], &floor);
     let dx = config.domain.dx();
     let particles = ParticleSet::from_shapes(
         &[Shape::Cylinder {

@@ -7,7 +7,9 @@
 //! the motion. After the release the block springs back to a permanent dent. Free: `E`,
 //! `nu`, yield stress, plastic viscosity, density. Two views.
 
-use super::{bounds_around, push_force, sim_config, stage, with, SceneSpec, Size};
+use super::{
+    bounds_around, floor_collider, push_force, stage, stage_config, with, SceneSpec, Size,
+};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
 use r4d_optim::video::{FitConfig, OptimizerKind};
 use r4d_optim::ParamKind;
@@ -48,27 +50,8 @@ pub fn spec(size: Size) -> SceneSpec {
     let t = truth();
     let a = 1.5 * t.yield_stress_pa / (t.density_kg_m3 * 0.1);
     let f = push_force([0.0, 0.0, -a], t.density_kg_m3, n_grid);
-    let text = format!(
-        r#"
-[domain]
-grid_lim = 1.0
-n_grid = {n_grid}
-[time]
-substep_dt = {substep_dt}
-frame_dt = 0.025
-frames = {frames}
-[solver]
-gravity = [0.0, 0.0, -9.8]
-[[parts]]
-material = "foam"
-[[boundary]]
-type = "bounding_box"
-[[boundary]]
-type = "surface_collider"
-point = [0.0, 0.0, {FLOOR}]
-normal = [0.0, 0.0, 1.0]
-surface = "sticky"
-[[boundary]]
+    let pushes = format!(
+        r#"[[boundary]]
 type = "particle_impulse"
 force = [0.0, 0.0, {fz}]
 point = [0.5, 0.5, {mid}]
@@ -87,7 +70,8 @@ start_time = 0.1
         n2 = num_dt(0.2),
         n1 = num_dt(0.1)
     );
-    let config = sim_config(&text, vec![truth()]);
+    let boundaries = floor_collider(FLOOR, "surface = \"sticky\"") + &pushes;
+    let config = stage_config(n_grid, substep_dt, frames, vec![truth()], &boundaries);
     let dx = config.domain.dx();
     let particles = ParticleSet::from_shapes(
         &[Shape::Box {

@@ -557,6 +557,37 @@ fn push_force(a: [f64; 3], rho: f64, n_grid: usize) -> [f64; 3] {
     a.map(|x| x * rho * v)
 }
 
+/// The stage's simulation: a unit box of `n_grid` cells per side with its bounding box,
+/// gravity along -z, `frames` frames of 0.025 s in substeps of `substep_dt`, the parts
+/// `parts`, and `boundaries` (more `[[boundary]]` tables, TOML) after the bounding box.
+fn stage_config(
+    n_grid: usize,
+    substep_dt: f64,
+    frames: usize,
+    parts: Vec<PartParams>,
+    boundaries: &str,
+) -> SimConfig {
+    let materials: String = parts
+        .iter()
+        .map(|p| format!("[[parts]]\nmaterial = \"{}\"\n", p.material.name()))
+        .collect();
+    let text = format!(
+        "[domain]\ngrid_lim = 1.0\nn_grid = {n_grid}\n[time]\nsubstep_dt = {substep_dt:e}\n\
+         frame_dt = 0.025\nframes = {frames}\n[solver]\ngravity = [0.0, 0.0, -9.8]\n{materials}\
+         [[boundary]]\ntype = \"bounding_box\"\n{boundaries}"
+    );
+    sim_config(&text, parts)
+}
+
+/// The floor: a surface collider at height `z` facing up, `surface` being a config surface
+/// kind and its settings (`surface = "sticky"`, or `surface = "friction"` and `friction`).
+fn floor_collider(z: f64, surface: &str) -> String {
+    format!(
+        "[[boundary]]\ntype = \"surface_collider\"\npoint = [0.0, 0.0, {z}]\n\
+         normal = [0.0, 0.0, 1.0]\n{surface}\n"
+    )
+}
+
 /// A simulation config from TOML text with `parts` as its parts (the scene files' configs
 /// are fixed text, so a parse error is a bug).
 fn sim_config(text: &str, parts: Vec<PartParams>) -> SimConfig {

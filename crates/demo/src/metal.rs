@@ -7,7 +7,7 @@
 //! a stiffer start or a faster hardening bend it alike). Free: `E`, `nu`,
 //! yield stress, hardening coefficient, density. Two views.
 
-use super::{bounds_around, push_force, sim_config, stage, with, SceneSpec, Size};
+use super::{bounds_around, push_force, stage, stage_config, with, SceneSpec, Size};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
 use r4d_optim::video::{FitConfig, OptimizerKind};
 use r4d_optim::ParamKind;
@@ -35,22 +35,8 @@ pub fn spec(size: Size) -> SceneSpec {
     };
     // 41 m/s^2 downwards on the tip for 0.08 s, then 1.6x that from 0.2 s.
     let f = push_force([0.0, 0.0, -41.0], truth().density_kg_m3, n_grid);
-    let text = format!(
-        r#"
-[domain]
-grid_lim = 1.0
-n_grid = {n_grid}
-[time]
-substep_dt = 2e-4
-frame_dt = 0.025
-frames = {frames}
-[solver]
-gravity = [0.0, 0.0, -9.8]
-[[parts]]
-material = "metal"
-[[boundary]]
-type = "bounding_box"
-[[boundary]]
+    let boundaries = format!(
+        r#"[[boundary]]
 type = "cuboid"
 point = [0.2, 0.5, 0.5]
 size = [0.15, 0.2, 0.2]
@@ -72,7 +58,7 @@ start_time = 0.2
         fz = f[2],
         fz2 = 1.6 * f[2]
     );
-    let config = sim_config(&text, vec![truth()]);
+    let config = stage_config(n_grid, 2e-4, frames, vec![truth()], &boundaries);
     let dx = config.domain.dx();
     let particles = ParticleSet::from_shapes(
         &[Shape::Box {

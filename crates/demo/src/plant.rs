@@ -4,7 +4,7 @@
 //! absolute density enter the motion, not only `E / density`), then the plant sways under
 //! gravity. Free: `E` and density of both parts, one view.
 
-use super::{sim_config, stage, SceneSpec, Size};
+use super::{stage, stage_config, SceneSpec, Size};
 use r4d_mpm::{PartParams, ParticleSet, Shape};
 use r4d_optim::video::FitConfig;
 use r4d_optim::ParamKind;
@@ -32,24 +32,7 @@ pub fn spec(size: Size) -> SceneSpec {
         Size::Full => (24, 16, (256, 192)),
         Size::Small => (16, 10, (96, 72)),
     };
-    let text = format!(
-        r#"
-[domain]
-grid_lim = 1.0
-n_grid = {n_grid}
-[time]
-substep_dt = 3.3333333333333335e-4
-frame_dt = 0.025
-frames = {frames}
-[solver]
-gravity = [0.0, 0.0, -9.8]
-[[parts]]
-material = "jelly"
-[[parts]]
-material = "jelly"
-[[boundary]]
-type = "bounding_box"
-[[boundary]]
+    let boundaries = r#"[[boundary]]
 type = "cuboid"
 point = [0.5, 0.5, 0.125]
 size = [0.5, 0.5, 0.045]
@@ -60,9 +43,9 @@ force = [0.5, 0.18, 0.0]
 point = [0.5, 0.5, 0.53125]
 size = [0.13, 0.13, 0.1]
 num_dt = 30
-"#
-    );
-    let config = sim_config(&text, truth());
+"#;
+    // 75 substeps per 0.025-s frame.
+    let config = stage_config(n_grid, 0.025 / 75.0, frames, truth(), boundaries);
     let dx = config.domain.dx();
     let shapes = [
         // Stem: 0.125 x 0.125 x 0.3125 m, clamped at the bottom.

@@ -3,7 +3,9 @@
 //! impact and keeps its squashed shape, its yield stress dropping as it flows (softening).
 //! Free: `E`, `nu`, yield stress, softening, density. Two views.
 
-use super::{bounds_around, push_force, sim_config, stage, with, SceneSpec, Size};
+use super::{
+    bounds_around, floor_collider, push_force, stage, stage_config, with, SceneSpec, Size,
+};
 use r4d_mpm::{Material, PartParams, ParticleSet, Shape};
 use r4d_optim::video::{FitConfig, OptimizerKind, RestartsConfig};
 use r4d_optim::ParamKind;
@@ -41,28 +43,8 @@ pub fn spec(size: Size) -> SceneSpec {
     let num_dt = |seconds: f64| (seconds / substep_dt).round() as u32;
     // Thrown: 4.6 m/s^2 sideways and 13.8 m/s^2 down for 0.025 s, on top of gravity.
     let f = push_force([4.6, 0.0, -13.8], truth().density_kg_m3, n_grid);
-    let text = format!(
-        r#"
-[domain]
-grid_lim = 1.0
-n_grid = {n_grid}
-[time]
-substep_dt = {substep_dt}
-frame_dt = 0.025
-frames = {frames}
-[solver]
-gravity = [0.0, 0.0, -9.8]
-[[parts]]
-material = "plasticine"
-[[boundary]]
-type = "bounding_box"
-[[boundary]]
-type = "surface_collider"
-point = [0.0, 0.0, {FLOOR}]
-normal = [0.0, 0.0, 1.0]
-surface = "friction"
-friction = 0.8
-[[boundary]]
+    let throw = format!(
+        r#"[[boundary]]
 type = "particle_impulse"
 force = [{fx}, 0.0, {fz}]
 point = [0.4, 0.5, 0.5]
@@ -73,7 +55,8 @@ num_dt = {n}
         fz = f[2],
         n = num_dt(0.025)
     );
-    let config = sim_config(&text, vec![truth()]);
+    let boundaries = floor_collider(FLOOR, "surface = \"friction\"\nfriction = 0.8") + &throw;
+    let config = stage_config(n_grid, substep_dt, frames, vec![truth()], &boundaries);
     let dx = config.domain.dx();
     let particles = ParticleSet::from_shapes(
         &[Shape::Box {

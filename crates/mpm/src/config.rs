@@ -397,10 +397,7 @@ impl SimConfig {
                     ),
                 ));
             }
-            if p.material == crate::Material::Fluid && p.plastic_viscosity_pa_s > 0.0 {
-                let bound =
-                    s.max_cfl * crate::VISCOUS_STABILITY * p.density_kg_m3 * d.dx() * d.dx()
-                        / p.plastic_viscosity_pa_s;
+            if let Some(bound) = p.viscous_dt_bound(d.dx(), s.max_cfl) {
                 if dt > bound {
                     return Err(bad(
                         &format!("parts[{i}].plastic_viscosity_pa_s"),

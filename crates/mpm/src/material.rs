@@ -251,6 +251,16 @@ impl PartParams {
         )
     }
 
+    /// The longest substep the explicit viscous stress of a `fluid` allows on a grid of
+    /// spacing `dx` (m), `max_cfl VISCOUS_STABILITY rho dx^2 / viscosity` (s); `None` for the
+    /// other materials and for a fluid without viscosity.
+    pub fn viscous_dt_bound(&self, dx: f64, max_cfl: f64) -> Option<f64> {
+        (self.material == Material::Fluid && self.plastic_viscosity_pa_s > 0.0).then(|| {
+            max_cfl * crate::VISCOUS_STABILITY * self.density_kg_m3 * dx * dx
+                / self.plastic_viscosity_pa_s
+        })
+    }
+
     /// Speed of the pressure (P) wave `sqrt((lambda + 2 mu) / rho)` in m/s: the fastest wave
     /// the explicit integrator must resolve.
     pub fn p_wave_speed(&self) -> f64 {

@@ -121,9 +121,7 @@ impl SimSetup {
         let dt = self.config.time.substep_dt;
         let cfl = self.config.solver.max_cfl;
         for (i, p) in params.iter().enumerate() {
-            if p.material == crate::Material::Fluid && p.plastic_viscosity_pa_s > 0.0 {
-                let bound = cfl * crate::VISCOUS_STABILITY * p.density_kg_m3 * self.dx * self.dx
-                    / p.plastic_viscosity_pa_s;
+            if let Some(bound) = p.viscous_dt_bound(self.dx, cfl) {
                 if dt > bound {
                     return Err(Error::ViscousStability {
                         dt_s: dt,
