@@ -98,6 +98,15 @@ impl ProblemBuilder {
             let n = g.len();
             (g, SimLink::identity(n))
         });
+        // The config's and the cameras' limits before any video is allocated.
+        self.config
+            .validate("the problem's config")
+            .map_err(|e| FitError::Input(e.to_string()))?;
+        for (k, (camera, _)) in self.views.iter().enumerate() {
+            camera
+                .validate(&format!("view {k}'s camera"))
+                .map_err(FitError::Input)?;
+        }
         let t = &self.config.time;
         let frames = t.frames;
         let views = self
