@@ -4,7 +4,7 @@
 //! `cargo bench --bench adjoint [-- PARTICLES FRAMES SUBSTEPS_PER_FRAME]` (defaults: 10 000
 //! particles, 2 frames of 50 substeps, n_grid 64, f32), for the single-threaded host
 //! reference backend and the parallel CPU backend (`CpuBackend`, all cores), both through the
-//! generic stepper `KernelAdjoint`.
+//! generic stepper `Simulation`.
 //! The paper's scale (16 frames x 400 substeps, 10k and 100k particles) takes an hour on a
 //! 2-core machine: `cargo bench --bench adjoint -- 100000 16 400 --parallel-only`.
 //! `--parallel-only` skips the single-threaded host stepper, `--only store-all|per-frame|every-n|nested`
@@ -13,9 +13,11 @@
 
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_mpm::adjoint::checkpoint::{memory_plan, value_and_grad, Checkpointing, Differentiable};
-use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, MpmAdjointKernels};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
+use r4d_mpm::adjoint::kernels::MpmAdjointKernels;
 use r4d_mpm::reference::ReferenceBackend;
+use r4d_mpm::simulation::infallible;
+use r4d_mpm::Simulation;
 use r4d_mpm::{
     BoundaryCondition, Domain, PartParams, ParticleSet, Shape, SimConfig, Surface, TimeConfig,
 };
@@ -81,7 +83,7 @@ fn main() {
     if !parallel_only {
         measure(
             "host (1 thread)",
-            &|| infallible(KernelAdjoint::new(ReferenceBackend::new(), &sim)),
+            &|| infallible(Simulation::with_host(ReferenceBackend::new(), &sim)),
             &params,
             substeps,
             spf,
@@ -92,7 +94,7 @@ fn main() {
     }
     measure(
         "parallel CPU",
-        &|| infallible(KernelAdjoint::new(CpuBackend::new(Par::Rayon), &sim)),
+        &|| infallible(Simulation::with_host(CpuBackend::new(Par::Rayon), &sim)),
         &params,
         substeps,
         spf,
@@ -105,7 +107,7 @@ fn main() {
 #[allow(clippy::too_many_arguments)]
 fn measure<'a, B>(
     label: &str,
-    make: &dyn Fn() -> KernelAdjoint<'a, B>,
+    make: &dyn Fn() -> Simulation<B>,
     params: &Vec<PhysParams<f32>>,
     substeps: u64,
     spf: u32,

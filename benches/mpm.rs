@@ -14,8 +14,8 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Through
 use r4d_backend_cpu::CpuBackend;
 use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
 use r4d_mpm::{
-    reference::ReferenceBackend, BoundaryCondition, MpmKernels, MpmSim, PartParams, ParticleSet,
-    Shape, SimConfig, Simulator, Surface,
+    reference::ReferenceBackend, BoundaryCondition, MpmKernels, PartParams, ParticleSet, Shape,
+    SimConfig, Simulation, Simulator, Surface,
 };
 use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use std::sync::Arc;
@@ -75,16 +75,16 @@ fn bench_backend<B: MpmKernels>(
         let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
         let np = scene.len();
         let base = reset_peak();
-        let mut sim = MpmSim::new(make(), &cfg, scene, "bench").unwrap();
+        let sim = Simulation::new(make(), &cfg, scene, "bench").unwrap();
         let mut state = sim.init_state(&cfg.parts).unwrap();
         // Warm up: let the block fall a little so velocities and stresses are non-trivial.
         for _ in 0..20 {
-            sim.substep(&mut state).unwrap();
+            sim.step_substep(&mut state).unwrap();
         }
         group.throughput(Throughput::Elements(np as u64));
         group.bench_with_input(BenchmarkId::from_parameter(np), &np, |b, _| {
             b.iter(|| {
-                sim.substep(&mut state).unwrap();
+                sim.step_substep(&mut state).unwrap();
                 sync(sim.backend());
             })
         });

@@ -4,12 +4,12 @@
 //! f32, slip bounding box, on
 //!
 //! * `adjoint_substep/cpu/{forward,backward}/N`: the parallel CPU adjoint
-//!   (`KernelAdjoint<CpuBackend<f32>>`, all cores);
+//!   (`Simulation<CpuBackend<f32>>`, all cores);
 //! * `adjoint_substep/wgpu/{forward,backward}/N`: the device adjoint
-//!   (`KernelAdjoint<WgpuMpm>`, the same stepper) when a wgpu adapter exists; every call waits
+//!   (`Simulation<WgpuMpm>`, the same stepper) when a wgpu adapter exists; every call waits
 //!   for the device, so times are execution times;
 //! * `adjoint_substep/vulkan/{forward,backward}/N`: the same on the Vulkan engine
-//!   (`KernelAdjoint<VulkanMpm>`; each call ends with `VulkanEngine::finish`).
+//!   (`Simulation<VulkanMpm>`; each call ends with `VulkanEngine::finish`).
 //!
 //! The input of every timed call is the same: the state after 20 warm-up substeps (run on
 //! the CPU, uploaded for wgpu) and, for the backward, an adjoint seeded as by a loss on the
@@ -44,12 +44,13 @@ use r4d_backend_vulkan::{VulkanEngine, VulkanMpm};
 use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
 use r4d_gpu::GpuEngine;
 use r4d_mpm::adjoint::checkpoint::Differentiable;
-use r4d_mpm::adjoint::engine::MpmAdjointKernels;
-use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
+use r4d_mpm::adjoint::kernels::MpmAdjointKernels;
+use r4d_mpm::simulation::infallible;
 use r4d_mpm::{
     BoundaryCondition, Domain, PartParams, ParticleSet, Shape, SimConfig, Surface, TimeConfig,
 };
+use r4d_mpm::{Simulation, State};
 use resonance4d::alloc::{peak_since, reset_peak, Counting, LIVE};
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
@@ -144,7 +145,7 @@ impl Case {
         let params = vec![PhysParams::<f32>::of(&cfg.parts[0])];
         let np = sim.len();
         let before = {
-            let warm = infallible(KernelAdjoint::new(
+            let warm = infallible(Simulation::with_host(
                 CpuBackend::<f32>::with_par(Par::Rayon),
                 &sim,
             ));
@@ -186,12 +187,12 @@ fn bench_cpu(c: &mut Criterion, cases: &[Case]) {
     group.sample_size(10);
     for case in cases {
         let np = case.sim.len();
-        let stepper = infallible(KernelAdjoint::new(
+        let stepper = infallible(Simulation::with_host(
             CpuBackend::<f32>::with_par(Par::Rayon),
             &case.sim,
         ));
         let b = stepper.backend();
-        let up = |h: &HostState<f32>| infallible(StateBufs::upload(b, h));
+        let up = |h: &HostState<f32>| infallible(State::upload(b, h));
         let before = up(&case.before);
         let k = WARMUP;
         // First calls, measured: peak above what is live before each.
@@ -298,7 +299,7 @@ struct Device<'a> {
     peak_bytes: &'a dyn Fn() -> u64,
 }
 
-/// The device adjoint (`KernelAdjoint` over a GPU backend's kernels): the same cases and
+/// The device adjoint (`Simulation` over a GPU backend's kernels): the same cases and
 /// measurements on every GPU engine.
 fn bench_device<B: MpmAdjointKernels<Scalar = f32>>(
     c: &mut Criterion,
@@ -312,7 +313,7 @@ fn bench_device<B: MpmAdjointKernels<Scalar = f32>>(
     group.sample_size(10);
     for case in cases {
         let np = case.sim.len();
-        let stepper = match KernelAdjoint::new(make(), &case.sim) {
+        let stepper = match Simulation::with_host(make(), &case.sim) {
             Ok(s) => s,
             Err(e) => {
                 eprintln!("adjoint_substep/{name}/{np} skipped: {e}");
@@ -320,8 +321,8 @@ fn bench_device<B: MpmAdjointKernels<Scalar = f32>>(
             }
         };
         let b = stepper.backend();
-        let before = StateBufs::upload(b, &case.before).expect("uploading the state");
-        let adj0 = StateBufs::upload(b, &case.adj).expect("uploading the adjoint");
+        let before = State::upload(b, &case.before).expect("uploading the state");
+        let adj0 = State::upload(b, &case.adj).expect("uploading the adjoint");
         let mut grad = stepper.zero_grad().expect("device gradient");
         let k = WARMUP;
         // First calls build the pipelines; the measured ones are the second.

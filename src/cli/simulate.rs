@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    ply::write_ply, reference::ReferenceBackend, MpmKernels, MpmSim, ParticleSet, SimConfig,
+    ply::write_ply, reference::ReferenceBackend, MpmKernels, ParticleSet, SimConfig, Simulation,
     Simulator,
 };
 use serde_json::json;
@@ -137,11 +137,11 @@ fn simulate<B: MpmKernels>(
     )?;
     let n = scene.len();
     let backend_name = backend.name();
-    let mut sim = MpmSim::new(backend, &config, scene, source)?;
+    let print = fingerprint(&config, &scene, backend_name, a.write_f);
+    let mut sim = Simulation::new(backend, &config, scene, source)?;
     let params = config.parts.clone();
     let snap_path = a.out.join("state.r4d");
     let resumed = a.resume && snap_path.exists();
-    let print = fingerprint(&config, sim.scene(), backend_name, a.write_f);
     let mut state = if resumed {
         let snap = r4d_mpm::Snapshot::read(&snap_path, n, &print)?;
         eprintln!(
@@ -166,7 +166,7 @@ fn simulate<B: MpmKernels>(
             .expect("valid template"),
     );
     let start = Instant::now();
-    let write = |sim: &MpmSim<B>, state: &r4d_mpm::SimState<B>, k: usize| -> Result<()> {
+    let write = |sim: &Simulation<B>, state: &r4d_mpm::SimState<B>, k: usize| -> Result<()> {
         let x = sim.positions(state)?;
         let f = if a.write_f {
             Some(sim.deformation_gradients(state)?)

@@ -1,5 +1,5 @@
 //! The device adjoint against the parallel CPU adjoint, one suite for every GPU engine (wgpu
-//! and Vulkan: `wgpu::*`, `vulkan::*`): the one stepper (`KernelAdjoint`) on `WgpuMpm` /
+//! and Vulkan: `wgpu::*`, `vulkan::*`): the one stepper (`Simulation`) on `WgpuMpm` /
 //! `VulkanMpm` and on `CpuBackend<f32>`, driven by the same checkpointing
 //! driver: parameter gradients (the bound for elastic scenes: 1e-3 relative) and the
 //! adjoint of the initial state.
@@ -9,8 +9,10 @@ use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_backend_vulkan::{VulkanEngine, VulkanMpm};
 use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
-use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, MpmAdjointKernels};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
+use r4d_mpm::adjoint::kernels::MpmAdjointKernels;
+use r4d_mpm::simulation::infallible;
+use r4d_mpm::Simulation;
 use r4d_mpm::{
     BoundaryCondition, Domain, ForceForm, Material, PartParams, ParticleSet, Shape, SimConfig,
     SolverConfig, Surface, TimeConfig,
@@ -134,7 +136,7 @@ fn run<B: MpmAdjointKernels<Scalar = f32>>(
     sim: &HostSim,
     params: &[PhysParams<f32>],
 ) -> (Vec<PhysParams<f32>>, HostState<f32>) {
-    let d = KernelAdjoint::new(b, sim).unwrap();
+    let d = Simulation::with_host(b, sim).unwrap();
     let init = d.init(params, &initial_velocity(sim.len())).unwrap();
     let (_, adj0, g) = value_and_grad(
         &d,
@@ -426,7 +428,7 @@ fn particles_leaving_the_grid_match_the_cpu_adjoint(ctx: &Gpu) {
     let params: Vec<PhysParams<f32>> = cfg.parts.iter().map(PhysParams::of).collect();
     let (gc, ac) = cpu(&sim, &params);
     let (gg, ag) = gpu(ctx, &sim, &params);
-    let host = infallible(KernelAdjoint::new(
+    let host = infallible(Simulation::with_host(
         CpuBackend::<f32>::with_par(Par::Rayon),
         &sim,
     ));

@@ -1,12 +1,14 @@
 //! The parallel CPU backend's reverse stages (`CpuBackend`, through the generic
-//! `KernelAdjoint`) against the f64 reference backend's (the gradient oracle).
+//! `Simulation`) against the f64 reference backend's (the gradient oracle).
 
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
-use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint, MpmAdjointKernels};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
+use r4d_mpm::adjoint::kernels::MpmAdjointKernels;
 use r4d_mpm::math::Real;
 use r4d_mpm::reference::ReferenceBackend;
+use r4d_mpm::simulation::infallible;
+use r4d_mpm::Simulation;
 use r4d_mpm::{
     BoundaryCondition, Domain, ForceForm, Material, PartParams, ParticleSet, Shape, SimConfig,
     SolverConfig, Surface, TimeConfig,
@@ -75,7 +77,7 @@ fn grad<B: MpmAdjointKernels<Error = Infallible>>(
     sim: &HostSim,
     part: &PartParams,
 ) -> [f64; 6] {
-    let d = infallible(KernelAdjoint::new(b, sim));
+    let d = infallible(Simulation::with_host(b, sim));
     let params = vec![PhysParams::<B::Scalar>::of(part)];
     let init = infallible(d.init(&params, &vec![[B::Scalar::c(0.0); 3]; sim.len()]));
     let (_, adj0, g) = infallible(value_and_grad(
@@ -262,7 +264,7 @@ fn particles_leaving_the_grid_do_not_crash_the_adjoint() {
     let sim = HostSim::new(&cfg, &sc).unwrap();
     // The block falls through the floor of the grid within the run.
     let params = vec![PhysParams::<f64>::of(&cfg.parts[0])];
-    let oracle = infallible(KernelAdjoint::new(
+    let oracle = infallible(Simulation::with_host(
         ReferenceBackend::<f64>::in_scalar(),
         &sim,
     ));
@@ -293,7 +295,7 @@ fn per_particle_gradients_sum_to_the_part_gradient_and_match_finite_differences(
     assert_eq!(sim.slots(), sim.len());
     let loss_weights = |f: usize, p: usize| ((p * 7 + f * 3) % 11) as f64 / 11.0 - 0.5;
     let run = |sim: &HostSim, params: &Vec<PhysParams<f64>>| {
-        let d = infallible(KernelAdjoint::new(cpu::<f64>(Par::Rayon), sim));
+        let d = infallible(Simulation::with_host(cpu::<f64>(Par::Rayon), sim));
         let init = infallible(d.init(params, &vec![[0.0; 3]; sim.len()]));
         let (l, adj0, g) = infallible(value_and_grad(
             &d,

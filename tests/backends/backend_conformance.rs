@@ -12,7 +12,7 @@ use crate::common::gpu;
 use r4d_backend_cpu::CpuBackend;
 use r4d_backend_wgpu::testing::gpu_or_skip_with;
 use r4d_backend_wgpu::WgpuMpm;
-use r4d_mpm::{MpmKernels, MpmSim, ParticleSet, SimConfig, Simulator};
+use r4d_mpm::{MpmKernels, ParticleSet, SimConfig, Simulation, Simulator};
 use std::sync::Arc;
 
 /// Runs `frames` frames; returns positions and deformation gradients.
@@ -22,7 +22,7 @@ fn run<B: MpmKernels>(
     frames: usize,
 ) -> (Vec<[f32; 3]>, Vec<[f32; 9]>) {
     let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
-    let mut sim = MpmSim::new(backend, cfg, scene, "conformance").unwrap();
+    let mut sim = Simulation::new(backend, cfg, scene, "conformance").unwrap();
     let mut s = sim.init_state(&cfg.parts).unwrap();
     for _ in 0..frames {
         sim.step_frame(&mut s, &cfg.parts).unwrap();

@@ -1,5 +1,5 @@
-//! `fit_trajectory` on the wgpu backend (and on the Vulkan engine) (f32, `KernelAdjoint<WgpuMpm>`) against the CPU backend (f64,
-//! `KernelAdjoint<CpuBackend<f64>>`): the first iteration's loss and gradient agree to 1e-3 relative and the
+//! `fit_trajectory` on the wgpu backend (and on the Vulkan engine) (f32, `Simulation<WgpuMpm>`) against the CPU backend (f64,
+//! `Simulation<CpuBackend<f64>>`): the first iteration's loss and gradient agree to 1e-3 relative and the
 //! fitted parameters to 1% (the CPU-vs-wgpu bound). Skipped without an adapter unless
 //! `R4D_REQUIRE_GPU=1`.
 
@@ -7,13 +7,13 @@ use crate::common;
 
 use common::fixture;
 use r4d_backend_cpu::CpuBackend;
-use r4d_mpm::{MpmSim, ParticleSet, SimConfig, Simulator};
+use r4d_mpm::{ParticleSet, SimConfig, Simulation, Simulator};
 use resonance4d::compute::{self, Compute};
 use resonance4d::fit_trajectory::{fit_trajectory, FitOptions, IterRecord};
 
 /// Simulates `cfg` on the CPU backend (as `r4d simulate` does) and returns frames 1 ...
 fn targets(cfg: &SimConfig, scene: &ParticleSet) -> Vec<Vec<[f32; 3]>> {
-    let mut sim = MpmSim::new(CpuBackend::default(), cfg, scene.clone(), "target").unwrap();
+    let mut sim = Simulation::new(CpuBackend::default(), cfg, scene.clone(), "target").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
     (0..cfg.time.frames)
         .map(|_| {

@@ -1,12 +1,13 @@
 //! One forward pass: `r4d simulate` and the forward pass of a fit (the generic
-//! differentiable stepper `KernelAdjoint` on the CPU backend) run the same substep code, so
+//! differentiable stepper `Simulation` on the CPU backend) run the same substep code, so
 //! their positions are bitwise equal, for every material's shipped config (the fluid has no
 //! adjoint and is left out).
 
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_mpm::adjoint::checkpoint::Differentiable;
-use r4d_mpm::adjoint::engine::{infallible, KernelAdjoint};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
+use r4d_mpm::simulation::infallible;
+use r4d_mpm::Simulation;
 use r4d_mpm::{Material, ParticleSet, SimConfig};
 use std::path::PathBuf;
 use std::process::Command;
@@ -51,7 +52,7 @@ fn compare(config: &str, frames: usize) {
     );
     let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
     let sim = HostSim::new(&cfg, &scene).unwrap();
-    let fit = infallible(KernelAdjoint::new(
+    let fit = infallible(Simulation::with_host(
         CpuBackend::<f32>::with_par(Par::Rayon),
         &sim,
     ));

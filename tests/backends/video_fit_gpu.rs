@@ -5,7 +5,7 @@ use crate::common::video::{fit_config, jelly, small_problem};
 use resonance4d::video_fit::fit::NoHooks;
 use resonance4d::video_fit::{run_fit, Objective, Precision};
 
-/// The video fit on the GPU: simulation and reverse sweep (`KernelAdjoint<WgpuMpm>`, f32), rendering and
+/// The video fit on the GPU: simulation and reverse sweep (`Simulation<WgpuMpm>`, f32), rendering and
 /// render VJP (`WgpuSplat`), the loss on the CPU. Loss and every parameter gradient agree with
 /// the CPU's f32 run, and a few fit iterations reach the same parameters within 1% (the
 /// bound).

@@ -127,16 +127,16 @@ fn bad_input_exits_nonzero_naming_the_file() {
 #[test]
 fn every_shipped_config_loads_and_runs_a_substep() {
     use r4d_backend_cpu::CpuBackend;
-    use r4d_mpm::{MpmSim, ParticleSet, SimConfig, Simulator};
+    use r4d_mpm::{ParticleSet, SimConfig, Simulation, Simulator};
     let mut n = 0;
     for e in std::fs::read_dir(repo("configs")).unwrap() {
         let p = e.unwrap().path();
         let cfg = SimConfig::load(&p).unwrap_or_else(|e| panic!("{e}"));
         let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
-        let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene, &p.display().to_string())
+        let sim = Simulation::new(CpuBackend::default(), &cfg, scene, &p.display().to_string())
             .unwrap_or_else(|e| panic!("{e}"));
         let mut st = sim.init_state(&cfg.parts).unwrap();
-        sim.substep(&mut st).unwrap();
+        sim.step_substep(&mut st).unwrap();
         n += 1;
     }
     assert!(n >= 7);

@@ -3,7 +3,7 @@
 
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    BoundaryCondition, Domain, ForceForm, MpmSim, PartParams, ParticleSet, Shape, SimConfig,
+    BoundaryCondition, Domain, ForceForm, PartParams, ParticleSet, Shape, SimConfig, Simulation,
     SolverConfig, TimeConfig,
 };
 
@@ -56,8 +56,8 @@ pub fn boxed(cfg: &SimConfig, min: [f64; 3], max: [f64; 3]) -> ParticleSet {
 }
 
 /// A simulator on the CPU backend.
-pub fn sim(cfg: &SimConfig, scene: ParticleSet) -> MpmSim<CpuBackend> {
-    MpmSim::new(CpuBackend::default(), cfg, scene, "test").unwrap()
+pub fn sim(cfg: &SimConfig, scene: ParticleSet) -> Simulation<CpuBackend> {
+    Simulation::new(CpuBackend::default(), cfg, scene, "test").unwrap()
 }
 
 /// Bounding box (lo, hi) and centroid of points.

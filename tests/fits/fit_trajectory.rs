@@ -5,14 +5,14 @@ use crate::common;
 
 use common::fixture;
 use r4d_backend_cpu::CpuBackend;
-use r4d_mpm::{MpmSim, ParticleSet, SimConfig, Simulator};
+use r4d_mpm::{ParticleSet, SimConfig, Simulation, Simulator};
 use r4d_optim::ParamKind;
 use resonance4d::compute::{self, Compute};
 use resonance4d::fit_trajectory::{fit_trajectory, FitOptions};
 
 /// Simulates `cfg` on the CPU backend (as `r4d simulate` does) and returns frames 1 ...
 fn targets(cfg: &SimConfig, scene: &ParticleSet) -> Vec<Vec<[f32; 3]>> {
-    let mut sim = MpmSim::new(CpuBackend::default(), cfg, scene.clone(), "target").unwrap();
+    let mut sim = Simulation::new(CpuBackend::default(), cfg, scene.clone(), "target").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
     (0..cfg.time.frames)
         .map(|_| {

@@ -14,8 +14,8 @@ use crate::common;
 use common::scenes::config;
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    BoundaryCondition, ForceForm, Material, MpmKernels as _, MpmSim, PartParams, ParticleSet,
-    Shape, Simulator,
+    BoundaryCondition, ForceForm, Material, MpmKernels as _, PartParams, ParticleSet, Shape,
+    Simulation, Simulator,
 };
 
 const E: f64 = 1e6;
@@ -211,9 +211,9 @@ fn measured_frequency_hz(
         .filter(|&i| scene.x[i][0] as f64 > xc + l - dx)
         .collect();
     let z0: f64 = tip.iter().map(|&i| scene.x[i][2] as f64).sum::<f64>() / tip.len() as f64;
-    let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene, "cantilever").unwrap();
+    let mut sim = Simulation::new(CpuBackend::default(), &cfg, scene, "cantilever").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
-    sim.backend().write(&mut st.particles.v, &v).unwrap();
+    sim.backend().write(&mut st.state.v, &v).unwrap();
     let f_eb = euler_bernoulli_hz(l, h);
     let samples = (periods / f_eb / (10.0 * dt)).ceil() as usize;
     let (mut t, mut z) = (vec![0.0], vec![0.0]);

@@ -10,7 +10,7 @@ use common::scenes::{bbox, config};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::math::Mat3;
 use r4d_mpm::{
-    BoundaryCondition, Material, MpmSim, PartParams, ParticleSet, Shape, SimConfig, SimState,
+    BoundaryCondition, Material, PartParams, ParticleSet, Shape, SimConfig, SimState, Simulation,
     Simulator, Surface,
 };
 
@@ -63,19 +63,20 @@ fn cylinder(cfg: &SimConfig, z0: f64, radius: f64, height: f64) -> ParticleSet {
 }
 
 /// Current volume `sum J V0` (m^3) of the particles.
-fn volume(st: &SimState<CpuBackend>) -> f64 {
-    let p = &st.particles;
-    p.f.iter()
-        .zip(&p.vol0)
+fn volume(sim: &Simulation<CpuBackend>, st: &SimState<CpuBackend>) -> f64 {
+    st.state
+        .f
+        .iter()
+        .zip(&sim.host().vol0)
         .map(|(f, &v0)| {
             let m = [0, 1, 2].map(|i| [0, 1, 2].map(|j| f[3 * i + j] as f64));
-            Mat3(m).det() * v0 as f64
+            Mat3(m).det() * v0
         })
         .sum()
 }
 
 fn max_speed(st: &SimState<CpuBackend>) -> f64 {
-    st.particles
+    st.state
         .v
         .iter()
         .map(|v| v.iter().map(|&x| (x as f64).powi(2)).sum::<f64>().sqrt())
@@ -100,19 +101,19 @@ fn a_drop_keeps_its_mass_and_its_volume_within_the_weak_compressibility() {
     let k = 1e5;
     let cfg = on_floor(32, 1e-4, 100, fluid(k, 2.0));
     let scene = cylinder(&cfg, FLOOR + 0.1, 0.1, 0.1);
-    let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene, "drop").unwrap();
+    let mut sim = Simulation::new(CpuBackend::default(), &cfg, scene, "drop").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
-    let v0 = volume(&st);
-    let m_total: f64 = st.particles.mass.iter().map(|&m| m as f64).sum();
+    let v0 = volume(&sim, &st);
+    let m_total: f64 = sim.masses().unwrap().iter().map(|&m| m as f64).sum();
     let (mut worst, mut last) = (0.0f64, 0.0);
     for frame in 0..60 {
         sim.step_frame(&mut st, &cfg.parts).unwrap();
-        let grid_mass: f64 = sim.grid().nodes.iter().map(|n| n[3] as f64).sum();
+        let grid_mass: f64 = sim.with_grid(|_, g| g.nodes.iter().map(|n| n[3] as f64).sum());
         assert!(
             (grid_mass - m_total).abs() <= 1e-5 * m_total,
             "frame {frame}: grid mass {grid_mass} vs particle mass {m_total}"
         );
-        last = volume(&st) / v0 - 1.0;
+        last = volume(&sim, &st) / v0 - 1.0;
         worst = worst.max(last.abs());
     }
     let x = sim.positions(&st).unwrap();
@@ -141,7 +142,7 @@ fn a_viscous_layer_spreads_at_a_rate_inversely_proportional_to_its_viscosity() {
     let spread = |eta: f64, frames: usize| -> Vec<f64> {
         let cfg = on_floor(32, 1e-4, 250, fluid(1e5, eta));
         let scene = cylinder(&cfg, FLOOR, 0.1, 0.1);
-        let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene, "layer").unwrap();
+        let mut sim = Simulation::new(CpuBackend::default(), &cfg, scene, "layer").unwrap();
         let mut st = sim.init_state(&cfg.parts).unwrap();
         let mut r = vec![rms_radius(&sim.positions(&st).unwrap())];
         for _ in 0..frames {
@@ -214,7 +215,7 @@ fn column(material: Material, yield_stress_pa: f64, secs: f64) -> (f64, f64) {
         cfg.domain.dx(),
     );
     let h0 = bbox(&scene.x).1[2] - FLOOR;
-    let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene, "column").unwrap();
+    let mut sim = Simulation::new(CpuBackend::default(), &cfg, scene, "column").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
     for _ in 0..frames {
         sim.step_frame(&mut st, &cfg.parts).unwrap();

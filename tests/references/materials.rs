@@ -5,7 +5,7 @@ use crate::common;
 use common::scenes::{bbox, boxed, config, jelly, sim};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    BoundaryCondition, Material, MpmSim, PartParams, ParticleSet, Shape, SimConfig, SimState,
+    BoundaryCondition, Material, PartParams, ParticleSet, Shape, SimConfig, SimState, Simulation,
     Simulator, Surface,
 };
 
@@ -30,7 +30,7 @@ fn run(
     cfg: &SimConfig,
     scene: ParticleSet,
     frames: usize,
-    mut probe: impl FnMut(usize, &MpmSim<CpuBackend>, &SimState<CpuBackend>),
+    mut probe: impl FnMut(usize, &Simulation<CpuBackend>, &SimState<CpuBackend>),
 ) {
     let mut s = sim(cfg, scene);
     let mut st = s.init_state(&cfg.parts).unwrap();
@@ -330,7 +330,7 @@ fn snow_compacts_under_compression() {
     let scene = boxed(&cfg, [0.4, 0.4, 3.0 * dx], [0.6, 0.6, 3.0 * dx + 0.15]);
     let mut mean_jp = 1.0;
     run(&cfg, scene, 10, |_, _, st| {
-        let p = &st.particles.plastic;
+        let p = &st.state.plastic;
         mean_jp = p.iter().map(|s| s[1] as f64).sum::<f64>() / p.len() as f64;
     });
     eprintln!("snow: mean J_p after compression {mean_jp:.3}");

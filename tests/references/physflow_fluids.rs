@@ -13,7 +13,7 @@ use crate::common;
 use common::{fixture, read_npz};
 use r4d_backend_cpu::CpuBackend;
 use r4d_datasets::{load, LoadOptions};
-use r4d_mpm::{Material, MpmSim, Simulator};
+use r4d_mpm::{Material, Simulation, Simulator};
 
 struct Compared {
     /// Largest particle distance over all frames (world units) and its frame.
@@ -72,7 +72,7 @@ fn compare(scene: &str, material: Material) -> Compared {
         exp["frame_substeps"].data[1] as u32, spf,
         "{scene}: substeps per frame"
     );
-    let mut sim = MpmSim::new(
+    let mut sim = Simulation::new(
         CpuBackend::<f32>::default(),
         cfg,
         ds.particles.clone(),

@@ -8,7 +8,7 @@ use crate::common;
 
 use common::{fixture, read_npz, Array};
 use r4d_backend_cpu::CpuBackend;
-use r4d_mpm::{physgaussian, MpmKernels, MpmSim, ParticleSet, Simulator};
+use r4d_mpm::{physgaussian, MpmKernels, ParticleSet, Simulation, Simulator};
 
 struct Run {
     dx: f64,
@@ -32,7 +32,7 @@ fn run<B: MpmKernels>(backend: B, scenario: &str) -> Run {
     };
     imp.apply_to_scene(&mut scene, true);
     let cfg = imp.config;
-    let mut sim = MpmSim::new(backend, &cfg, scene, scenario).unwrap();
+    let mut sim = Simulation::new(backend, &cfg, scene, scenario).unwrap();
     let mut state = sim.init_state(&cfg.parts).unwrap();
     let mut ours = vec![sim.positions(&state).unwrap()];
     for _ in 0..cfg.time.frames {

@@ -6,8 +6,8 @@ use crate::common;
 use common::scenes::{boxed, config, jelly};
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_mpm::{
-    reference::ReferenceBackend, BoundaryCondition, ForceForm, Material, MpmKernels, MpmSim,
-    PartParams, ParticleSet, SimConfig, Simulator, Surface,
+    reference::ReferenceBackend, BoundaryCondition, ForceForm, Material, MpmKernels, PartParams,
+    ParticleSet, SimConfig, Simulation, Simulator, Surface,
 };
 
 fn momentum(m: &[f32], v: &[[f32; 3]]) -> [f64; 3] {
@@ -31,7 +31,7 @@ fn mass_and_momentum_are_conserved_in_free_space() {
         cfg.solver.gravity = [0.0; 3];
         cfg.solver.force = force;
         let scene = boxed(&cfg, [0.4, 0.4, 0.4], [0.6, 0.6, 0.6]);
-        let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene.clone(), "test").unwrap();
+        let mut sim = Simulation::new(CpuBackend::default(), &cfg, scene.clone(), "test").unwrap();
         let mut st = sim.init_state(&cfg.parts).unwrap();
         // Translation plus a spin about z through the centre, plus a squeeze along x.
         let v: Vec<[f32; 3]> = scene
@@ -42,17 +42,17 @@ fn mass_and_momentum_are_conserved_in_free_space() {
                 [0.3 - 2.0 * dy - 1.0 * dx, -0.2 + 2.0 * dx, 0.1]
             })
             .collect();
-        sim.backend().write(&mut st.particles.v, &v).unwrap();
-        let m = st.particles.mass.clone();
+        sim.backend().write(&mut st.state.v, &v).unwrap();
+        let m = sim.masses().unwrap();
         let p0 = momentum(&m, &v);
         let m_total: f64 = m.iter().map(|&x| x as f64).sum();
         sim.step_frame(&mut st, &cfg.parts).unwrap();
-        let grid_mass: f64 = sim.grid().nodes.iter().map(|n| n[3] as f64).sum();
+        let grid_mass: f64 = sim.with_grid(|_, g| g.nodes.iter().map(|n| n[3] as f64).sum());
         assert!(
             (grid_mass - m_total).abs() <= 1e-5 * m_total,
             "{force:?}: grid mass {grid_mass} vs particle mass {m_total}"
         );
-        let p1 = momentum(&m, &st.particles.v);
+        let p1 = momentum(&m, &st.state.v);
         let err = norm([p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]]) / norm(p0);
         eprintln!("{force:?}: relative momentum change over 100 substeps {err:.2e}");
         assert!(err < 1e-5, "{force:?}: momentum drift {err}");
@@ -65,7 +65,7 @@ fn free_fall_matches_the_analytic_parabola() {
     cfg.solver.force = ForceForm::Classic;
     let scene = boxed(&cfg, [0.45, 0.45, 0.8], [0.55, 0.55, 0.9]);
     let dx = cfg.domain.dx();
-    let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene.clone(), "test").unwrap();
+    let mut sim = Simulation::new(CpuBackend::default(), &cfg, scene.clone(), "test").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
     let mut worst: f64 = 0.0;
     for _ in 0..12 {
@@ -164,7 +164,7 @@ fn mixed_scene() -> (SimConfig, ParticleSet) {
 
 fn trajectory<B: MpmKernels>(backend: B, frames: usize) -> Vec<Vec<[f32; 3]>> {
     let (cfg, scene) = mixed_scene();
-    let mut sim = MpmSim::new(backend, &cfg, scene, "mixed").unwrap();
+    let mut sim = Simulation::new(backend, &cfg, scene, "mixed").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
     let mut out = Vec::new();
     for _ in 0..frames {
@@ -229,17 +229,17 @@ fn sliding_speed(surface: Surface, friction: f64) -> (f64, f64) {
         },
     ];
     let scene = boxed(&cfg, [0.2, 0.4, floor], [0.35, 0.6, floor + 0.1]);
-    let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene.clone(), "slide").unwrap();
+    let mut sim = Simulation::new(CpuBackend::default(), &cfg, scene.clone(), "slide").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
     sim.backend()
-        .write(&mut st.particles.v, &vec![[1.0, 0.0, 0.0]; scene.len()])
+        .write(&mut st.state.v, &vec![[1.0, 0.0, 0.0]; scene.len()])
         .unwrap();
     for _ in 0..10 {
         sim.step_frame(&mut st, &cfg.parts).unwrap();
     }
-    let v = &st.particles.v;
+    let v = &st.state.v;
     let speed = v.iter().map(|p| p[0] as f64).sum::<f64>() / v.len() as f64;
-    let x = &st.particles.x;
+    let x = &st.state.x;
     let bottom: Vec<usize> = (0..scene.len())
         .filter(|&i| (scene.x[i][2] as f64) < floor + 0.5 * dx)
         .collect();

@@ -6,7 +6,8 @@ use crate::common;
 use common::scenes::{boxed, config, jelly};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    BoundaryCondition, Error, MpmSim, OutOfDomain, PartParams, ParticleSet, SimConfig, Simulator,
+    BoundaryCondition, Error, OutOfDomain, PartParams, ParticleSet, SimConfig, Simulation,
+    Simulator,
 };
 
 fn tmp(name: &str) -> std::path::PathBuf {
@@ -19,7 +20,7 @@ fn tmp(name: &str) -> std::path::PathBuf {
 fn a_substep_beyond_the_cfl_bound_is_refused_up_front() {
     let cfg = config(32, 1e-2, 1, jelly(1e6));
     let scene = boxed(&cfg, [0.4; 3], [0.6; 3]);
-    let e = MpmSim::new(CpuBackend::default(), &cfg, scene, "t")
+    let e = Simulation::new(CpuBackend::default(), &cfg, scene, "t")
         .err()
         .unwrap();
     assert!(matches!(e, Error::CflViolation { .. }), "{e}");
@@ -43,7 +44,7 @@ fn a_viscosity_beyond_the_explicit_stability_bound_is_refused_up_front() {
     };
     let cfg = config(32, 1e-4, 1, fluid(7000.0));
     let scene = boxed(&cfg, [0.4; 3], [0.6; 3]);
-    let e = MpmSim::new(CpuBackend::default(), &cfg, scene.clone(), "t")
+    let e = Simulation::new(CpuBackend::default(), &cfg, scene.clone(), "t")
         .err()
         .unwrap();
     assert!(matches!(e, Error::ViscousStability { part: 0, .. }), "{e}");
@@ -53,7 +54,7 @@ fn a_viscosity_beyond_the_explicit_stability_bound_is_refused_up_front() {
         "{e}"
     );
     let ok = config(32, 1e-4, 1, fluid(4800.0));
-    assert!(MpmSim::new(CpuBackend::default(), &ok, scene, "t").is_ok());
+    assert!(Simulation::new(CpuBackend::default(), &ok, scene, "t").is_ok());
 }
 
 #[test]
@@ -67,7 +68,7 @@ fn an_exploding_simulation_stops_with_frame_and_substep() {
         surface: Default::default(),
     }];
     let scene = boxed(&cfg, [0.4; 3], [0.6; 3]);
-    let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene, "t").unwrap();
+    let mut sim = Simulation::new(CpuBackend::default(), &cfg, scene, "t").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
     let mut err = None;
     for _ in 0..20 {
@@ -93,7 +94,7 @@ fn leaving_the_domain_is_an_error_or_clamped_by_policy() {
     let mut cfg: SimConfig = config(32, 1e-4, 100, jelly(1e5));
     cfg.solver.gravity = [0.0, 0.0, -200.0];
     let scene = boxed(&cfg, [0.45, 0.45, 0.1], [0.55, 0.55, 0.2]);
-    let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene.clone(), "t").unwrap();
+    let mut sim = Simulation::new(CpuBackend::default(), &cfg, scene.clone(), "t").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
     let e = (0..50)
         .find_map(|_| sim.step_frame(&mut st, &cfg.parts).err())
@@ -103,7 +104,7 @@ fn leaving_the_domain_is_an_error_or_clamped_by_policy() {
     assert!(e.to_string().contains("(z = "), "{e}");
 
     cfg.solver.out_of_domain = OutOfDomain::Clamp;
-    let mut sim = MpmSim::new(CpuBackend::default(), &cfg, scene, "t").unwrap();
+    let mut sim = Simulation::new(CpuBackend::default(), &cfg, scene, "t").unwrap();
     let mut st = sim.init_state(&cfg.parts).unwrap();
     for _ in 0..10 {
         sim.step_frame(&mut st, &cfg.parts).unwrap();
@@ -118,7 +119,7 @@ fn leaving_the_domain_is_an_error_or_clamped_by_policy() {
 fn invalid_parameters_name_the_part_and_field() {
     let cfg = config(32, 1e-4, 1, jelly(1e5));
     let scene = boxed(&cfg, [0.4; 3], [0.6; 3]);
-    let sim = MpmSim::new(CpuBackend::default(), &cfg, scene, "t").unwrap();
+    let sim = Simulation::new(CpuBackend::default(), &cfg, scene, "t").unwrap();
     for (p, field) in [
         (
             PartParams {
@@ -158,20 +159,20 @@ fn bad_particles_name_the_file_and_particle() {
     let cfg = config(32, 1e-4, 1, jelly(1e5));
     let mut scene = boxed(&cfg, [0.4; 3], [0.6; 3]);
     scene.x[7] = [0.5, f32::NAN, 0.5];
-    let e = MpmSim::new(CpuBackend::default(), &cfg, scene.clone(), "in.ply")
+    let e = Simulation::new(CpuBackend::default(), &cfg, scene.clone(), "in.ply")
         .err()
         .unwrap()
         .to_string();
     assert!(e.contains("in.ply") && e.contains("particle 7"), "{e}");
     scene.x[7] = [0.5, 1.5, 0.5];
-    let e = MpmSim::new(CpuBackend::default(), &cfg, scene.clone(), "in.ply")
+    let e = Simulation::new(CpuBackend::default(), &cfg, scene.clone(), "in.ply")
         .err()
         .unwrap()
         .to_string();
     assert!(e.contains("outside the grid"), "{e}");
     scene.x[7] = [0.5; 3];
     scene.part[3] = 4;
-    let e = MpmSim::new(CpuBackend::default(), &cfg, scene, "in.ply")
+    let e = Simulation::new(CpuBackend::default(), &cfg, scene, "in.ply")
         .err()
         .unwrap()
         .to_string();

@@ -1,6 +1,6 @@
 //! The reverse stages of a substep on the CPU ([`MpmAdjointKernels`] for [`CpuBackend`]), run
 //! in the order `r4d_mpm::substep::reverse` gives by the generic stepper
-//! `r4d_mpm::adjoint::engine::KernelAdjoint`.
+//! `r4d_mpm::Simulation`.
 //!
 //! They call exactly the per-particle and per-node VJP functions the single-threaded reference
 //! backend calls, adding only scheduling: particles in parallel, grid nodes in parallel, and
@@ -10,7 +10,7 @@
 //! order, so results do not depend on the number of threads.
 
 use crate::{slabs, CpuBackend};
-use r4d_mpm::adjoint::engine::{AdjointScratch, MpmAdjointKernels, StateBufs};
+use r4d_mpm::adjoint::kernels::{AdjointScratch, MpmAdjointKernels};
 use r4d_mpm::adjoint::particle_vjp::{particle_stage_vjp_svd, ParticleForward};
 use r4d_mpm::adjoint::transfer_vjp::{g2p_vjp, grid_node_vjp, G2pBar};
 use r4d_mpm::kernels::{Grid, GridBc, Particles, StepConsts, BLOCK};
@@ -19,16 +19,17 @@ use r4d_mpm::params::PARAM_ADJOINTS;
 use r4d_mpm::reference::reduce_slots_in_order;
 use r4d_mpm::substep::{SubstepTables, Tape};
 use r4d_mpm::transfer::{in_domain, k};
+use r4d_mpm::State;
 use rayon::prelude::*;
 use std::convert::Infallible;
 
 impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
     fn g2p_vjp(
         &self,
-        before: &StateBufs<Self>,
+        before: &State<Self>,
         tape: &Tape<Self>,
         g: &Grid<Self>,
-        adj: &StateBufs<Self>,
+        adj: &State<Self>,
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
     ) -> Result<(), Infallible> {
@@ -131,17 +132,17 @@ impl<T: Real> MpmAdjointKernels for CpuBackend<T> {
     fn p2g_vjp(
         &self,
         p: &Particles<Self>,
-        before: &StateBufs<Self>,
+        before: &State<Self>,
         tape: &Tape<Self>,
         t: &SubstepTables<Self>,
         n: usize,
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
-        adj: &mut StateBufs<Self>,
+        adj: &mut State<Self>,
     ) -> Result<(), Infallible> {
         let pbcs = &t.particle_bcs[..c.n_particle_bcs as usize];
         let (grid_in_bar, fe_bar, x_bar) = (&s.grid_in_bar, &s.fe_bar, &s.x_bar);
-        let StateBufs {
+        let State {
             x,
             v,
             c: cm,

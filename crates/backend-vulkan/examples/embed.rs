@@ -11,7 +11,7 @@
 use r4d_backend_vulkan::ash::{self, vk};
 use r4d_backend_vulkan::{HostDevice, VulkanEngine, VulkanMpm};
 use r4d_gpu::GpuEngine;
-use r4d_mpm::{MpmSim, ParticleSet, SimConfig, Simulator};
+use r4d_mpm::{ParticleSet, SimConfig, Simulation, Simulator};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     // --- The application's side: its own instance, device and queue. ---
@@ -83,7 +83,7 @@ type = "bounding_box"
 "#,
         )?;
         let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
-        let mut sim = MpmSim::new(VulkanMpm::new(engine.clone()), &cfg, scene, "embed")?;
+        let mut sim = Simulation::new(VulkanMpm::new(engine.clone()), &cfg, scene, "embed")?;
         let mut state = sim.init_state(&cfg.parts)?;
         for _ in 0..cfg.time.frames {
             sim.step_frame(&mut state, &cfg.parts)?;

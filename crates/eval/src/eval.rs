@@ -10,7 +10,7 @@
 //!   means over views.
 //! * **Trajectories** (Table 3), where the dataset has ground-truth point clouds (PhysFlow's
 //!   `pcd/<k>.ply` = frame `k - 1`, in world coordinates): the fitted parameters are simulated
-//!   with the fit's own simulator (`KernelAdjoint` on the problem's backend, f64 where it has
+//!   with the fit's own simulator (`Simulation` on the problem's backend, f64 where it has
 //!   the choice); ground-truth frame `j` is at
 //!   `j / fps_fit` (the video's frame rate; the positions are linear in time between simulated
 //!   frames when the grids differ); every particle is mapped to world coordinates by the

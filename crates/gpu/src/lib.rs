@@ -7,10 +7,10 @@
 //! knows nothing about MPM.
 //!
 //! [`GpuMpm`] implements the simulator's kernel traits ([`r4d_mpm::MpmKernels`] forward,
-//! [`r4d_mpm::adjoint::engine::MpmAdjointKernels`] reverse) and [`GpuSplat`] the renderer's
+//! [`r4d_mpm::adjoint::kernels::MpmAdjointKernels`] reverse) and [`GpuSplat`] the renderer's
 //! ([`r4d_splat::SplatKernels`], forward and backward) once for every engine: a new GPU
 //! backend implements [`GpuEngine`] (six methods) and gets the whole differentiable simulator
-//! (the stage order of `r4d_mpm::substep`, the stepper of `r4d_mpm::adjoint::engine`) and
+//! (the stage order of `r4d_mpm::substep`, the driver `r4d_mpm::Simulation`) and
 //! renderer (`r4d_splat::SplatRenderer`).
 //!
 //! ```

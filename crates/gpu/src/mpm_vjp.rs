@@ -1,6 +1,6 @@
 //! The reverse stages of a substep on any GPU engine ([`MpmAdjointKernels`] for [`GpuMpm`]), run
 //! in the order `r4d_mpm::substep::reverse` gives by the one differentiable stepper
-//! `r4d_mpm::adjoint::engine::KernelAdjoint` (so the checkpointing driver, the forward
+//! `r4d_mpm::Simulation` (so the checkpointing driver, the forward
 //! re-run with its tape and the per-slot chain rule are the CPU's).
 //!
 //! One recording per stage of `r4d-shaders`' kernels (`wgsl/mpm/`), mirroring the per-particle and per-node VJP
@@ -36,10 +36,11 @@
 use crate::engine::{GpuBuf, GpuEngine};
 use crate::mpm::{Counts, GpuMpm};
 use crate::recording::Recording;
-use r4d_mpm::adjoint::engine::{AdjointScratch, MpmAdjointKernels, StateBufs};
+use r4d_mpm::adjoint::kernels::{AdjointScratch, MpmAdjointKernels};
 use r4d_mpm::kernels::{Grid, GridBc, Particles, StepConsts};
 use r4d_mpm::params::PARAM_ADJOINTS;
 use r4d_mpm::substep::{SubstepTables, Tape};
+use r4d_mpm::State;
 use r4d_shaders::mpm as k;
 
 /// Floats per particle of the reverse sweep's private record (`SBAR_STRIDE` in
@@ -57,10 +58,10 @@ pub(crate) struct ReverseRecords<E: GpuEngine> {
 impl<E: GpuEngine> MpmAdjointKernels for GpuMpm<E> {
     fn g2p_vjp(
         &self,
-        before: &StateBufs<Self>,
+        before: &State<Self>,
         tape: &Tape<Self>,
         g: &Grid<Self>,
-        adj: &StateBufs<Self>,
+        adj: &State<Self>,
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
     ) -> Result<(), E::Error> {
@@ -118,13 +119,13 @@ impl<E: GpuEngine> MpmAdjointKernels for GpuMpm<E> {
     fn p2g_vjp(
         &self,
         p: &Particles<Self>,
-        before: &StateBufs<Self>,
+        before: &State<Self>,
         tape: &Tape<Self>,
         t: &SubstepTables<Self>,
         n: usize,
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
-        adj: &mut StateBufs<Self>,
+        adj: &mut State<Self>,
     ) -> Result<(), E::Error> {
         let np = p.count;
         let mut records = self

@@ -1,13 +1,13 @@
 //! The dispatch lists of a substep, forward and reverse, as any engine receives them: a
 //! tracing engine (host byte buffers, copies and clears executed, dispatches only recorded and
-//! checked against the kernels' reflected bindings) runs the one stepper `KernelAdjoint` on
+//! checked against the kernels' reflected bindings) runs the one stepper `Simulation` on
 //! `GpuMpm`. No GPU needed.
 
 use r4d_gpu::{Command, GpuEngine, GpuMpm, Recording, Resource};
 use r4d_mpm::adjoint::checkpoint::Differentiable;
-use r4d_mpm::adjoint::engine::KernelAdjoint;
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::kernels::MemoryUsage;
+use r4d_mpm::Simulation;
 use r4d_mpm::{ParticleSet, SimConfig};
 use r4d_shaders::BindingKind;
 use std::sync::Mutex;
@@ -140,7 +140,7 @@ fn a_substep_dispatches_its_stages_in_the_order_of_substep_forward_and_reverse()
     let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
     let sim = HostSim::new(&cfg, &scene).unwrap();
     let gpu = GpuMpm::<TraceEngine>::new(TraceEngine::default());
-    let d = KernelAdjoint::new(gpu, &sim).unwrap();
+    let d = Simulation::with_host(gpu, &sim).unwrap();
     let params: Vec<PhysParams<f32>> = cfg.parts.iter().map(PhysParams::of).collect();
     let before = d.init(&params, &vec![[0.0; 3]; sim.len()]).unwrap();
     let mut s = d.clone_state(&before).unwrap();

@@ -151,6 +151,17 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// A backend returned data the generic code cannot use (a buffer of the wrong length, a
+    /// state another simulation made).
+    #[error("backend {backend}, {op}: {message}")]
+    BackendOutput {
+        /// The backend's name.
+        backend: String,
+        /// The operation.
+        op: &'static str,
+        /// What is wrong.
+        message: String,
+    },
     /// A backend failure the caller can't prevent (device lost, out of memory).
     #[error("backend: {0}")]
     Backend(#[source] Box<dyn std::error::Error + Send + Sync>),

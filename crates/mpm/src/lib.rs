@@ -12,14 +12,18 @@
 //!   matters for finite-difference checks.
 //! * Kernel trait: [`MpmKernels`] with backend-owned buffers; [`reference::ReferenceBackend`]
 //!   is the single-threaded reference every backend is tested against.
-//! * Driver, once: [`MpmSim`] implements [`Simulator`] for any backend.
+//! * State, once: [`State`] (backend buffers; also the adjoint's type), [`SimState`] (a state
+//!   with its clock), [`adjoint::host::HostState`] (a host copy).
+//! * Driver, once: [`Simulation`] on any backend: frame by frame ([`Simulator`]), substep by
+//!   substep with VJPs ([`adjoint::checkpoint::Differentiable`]), and behind a trait object
+//!   ([`DynSimulation`]) when the backend is chosen at run time.
 //! * Inputs: [`SimConfig`] (TOML/JSON), [`physgaussian`] importer, [`ParticleSet`] from PLY or
 //!   built-in shapes, [`ply`] reader/writer.
 //!
 //! ## Example
 //!
 //! ```
-//! use r4d_mpm::{reference::ReferenceBackend, MpmSim, ParticleSet, SimConfig, Simulator};
+//! use r4d_mpm::{reference::ReferenceBackend, ParticleSet, SimConfig, Simulation, Simulator};
 //! let cfg: SimConfig = toml::from_str(r#"
 //!     domain = { grid_lim = 1.0, n_grid = 16 }
 //!     time = { substep_dt = 1e-4, substeps_per_frame = 10, frames = 2 }
@@ -32,11 +36,11 @@
 //! "#).unwrap();
 //! cfg.validate("example").unwrap();
 //! let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
-//! let mut sim = MpmSim::new(ReferenceBackend::new(), &cfg, scene, "example").unwrap();
+//! let mut sim = Simulation::new(ReferenceBackend::new(), &cfg, scene, "example").unwrap();
 //! let mut state = sim.init_state(&cfg.parts).unwrap();
 //! sim.step_frame(&mut state, &cfg.parts).unwrap();
 //! let x = sim.positions(&state).unwrap();
-//! assert!(x[0][2] < sim.scene().x[0][2]); // fell under gravity
+//! assert!(x[0][2] < sim.host().x0[0][2]); // fell under gravity
 //! ```
 
 pub mod adjoint;
@@ -54,7 +58,9 @@ pub mod ply;
 pub mod reference;
 pub mod scene;
 pub mod sim;
+pub mod simulation;
 pub mod snapshot;
+pub mod state;
 pub mod strict;
 pub mod substep;
 pub mod transfer;
@@ -73,5 +79,7 @@ pub use material::{Material, PartConsts, PartParams, PARAM_LIMITS};
 /// B-spline transfer's bound scales with `dx^2`); 0.5 leaves a margin.
 pub const VISCOUS_STABILITY: f64 = 0.5;
 pub use scene::{ParticleSet, Shape};
-pub use sim::{MpmSim, SimSetup, SimState, Simulator};
+pub use sim::{SimSetup, Simulator};
+pub use simulation::{DynSimulation, Simulation};
 pub use snapshot::Snapshot;
+pub use state::{SimState, State};

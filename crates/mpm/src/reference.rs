@@ -2,7 +2,7 @@
 //! fast. Every other backend is tested against it. It calls the per-particle and per-node
 //! functions of [`crate::transfer`], which hold the math once.
 
-use crate::adjoint::engine::{AdjointScratch, MpmAdjointKernels, StateBufs};
+use crate::adjoint::kernels::{AdjointScratch, MpmAdjointKernels};
 use crate::adjoint::particle_vjp::{particle_stage_vjp, ParticleForward};
 use crate::adjoint::transfer_vjp::{g2p_vjp, grid_node_vjp};
 use crate::kernels::{
@@ -11,6 +11,7 @@ use crate::kernels::{
 use crate::material::PartConsts;
 use crate::math::Real;
 use crate::params::{MAT_CONSTS, PARAM_ADJOINTS};
+use crate::state::State;
 use crate::substep::{SubstepTables, Tape};
 use crate::transfer::{
     damped_affine, g2p_finish, gather, grid_node_update, in_domain, k, out_of_domain_coordinate,
@@ -157,10 +158,10 @@ impl<T: Real> MpmKernels for ReferenceBackend<T> {
 impl<T: Real> MpmAdjointKernels for ReferenceBackend<T> {
     fn g2p_vjp(
         &self,
-        before: &StateBufs<Self>,
+        before: &State<Self>,
         tape: &Tape<Self>,
         g: &Grid<Self>,
-        adj: &StateBufs<Self>,
+        adj: &State<Self>,
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
     ) -> Result<(), Infallible> {
@@ -216,13 +217,13 @@ impl<T: Real> MpmAdjointKernels for ReferenceBackend<T> {
     fn p2g_vjp(
         &self,
         p: &Particles<Self>,
-        before: &StateBufs<Self>,
+        before: &State<Self>,
         tape: &Tape<Self>,
         t: &SubstepTables<Self>,
         n: usize,
         c: &StepConsts,
         s: &mut AdjointScratch<Self>,
-        adj: &mut StateBufs<Self>,
+        adj: &mut State<Self>,
     ) -> Result<(), Infallible> {
         let pbcs = &t.particle_bcs[..c.n_particle_bcs as usize];
         for i in 0..p.count {

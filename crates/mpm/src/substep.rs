@@ -1,5 +1,5 @@
 //! The order of one MPM substep, written once for every backend and every caller
-//! (`r4d simulate` through [`crate::MpmSim`], the fits' forward and reverse passes).
+//! (every [`crate::Simulation`]: `r4d simulate`, the fits' forward and reverse passes).
 //!
 //! Forward ([`forward`]):
 //! 1. `particle_bcs`: impulses and velocity overrides (skipped when there are none);
@@ -15,10 +15,11 @@
 //! does not hold: the velocities after the particle conditions, F_elastic and the scattered
 //! grid (the updated grid stays in [`Grid::nodes`]).
 
-use crate::adjoint::engine::{AdjointScratch, MpmAdjointKernels, StateBufs};
+use crate::adjoint::kernels::{AdjointScratch, MpmAdjointKernels};
 use crate::kernels::{Grid, GridBc, MpmKernels, ParticleBc, Particles, StepConsts};
 use crate::material::PartConsts;
 use crate::params::MAT_CONSTS;
+use crate::state::State;
 
 /// The tables a substep reads besides the particles and the grid.
 pub struct SubstepTables<'a, B: MpmKernels> {
@@ -101,10 +102,10 @@ pub fn reverse<B: MpmAdjointKernels>(
     g: &Grid<B>,
     t: &SubstepTables<B>,
     c: &StepConsts,
-    before: &StateBufs<B>,
+    before: &State<B>,
     tape: &Tape<B>,
     s: &mut AdjointScratch<B>,
-    adj: &mut StateBufs<B>,
+    adj: &mut State<B>,
 ) -> Result<(), B::Error> {
     b.g2p_vjp(before, tape, g, adj, c, s)?;
     b.grid_update_vjp(tape, g, t.grid_bcs, c, s)?;

@@ -1,15 +1,18 @@
-//! Where a fit runs: the [`Compute`] trait a backend implements once (its MPM kernels and its
-//! renderer), so that every job of this crate — the video objective, the trajectory fit, a
+//! Where a fit runs: the [`Compute`] trait a backend implements once (its simulation and its
+//! renderer), so that everything of this crate — the video objective, the trajectory fit, a
 //! forward simulation for evaluation — runs on it without naming it.
 //!
-//! A job is generic over the kernels ([`MpmJob::run_on`]); a backend runs it on its own
-//! kernels in [`Compute::run_mpm`]:
+//! A backend hands out its [`Simulation`] behind a trait object ([`DynSimulation`]); the
+//! drivers of this crate run it:
 //!
 //! ```
+//! use r4d_mpm::adjoint::host::HostSim;
 //! use r4d_mpm::reference::ReferenceBackend;
-//! use r4d_optim::compute::{Compute, JobOut, MpmJob};
-//! use r4d_optim::{FitError, Precision};
+//! use r4d_mpm::DynSimulation;
+//! use r4d_optim::compute::{simulation_on, Compute, Precision};
+//! use r4d_optim::FitError;
 //! use r4d_splat::{reference::ReferenceSplat, Renderer, SplatRenderer};
+//! use std::sync::Arc;
 //!
 //! /// The single-threaded reference kernels (the gradient oracle).
 //! #[derive(Debug)]
@@ -19,10 +22,14 @@
 //!     fn name(&self) -> &str {
 //!         "reference"
 //!     }
-//!     fn run_mpm(&self, precision: Precision, job: MpmJob<'_>) -> Result<JobOut, FitError> {
+//!     fn simulation(
+//!         &self,
+//!         precision: Precision,
+//!         sim: Arc<HostSim>,
+//!     ) -> Result<Box<dyn DynSimulation>, FitError> {
 //!         match precision {
-//!             Precision::F32 => job.run_on(ReferenceBackend::<f32>::in_scalar()),
-//!             Precision::F64 => job.run_on(ReferenceBackend::<f64>::in_scalar()),
+//!             Precision::F32 => simulation_on(ReferenceBackend::<f32>::in_scalar(), sim),
+//!             Precision::F64 => simulation_on(ReferenceBackend::<f64>::in_scalar(), sim),
 //!         }
 //!     }
 //!     fn with_renderer(
@@ -38,15 +45,13 @@
 
 use crate::record::{FitState, IterRecord};
 use crate::trajectory::{self, FitOptions, Fitted};
-use crate::video::problem::{Mode, Objective, RunOut};
 use crate::FitError;
-use r4d_mpm::adjoint::checkpoint::Differentiable;
-use r4d_mpm::adjoint::engine::{KernelAdjoint, MpmAdjointKernels};
-use r4d_mpm::adjoint::host::{HostSim, PhysParams};
-use r4d_mpm::math::Real;
-use r4d_mpm::{PartParams, ParticleSet, SimConfig};
+use r4d_mpm::adjoint::host::HostSim;
+use r4d_mpm::adjoint::kernels::MpmAdjointKernels;
+use r4d_mpm::{DynSimulation, PartParams, ParticleSet, SimConfig, Simulation};
 use r4d_splat::{Camera, Deformation, Gaussians, Image, RenderSettings, Renderer};
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// Floating-point type of the simulation and its reverse sweep, where the backend has a
 /// choice (the CPU backends; a GPU simulates in f32).
@@ -62,14 +67,18 @@ pub enum Precision {
 
 /// A compute backend for the fits: its MPM kernels and its renderer.
 ///
-/// Implement [`Compute::run_mpm`] by handing the job your kernels
-/// ([`MpmJob::run_on`]); [`Compute::with_renderer`] by calling `f` with your renderer.
+/// Implement [`Compute::simulation`] by building a [`Simulation`] on your kernels,
+/// [`Compute::with_renderer`] by calling `f` with your renderer.
 pub trait Compute: Send + Sync + std::fmt::Debug {
     /// A short name for messages and reports (`"cpu"`, `"wgpu"`, ...).
     fn name(&self) -> &str;
-    /// Runs `job` on this backend's MPM kernels, in `precision` where the backend has a
-    /// choice.
-    fn run_mpm(&self, precision: Precision, job: MpmJob<'_>) -> Result<JobOut, FitError>;
+    /// The simulation of `sim` on this backend's kernels, in `precision` where the backend
+    /// has a choice.
+    fn simulation(
+        &self,
+        precision: Precision,
+        sim: Arc<HostSim>,
+    ) -> Result<Box<dyn DynSimulation>, FitError>;
     /// Calls `f` with this backend's renderer.
     fn with_renderer(
         &self,
@@ -122,11 +131,15 @@ impl Compute for ReferenceCompute {
         "reference"
     }
 
-    fn run_mpm(&self, precision: Precision, job: MpmJob<'_>) -> Result<JobOut, FitError> {
+    fn simulation(
+        &self,
+        precision: Precision,
+        sim: Arc<HostSim>,
+    ) -> Result<Box<dyn DynSimulation>, FitError> {
         use r4d_mpm::reference::ReferenceBackend;
         match precision {
-            Precision::F32 => job.run_on(ReferenceBackend::<f32>::in_scalar()),
-            Precision::F64 => job.run_on(ReferenceBackend::<f64>::in_scalar()),
+            Precision::F32 => simulation_on(ReferenceBackend::<f32>::in_scalar(), sim),
+            Precision::F64 => simulation_on(ReferenceBackend::<f64>::in_scalar(), sim),
         }
     }
 
@@ -140,143 +153,22 @@ impl Compute for ReferenceCompute {
     }
 }
 
-/// Work for a backend's MPM kernels, generic over them ([`MpmJob::run_on`]).
-pub struct MpmJob<'a>(Job<'a>);
-
-/// What a job returned (read by the job's owner).
-pub struct JobOut(Out);
-
-enum Job<'a> {
-    /// The video objective's forward (and reverse) pass.
-    Video {
-        obj: &'a Objective<'a>,
-        slots: &'a [PartParams],
-        mode: Mode,
-    },
-    /// A forward simulation reporting every frame's positions (simulation space, f64).
-    Forward(ForwardJob<'a>),
-    /// The trajectory fit.
-    Trajectory(Box<TrajectoryJob<'a>>),
-}
-
-enum Out {
-    Video(RunOut),
-    Forward,
-    Trajectory(Fitted),
+/// The simulation of `sim` on kernels `b`, boxed for [`Compute::simulation`].
+pub fn simulation_on<B: MpmAdjointKernels>(
+    b: B,
+    sim: Arc<HostSim>,
+) -> Result<Box<dyn DynSimulation>, FitError> {
+    let name = b.name();
+    Ok(Box::new(
+        Simulation::with_host(b, sim).map_err(|e| FitError::backend(name, e))?,
+    ))
 }
 
 /// Receives frame `j`'s positions of a forward simulation ([`simulate_frames`]).
 pub type FrameSink<'a> = dyn FnMut(usize, &[[f64; 3]]) -> Result<(), FitError> + 'a;
 
-/// A forward simulation of `frames` frames: `on_frame(j, x)` for `j = 0..=frames`.
-pub(crate) struct ForwardJob<'a> {
-    pub sim: &'a HostSim,
-    pub slots: &'a [PartParams],
-    pub frames: usize,
-    pub on_frame: &'a mut FrameSink<'a>,
-}
-
-/// The arguments of [`trajectory::fit_trajectory_resumable`].
-pub(crate) struct TrajectoryJob<'a> {
-    pub config: &'a SimConfig,
-    pub scene: &'a ParticleSet,
-    pub targets: &'a [Vec<[f32; 3]>],
-    pub opts: &'a FitOptions,
-    pub resume: Option<FitState>,
-    pub on_iter: &'a mut dyn FnMut(&IterRecord),
-    pub on_checkpoint: &'a mut dyn FnMut(&FitState),
-}
-
-impl<'a> MpmJob<'a> {
-    pub(crate) fn video(obj: &'a Objective<'a>, slots: &'a [PartParams], mode: Mode) -> Self {
-        MpmJob(Job::Video { obj, slots, mode })
-    }
-
-    pub(crate) fn forward(job: ForwardJob<'a>) -> Self {
-        MpmJob(Job::Forward(job))
-    }
-
-    pub(crate) fn trajectory(job: TrajectoryJob<'a>) -> Self {
-        MpmJob(Job::Trajectory(Box::new(job)))
-    }
-
-    /// Runs the job on kernels `b`.
-    pub fn run_on<B: MpmAdjointKernels>(self, b: B) -> Result<JobOut, FitError> {
-        match self.0 {
-            Job::Video { obj, slots, mode } => obj.run_on(b, slots, mode).map(Out::Video),
-            Job::Forward(j) => forward(b, j).map(|_| Out::Forward),
-            Job::Trajectory(j) => trajectory::fit_trajectory_resumable(
-                b,
-                j.config,
-                j.scene,
-                j.targets,
-                j.opts,
-                j.resume,
-                j.on_iter,
-                j.on_checkpoint,
-            )
-            .map(Out::Trajectory),
-        }
-        .map(JobOut)
-    }
-}
-
-impl JobOut {
-    pub(crate) fn into_video(self) -> Result<RunOut, FitError> {
-        match self.0 {
-            Out::Video(r) => Ok(r),
-            _ => Err(wrong_out()),
-        }
-    }
-
-    pub(crate) fn into_forward(self) -> Result<(), FitError> {
-        match self.0 {
-            Out::Forward => Ok(()),
-            _ => Err(wrong_out()),
-        }
-    }
-
-    pub(crate) fn into_trajectory(self) -> Result<Fitted, FitError> {
-        match self.0 {
-            Out::Trajectory(f) => Ok(f),
-            _ => Err(wrong_out()),
-        }
-    }
-}
-
-/// A backend that returned another job's output.
-fn wrong_out() -> FitError {
-    FitError::Input("the backend returned the output of another job (a Compute that does not run the job it is given)".into())
-}
-
-fn forward<B: MpmAdjointKernels>(b: B, j: ForwardJob<'_>) -> Result<(), FitError> {
-    let name = b.name();
-    let err = |e: B::Error| FitError::backend(name, e);
-    let phys: Vec<PhysParams<B::Scalar>> = j.slots.iter().map(PhysParams::of).collect();
-    let stepper = KernelAdjoint::new(b, j.sim).map_err(err)?;
-    let zero = B::Scalar::c(0.0);
-    let mut s = stepper
-        .init(&phys, &vec![[zero; 3]; j.sim.len()])
-        .map_err(err)?;
-    let spf = j.sim.setup.substeps_per_frame as u64;
-    let read = |s: &r4d_mpm::adjoint::engine::StateBufs<B>| -> Result<Vec<[f64; 3]>, FitError> {
-        let x = stepper.backend().download(&s.x).map_err(err)?;
-        Ok(x.iter().map(|p| p.map(|c| c.f64())).collect())
-    };
-    (j.on_frame)(0, &read(&s)?)?;
-    let mut k = 0u64;
-    for f in 1..=j.frames {
-        for _ in 0..spf {
-            stepper.step(&mut s, &phys, k).map_err(err)?;
-            k += 1;
-        }
-        (j.on_frame)(f, &read(&s)?)?;
-    }
-    Ok(())
-}
-
-/// [`trajectory::fit_trajectory_resumable`] on `compute`'s kernels (in f64 where the backend
-/// has a choice).
+/// [`trajectory::fit_trajectory_resumable`]: the trajectory fit on `compute`'s kernels (in f64
+/// where the backend has a choice).
 #[allow(clippy::too_many_arguments)]
 pub fn fit_trajectory_on(
     compute: &dyn Compute,
@@ -288,7 +180,8 @@ pub fn fit_trajectory_on(
     on_iter: &mut dyn FnMut(&IterRecord),
     on_checkpoint: &mut dyn FnMut(&FitState),
 ) -> Result<Fitted, FitError> {
-    let job = TrajectoryJob {
+    trajectory::fit_trajectory_resumable(
+        compute,
         config,
         scene,
         targets,
@@ -296,10 +189,7 @@ pub fn fit_trajectory_on(
         resume,
         on_iter,
         on_checkpoint,
-    };
-    compute
-        .run_mpm(Precision::F64, MpmJob::trajectory(job))?
-        .into_trajectory()
+    )
 }
 
 /// Simulates `frames` frames of `sim` with the parameters `slots` (one per parameter slot) on
@@ -320,13 +210,19 @@ pub fn simulate_frames(
             sim.slots()
         )));
     }
-    let job = ForwardJob {
-        sim,
-        slots,
-        frames,
-        on_frame,
-    };
-    compute
-        .run_mpm(precision, MpmJob::forward(job))?
-        .into_forward()
+    let d = compute.simulation(precision, Arc::new(sim.clone()))?;
+    let err = |e| FitError::sim(d.backend_name(), e);
+    let params = d.params(slots);
+    let mut s = d.init(&params, &vec![[0.0; 3]; sim.len()]).map_err(err)?;
+    let spf = sim.setup.substeps_per_frame as u64;
+    on_frame(0, &d.positions_f64(&s).map_err(err)?)?;
+    let mut k = 0u64;
+    for f in 1..=frames {
+        for _ in 0..spf {
+            d.step(&mut s, &params, k).map_err(err)?;
+            k += 1;
+        }
+        on_frame(f, &d.positions_f64(&s).map_err(err)?)?;
+    }
+    Ok(())
 }

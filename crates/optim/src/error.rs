@@ -58,6 +58,20 @@ impl FitError {
         }
     }
 
+    /// An error of a [`r4d_mpm::DynSimulation`] on backend `name`: the backend's own failures
+    /// (a device lost, data of the wrong size) as [`FitError::Backend`], the simulator's
+    /// refusals as [`FitError::Mpm`].
+    pub fn sim(name: &str, e: r4d_mpm::Error) -> FitError {
+        match e {
+            r4d_mpm::Error::Backend(source) => FitError::Backend {
+                backend: name.to_string(),
+                source,
+            },
+            e @ r4d_mpm::Error::BackendOutput { .. } => FitError::backend(name, e),
+            e => FitError::Mpm(e),
+        }
+    }
+
     /// A backend's error given as a message, named.
     pub fn backend_msg(name: &str, message: impl Into<String>) -> FitError {
         FitError::Backend {

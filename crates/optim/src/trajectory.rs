@@ -4,24 +4,25 @@
 //!
 //! Each iteration runs the simulation forward with checkpoints, evaluates a
 //! [`TrajectoryLoss`] at every frame against the targets, sweeps backward through every
-//! substep (`r4d_mpm::adjoint`, the one stepper `KernelAdjoint` on the given kernels) and
+//! substep (`r4d_mpm::adjoint`, the one driver `r4d_mpm::Simulation` on the backend) and
 //! updates the free parameters with AdamW in the log domain — the iteration the video fit
 //! runs too (`descent::iterate`: one parameter mapping, [`crate::space::ParamSpace`], one
-//! step, one best-so-far rule, one error type). The caller picks the kernels:
-//! the CPU backend in f64 (`CpuBackend<f64>`, the default of `r4d fit-trajectory`) or a GPU
-//! in f32 (`WgpuMpm`); the states stay on the backend, only the positions of each frame come
-//! back for the loss and its gradient goes back to the position adjoint on the backend.
+//! step, one best-so-far rule, one error type). The caller picks the backend
+//! ([`crate::compute::Compute`]; its simulation runs in f64 where it has a choice): the states
+//! stay on the backend, only the positions of each frame come back for the loss and its
+//! gradient goes back to the position adjoint on the backend.
 
+use crate::compute::{Compute, Precision};
 use crate::descent::{self, keep_best, Rate, Stepper};
 use crate::space::{part_summary, ParamSpace};
 use crate::{AdamW, LogDomainOptimizer, LrSchedule, ParamKind};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing};
-use r4d_mpm::adjoint::engine::{KernelAdjoint, MpmAdjointKernels, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::adjoint::trajectory_loss::TrajectoryLoss;
-use r4d_mpm::math::Real;
-use r4d_mpm::{PartParams, ParticleSet, SimConfig};
+use r4d_mpm::simulation::AnyState;
+use r4d_mpm::{DynSimulation, PartParams, ParticleSet, SimConfig};
 use std::cell::RefCell;
+use std::sync::Arc;
 use std::time::Instant;
 
 use crate::record::{mix_json, Fingerprint, Terms};
@@ -83,15 +84,15 @@ impl Default for FitOptions {
 /// `targets` (positions at frames 1, 2, ...). The starting point is the config's parameters.
 /// `on_iter` sees every iteration's record. Returns the parameters with the lowest loss
 /// evaluated.
-pub fn fit_trajectory<B: MpmAdjointKernels>(
-    backend: B,
+pub fn fit_trajectory(
+    compute: &dyn Compute,
     config: &SimConfig,
     scene: &ParticleSet,
     targets: &[Vec<[f32; 3]>],
     opts: &FitOptions,
     on_iter: impl FnMut(&IterRecord),
 ) -> Result<Vec<PartParams>, FitError> {
-    fit_trajectory_resumable(backend, config, scene, targets, opts, None, on_iter, |_| {})
+    fit_trajectory_resumable(compute, config, scene, targets, opts, None, on_iter, |_| {})
         .map(|f| f.parts)
 }
 
@@ -128,8 +129,8 @@ pub fn fingerprint(
 /// [`FitState::check`] refuses one of other inputs or options) and hands a [`FitState`] to
 /// `on_checkpoint` after every iteration (to be written to disk, [`FitState::to_json`]).
 #[allow(clippy::too_many_arguments)]
-pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
-    backend: B,
+pub fn fit_trajectory_resumable(
+    compute: &dyn Compute,
     config: &SimConfig,
     scene: &ParticleSet,
     targets: &[Vec<[f32; 3]>],
@@ -162,9 +163,8 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
     } else {
         HostSim::new(config, scene)?
     };
-    let name = backend.name();
-    let backend_error = |e: B::Error| FitError::backend(name, e);
-    let stepper = KernelAdjoint::new(backend, &sim).map_err(backend_error)?;
+    let stepper = compute.simulation(Precision::F64, Arc::new(sim.clone()))?;
+    let backend_error = |e| FitError::sim(stepper.backend_name(), e);
     // Parameter values per slot: per part, or per particle.
     let base: Vec<PartParams> = if per_particle {
         scene
@@ -235,7 +235,7 @@ pub fn fit_trajectory_resumable<B: MpmAdjointKernels>(
                 spf,
                 substeps,
             };
-            let (loss, grad) = sweep.run(&stepper).map_err(backend_error)?;
+            let (loss, grad) = sweep.run(&*stepper).map_err(backend_error)?;
             Ok(((), loss, grad))
         })?;
         keep_best(&mut state.best, it.loss, &it.theta);
@@ -287,36 +287,27 @@ impl Sweep<'_> {
     /// One evaluation on any backend. The loss of each frame is evaluated in f64 on the
     /// downloaded positions during the forward pass; its gradient is kept and added to the
     /// position adjoint on the backend when the reverse sweep reaches the frame.
-    fn run<B: MpmAdjointKernels>(
-        &self,
-        d: &KernelAdjoint<B>,
-    ) -> Result<(f64, Vec<PhysParams<f64>>), B::Error> {
+    fn run(&self, d: &dyn DynSimulation) -> Result<(f64, Vec<PhysParams<f64>>), r4d_mpm::Error> {
         let (sim, targets, loss_kind) = (self.sim, self.targets, self.loss);
-        let b = d.backend();
-        let phys: Vec<PhysParams<B::Scalar>> = self.parts.iter().map(PhysParams::of).collect();
-        let init = d.init(&phys, &vec![[B::Scalar::c(0.0); 3]; sim.len()])?;
+        let phys = d.params(self.parts);
+        let init = d.init(&phys, &vec![[0.0; 3]; sim.len()])?;
         let scale = 1.0 / self.frames as f64;
-        let error: RefCell<Option<B::Error>> = RefCell::new(None);
+        let error: RefCell<Option<r4d_mpm::Error>> = RefCell::new(None);
         // Each frame's position gradient, from the forward pass to its reverse hook.
-        type PosGrad<S> = Option<Vec<[S; 3]>>;
-        let frame_grads: RefCell<Vec<PosGrad<B::Scalar>>> =
+        let frame_grads: RefCell<Vec<Option<Vec<[f64; 3]>>>> =
             RefCell::new(vec![None; self.frames + 1]);
         // The loss at frame `f` of the state `s` and its (scaled) gradient.
-        let eval = |f: usize, s: &StateBufs<B>| -> Option<(f64, Vec<[B::Scalar; 3]>)> {
-            let x = match b.download(&s.x) {
+        let eval = |f: usize, s: &AnyState| -> Option<(f64, Vec<[f64; 3]>)> {
+            let x = match d.positions_f64(s) {
                 Ok(v) => v,
                 Err(e) => {
                     error.borrow_mut().get_or_insert(e);
                     return None;
                 }
             };
-            let x: Vec<[f64; 3]> = x.iter().map(|p| p.map(|v| v.f64())).collect();
             let mut g = vec![[0.0f64; 3]; x.len()];
             let l = loss_kind.value_and_grad(&x, &targets[f - 1], &mut g);
-            let g = g
-                .iter()
-                .map(|gp| gp.map(|v| B::Scalar::c(scale * v)))
-                .collect();
+            let g = g.iter().map(|gp| gp.map(|v| scale * v)).collect();
             Some((scale * l, g))
         };
         let (loss, adj0, grad) = value_and_grad(
@@ -339,7 +330,7 @@ impl Sweep<'_> {
                 let Some(g) = cached.or_else(|| eval(f, s).map(|(_, g)| g)) else {
                     return;
                 };
-                if let Err(e) = adj.add_to_x(b, &g) {
+                if let Err(e) = d.add_to_x(adj, &g) {
                     error.borrow_mut().get_or_insert(e);
                 }
             },
@@ -347,8 +338,6 @@ impl Sweep<'_> {
         if let Some(e) = error.into_inner() {
             return Err(e);
         }
-        let mut grad = d.grad_to_host(&grad, &phys)?;
-        d.init_vjp(&adj0, &mut grad)?;
-        Ok((loss, grad.iter().map(PhysParams::to_f64).collect()))
+        Ok((loss, d.gradient(&grad, &adj0, &phys)?))
     }
 }

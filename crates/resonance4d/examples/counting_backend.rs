@@ -1,9 +1,8 @@
-//! A backend of your own in one file: a `Compute` (what every fit runs on: MPM jobs and a
+//! A backend of your own in one file: a `Compute` (what every fit runs on: a simulation and a
 //! renderer) that delegates to the CPU backend and counts the calls, running a video fit that
 //! gives the CPU's result bit for bit:
 //! `cargo run --release -p resonance4d --example counting_backend`
 
-use resonance4d::optim::compute::{JobOut, MpmJob};
 use resonance4d::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
 use std::sync::Arc;
@@ -18,9 +17,13 @@ impl Compute for Counting {
     fn name(&self) -> &str {
         "counting"
     }
-    fn run_mpm(&self, precision: Precision, job: MpmJob<'_>) -> Result<JobOut, FitError> {
+    fn simulation(
+        &self,
+        p: Precision,
+        sim: Arc<HostSim>,
+    ) -> Result<Box<dyn DynSimulation>, FitError> {
         self.simulations.fetch_add(1, Relaxed);
-        resonance4d::compute::cpu().run_mpm(precision, job)
+        resonance4d::compute::cpu().simulation(p, sim)
     }
     fn with_renderer(
         &self,

@@ -52,7 +52,7 @@ pub fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..Default::default()
     };
 
-    let mut sim = MpmSim::new(CpuBackend::<f32>::default(), &config, particles, "jelly")?;
+    let mut sim = Simulation::new(CpuBackend::<f32>::default(), &config, particles, "jelly")?;
     let mut state = sim.init_state(&config.parts)?;
     let mut renderer = SplatRenderer::new(CpuSplat);
     let mut frames = Vec::new();

@@ -40,7 +40,7 @@
 //!     std::path::Path::new("jelly.toml"),
 //! )?;
 //! let particles = ParticleSet::from_shapes(&config.shapes, config.domain.dx());
-//! let mut sim = MpmSim::new(CpuBackend::<f32>::default(), &config, particles, "jelly")?;
+//! let mut sim = Simulation::new(CpuBackend::<f32>::default(), &config, particles, "jelly")?;
 //! let mut state = sim.init_state(&config.parts)?;
 //! for _ in 0..config.time.frames {
 //!     sim.step_frame(&mut state, &config.parts)?;

@@ -13,9 +13,10 @@
 pub use crate::builder::ProblemBuilder;
 pub use crate::compute::{Compute, Precision};
 pub use r4d_loss::{Dms, DmsConfig, L1Loss, Loss, SsimLoss, Video};
+pub use r4d_mpm::adjoint::host::HostSim;
 pub use r4d_mpm::{
-    BoundaryCondition, Material, MpmKernels, MpmSim, PartParams, ParticleSet, Shape, SimConfig,
-    SimState, Simulator, Surface,
+    BoundaryCondition, DynSimulation, Material, MpmKernels, PartParams, ParticleSet, Shape,
+    SimConfig, SimState, Simulation, Simulator, State, Surface,
 };
 pub use r4d_optim::video::fit::NoHooks;
 pub use r4d_optim::video::{

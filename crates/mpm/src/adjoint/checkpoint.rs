@@ -159,7 +159,7 @@ pub fn memory_plan(
 /// where `frame_adjoint(frame, state, adj)` adds the loss gradient at each frame boundary.
 /// Returns the total loss, the adjoint of the initial state and the parameter gradient.
 #[allow(clippy::too_many_arguments)]
-pub fn value_and_grad<D: Differentiable>(
+pub fn value_and_grad<D: Differentiable + ?Sized>(
     d: &D,
     init: &D::State,
     params: &D::Params,
@@ -253,7 +253,7 @@ pub fn value_and_grad<D: Differentiable>(
 /// keeping every state (the end state is `last`, not re-run), then the VJPs in reverse, with
 /// `frame_adjoint` at each frame boundary.
 #[allow(clippy::too_many_arguments)]
-fn reverse_piece<D: Differentiable>(
+fn reverse_piece<D: Differentiable + ?Sized>(
     d: &D,
     first: &D::State,
     last: &D::State,

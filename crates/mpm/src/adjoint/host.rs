@@ -4,7 +4,7 @@
 //! friction angle and density, plus the initial positions and velocities).
 //!
 //! The substep and its reverse sweep are not here: they run on any backend through
-//! [`super::engine::KernelAdjoint`] (the f64 reference backend is the gradient oracle). The
+//! [`crate::Simulation`] (the f64 reference backend is the gradient oracle). The
 //! out-of-domain clamp is not differentiated (a particle outside the grid is skipped by the
 //! transfers, never indexed out of bounds).
 
@@ -66,7 +66,7 @@ pub struct HostSim {
 
 impl HostSim {
     /// Builds the host simulator; the config must be valid. (A backend whose reverse stages do
-    /// not cover a part's model refuses it in [`super::engine::KernelAdjoint::new`].)
+    /// not cover a part's model refuses it in [`crate::Simulation::with_host`].)
     pub fn new(config: &SimConfig, scene: &ParticleSet) -> Result<Self> {
         let setup = SimSetup::new(config);
         scene.validate("host simulation", setup.dx, setup.n, config.parts.len())?;
@@ -162,4 +162,12 @@ pub fn add_grad<T: Real>(acc: &mut PhysParams<T>, g: &PhysParams<T>) {
     acc.plastic_viscosity += g.plastic_viscosity;
     acc.friction_angle_deg += g.friction_angle_deg;
     acc.density += g.density;
+}
+
+/// A shared copy of `sim` (what [`crate::Simulation::with_host`] takes: a simulation keeps
+/// its problem).
+impl From<&HostSim> for std::sync::Arc<HostSim> {
+    fn from(sim: &HostSim) -> Self {
+        std::sync::Arc::new(sim.clone())
+    }
 }

@@ -12,9 +12,9 @@
 //!   documented there.
 //! * [`particle_vjp`]: the reverse of one particle's P2G stage, the per-particle function the
 //!   host backends' `p2g_vjp` kernels call.
-//! * [`engine`]: the reverse stages every differentiating backend implements
-//!   ([`engine::MpmAdjointKernels`]) and the one differentiable stepper over them
-//!   ([`engine::KernelAdjoint`]; the stage order is [`crate::substep`]'s). On the f64
+//! * [`kernels`]: the reverse stages every differentiating backend implements
+//!   ([`kernels::MpmAdjointKernels`]), run by the one driver [`crate::Simulation`] (the
+//!   stage order is [`crate::substep`]'s). On the f64
 //!   reference backend it is the gradient oracle: whole trajectories (3 frames x 20
 //!   substeps, boundary conditions and plasticity active) match f64 finite differences to
 //!   better than 1e-4 for every material's E, nu, yield stress, plastic viscosity, friction
@@ -26,13 +26,13 @@
 //!
 //! The CPU backend implements the reverse stages in parallel (`r4d_backend_cpu`), the wgpu
 //! backend in WGSL (`r4d_backend_wgpu::mpm_vjp`, state and parameter gradients on the
-//! device); both run through the one stepper [`engine::KernelAdjoint`] and the one
-//! checkpointing driver. Not done yet: the fluid's adjoint.
+//! device); both run through the one driver [`crate::Simulation`] and the one
+//! checkpointing driver.
 
 pub mod checkpoint;
 pub mod constitutive_vjp;
-pub mod engine;
 pub mod host;
+pub mod kernels;
 pub mod particle_vjp;
 pub mod trajectory_loss;
 pub mod transfer_vjp;

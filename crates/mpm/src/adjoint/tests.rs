@@ -592,7 +592,6 @@ mod trajectory {
     //! every material x every parameter, 3 frames of 20 substeps, boundary conditions active.
     use super::Rng;
     use crate::adjoint::checkpoint::Differentiable;
-    use crate::adjoint::engine::{KernelAdjoint, StateBufs};
     use crate::adjoint::host::{HostSim, PhysParams};
     use crate::boundary::{BoundaryCondition, Surface};
     use crate::config::{Domain, ForceForm, SimConfig, SolverConfig, TimeConfig};
@@ -601,6 +600,8 @@ mod trajectory {
     use crate::math::Mat3;
     use crate::reference::ReferenceBackend;
     use crate::scene::{ParticleSet, Shape};
+    use crate::simulation::Simulation;
+    use crate::state::State as StateOf;
 
     const FRAMES: usize = 3;
     const SPF: u64 = 20;
@@ -671,8 +672,8 @@ mod trajectory {
         f: Vec<Vec<[f64; 9]>>,
     }
 
-    type Oracle<'a> = KernelAdjoint<'a, ReferenceBackend<f64>>;
-    type State = StateBufs<ReferenceBackend<f64>>;
+    type Oracle = Simulation<ReferenceBackend<f64>>;
+    type State = StateOf<ReferenceBackend<f64>>;
 
     fn frame_loss(s: &State, w: &Weights, frame: usize) -> f64 {
         let mut l = 0.0;
@@ -694,7 +695,7 @@ mod trajectory {
         v0: &[[f64; 3]],
         w: &Weights,
     ) -> (f64, Vec<State>, usize) {
-        let sim = eng.sim;
+        let sim = eng.host();
         let mut s = eng.init(params, v0).unwrap();
         let mut states = vec![eng.clone_state(&s).unwrap()];
         let mut loss = 0.0;
@@ -739,7 +740,7 @@ mod trajectory {
         };
         let v0: Vec<[f64; 3]> = (0..np).map(|_| [0.05, -0.02, 0.03]).collect();
         let params = vec![PhysParams::<f64>::of(&part)];
-        let eng = Oracle::new(ReferenceBackend::in_scalar(), &sim).unwrap();
+        let eng = Oracle::with_host(ReferenceBackend::in_scalar(), sim.clone()).unwrap();
         let (_, states, events) = run(&eng, &params, &v0, &w);
         assert_eq!(events > 0, plastic, "{name}: {events} plastic projections");
         // Reverse sweep.
@@ -962,7 +963,6 @@ mod precision {
     //! through the checkpointed driver.
     use super::Rng;
     use crate::adjoint::checkpoint::{value_and_grad, Checkpointing};
-    use crate::adjoint::engine::KernelAdjoint;
     use crate::adjoint::host::{HostSim, PhysParams};
     use crate::boundary::{BoundaryCondition, Surface};
     use crate::config::{Domain, ForceForm, SimConfig, SolverConfig, TimeConfig};
@@ -970,11 +970,13 @@ mod precision {
     use crate::math::Real;
     use crate::reference::ReferenceBackend;
     use crate::scene::{ParticleSet, Shape};
+    use crate::simulation::Simulation;
 
     fn grad<T: Real>(sim: &HostSim, part: &PartParams, w: &[Vec<[f64; 3]>]) -> [f64; 8] {
         let params = vec![PhysParams::<T>::of(part)];
         let v0 = vec![[T::zero(); 3]; sim.len()];
-        let stepper = KernelAdjoint::new(ReferenceBackend::<T>::in_scalar(), sim).unwrap();
+        let stepper =
+            Simulation::with_host(ReferenceBackend::<T>::in_scalar(), sim.clone()).unwrap();
         let init = stepper.init(&params, &v0).unwrap();
         let (_, adj0, g) = value_and_grad(
             &stepper,

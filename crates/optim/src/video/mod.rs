@@ -9,7 +9,7 @@
 //!
 //! The simulation, its reverse sweep and the rendering run on the problem's backend
 //! ([`VideoProblem::compute`], any [`crate::compute::Compute`]): the one stepper
-//! `KernelAdjoint<B>` over that backend's kernels, positions and F read back once per frame;
+//! `Simulation<B>` over that backend's kernels, positions and F read back once per frame;
 //! the loss runs on the host, band by band.
 
 pub mod config;

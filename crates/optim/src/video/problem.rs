@@ -8,16 +8,16 @@
 //! rendered video is resampled linearly in time between the two nearest simulated frames
 //! ([`TimeMap`]), and the gradient is split back with the same weights.
 
-use crate::compute::{Compute, JobOut, MpmJob, Precision};
+use crate::compute::{Compute, Precision};
 use crate::FitError;
 use crate::{HeapProbe, HeapSpan};
 use r4d_loss::bands::ReferenceVideo;
 use r4d_loss::ssim::ms_ssim;
 use r4d_loss::{BandedLoss, DmsConfig, DmsTerms, MsSsimConfig, Video, VideoLoss};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
-use r4d_mpm::adjoint::engine::{KernelAdjoint, MpmAdjointKernels, StateBufs};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
-use r4d_mpm::math::Real;
+use r4d_mpm::simulation::AnyState;
+use r4d_mpm::DynSimulation;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
 use r4d_splat::{Camera, Deformation, Gaussians, PreparedFrame, RenderSettings, Renderer, SimLink};
 use serde::Serialize;
@@ -241,7 +241,7 @@ pub const DEFAULT_BAND_ROWS: usize = 128;
 /// sums.
 pub struct Objective<'a> {
     problem: &'a VideoProblem,
-    sim: HostSim,
+    sim: Arc<HostSim>,
     time: TimeMap,
     loss: Arc<dyn VideoLoss>,
     /// Rows per band (a multiple of 16).
@@ -388,7 +388,7 @@ impl<'a> Objective<'a> {
         }
         let mut obj = Objective {
             problem,
-            sim,
+            sim: Arc::new(sim),
             time,
             loss,
             band_rows: DEFAULT_BAND_ROWS,
@@ -537,59 +537,43 @@ impl<'a> Objective<'a> {
             p.validate(&format!("parameters of slot {i}"))?;
         }
         self.compute.reset_device_peak();
-        let r = self
-            .compute
-            .run_mpm(self.precision, MpmJob::video(self, slots, mode))
-            .and_then(JobOut::into_video);
+        let r = self.run_on(slots, mode);
         if let Ok(mut p) = self.profile.lock() {
             p.device_peak_bytes = self.compute.device_peak_bytes();
         }
         r
     }
 
-    /// Runs on any backend: the simulation and its reverse sweep on `b` (the one stepper,
-    /// `KernelAdjoint`), each frame's positions and deformation gradients downloaded for the
-    /// renderer and the loss, the loss's gradient added to the adjoint state on `b`.
-    pub(crate) fn run_on<B: MpmAdjointKernels>(
-        &self,
-        b: B,
-        slots: &[PartParams],
-        mode: Mode,
-    ) -> Result<RunOut, FitError> {
-        let name = b.name();
-        let err = |e: B::Error| FitError::backend(name, e);
-        let phys: Vec<PhysParams<B::Scalar>> = slots.iter().map(PhysParams::of).collect();
-        let stepper = KernelAdjoint::new(b, &self.sim).map_err(err)?;
-        let be = stepper.backend();
-        let zero = B::Scalar::c(0.0);
-        let init = stepper
-            .init(&phys, &vec![[zero; 3]; self.sim.len()])
+    /// Runs on the objective's backend: the simulation and its reverse sweep on its
+    /// [`Compute::simulation`], each frame's positions and deformation gradients downloaded
+    /// for the renderer and the loss, the loss's gradient added to the adjoint state there.
+    fn run_on(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
+        let d = self.compute.simulation(self.precision, self.sim.clone())?;
+        let d: &dyn DynSimulation = &*d;
+        let name = d.backend_name();
+        let err = |e| FitError::sim(name, e);
+        let phys = d.params(slots);
+        let init = d
+            .init(&phys, &vec![[0.0; 3]; self.sim.len()])
             .map_err(err)?;
-        let grad0 = stepper.zero_grad().map_err(err)?;
-        // Each field is converted before the next is read back, so at most one host copy in
-        // the backend's scalar is alive (the frame reads run inside the forward pass's peak).
-        let read = |s: &StateBufs<B>| -> Result<Frame, FitError> {
-            let x = be.download(&s.x).map_err(err)?;
-            let x = x.iter().map(|p| p.map(|c| c.f64() as f32)).collect();
-            let f = be.download(&s.f).map_err(err)?;
-            let f = f.iter().map(|m| m.map(|c| c.f64() as f32)).collect();
+        let grad0 = d.zero_grad().map_err(err)?;
+        // Each field is converted before the next is read back.
+        let read = |s: &AnyState| -> Result<Frame, FitError> {
+            let x = d.positions_f64(s).map_err(err)?;
+            let x = x.iter().map(|p| p.map(|c| c as f32)).collect();
+            let f = d.deformation_gradients_f64(s).map_err(err)?;
+            let f = f.iter().map(|m| m.map(|c| c as f32)).collect();
             Ok(Frame { x, f })
         };
-        let add = |adj: &mut StateBufs<B>, g: &FrameGrad| -> Result<(), FitError> {
-            let cast = |v: &f32| B::Scalar::c(*v as f64);
-            let x: Vec<[B::Scalar; 3]> = g.x.iter().map(|p| p.each_ref().map(cast)).collect();
-            let f: Vec<[B::Scalar; 9]> = g.f.iter().map(|m| m.each_ref().map(cast)).collect();
-            adj.add_to_x(be, &x).map_err(err)?;
-            adj.add_to_f(be, &f).map_err(err)
+        let add = |adj: &mut AnyState, g: &FrameGrad| -> Result<(), FitError> {
+            let x: Vec<[f64; 3]> = g.x.iter().map(|p| p.map(f64::from)).collect();
+            let f: Vec<[f64; 9]> = g.f.iter().map(|m| m.map(f64::from)).collect();
+            d.add_to_x(adj, &x).map_err(err)?;
+            d.add_to_f(adj, &f).map_err(err)
         };
-        let (ev, back, videos) =
-            self.run_with(name, &stepper, &init, &phys, grad0, mode, &read, &add)?;
+        let (ev, back, videos) = self.run_with(name, d, &init, &phys, grad0, mode, &read, &add)?;
         let g = match back {
-            Some((adj0, g)) => {
-                let mut g = stepper.grad_to_host(&g, &phys).map_err(err)?;
-                stepper.init_vjp(&adj0, &mut g).map_err(err)?;
-                Some(g.iter().map(PhysParams::to_f64).collect::<Vec<_>>())
-            }
+            Some((adj0, g)) => Some(d.gradient(&g, &adj0, &phys).map_err(err)?),
             None => None,
         };
         Ok((ev, check_grad(g)?, videos))
@@ -1017,7 +1001,7 @@ impl<'a> Objective<'a> {
     /// [`Mode::Render`], and in [`Mode::Grad`] the initial state's adjoint and the parameter
     /// gradient.
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
-    fn run_with<D: Differentiable>(
+    fn run_with<D: Differentiable + ?Sized>(
         &self,
         name: &str,
         d: &D,

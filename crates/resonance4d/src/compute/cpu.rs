@@ -2,9 +2,12 @@
 
 use r4d_backend_cpu::splat::CpuSplat;
 use r4d_backend_cpu::{CpuBackend, Par};
-use r4d_optim::compute::{Compute, JobOut, MpmJob, Precision};
+use r4d_mpm::adjoint::host::HostSim;
+use r4d_mpm::DynSimulation;
+use r4d_optim::compute::{simulation_on, Compute, Precision};
 use r4d_optim::FitError;
 use r4d_splat::{Renderer, SplatRenderer};
+use std::sync::Arc;
 
 /// The CPU backend: `CpuBackend<T>` on all cores (rayon) and the CPU renderer.
 #[derive(Clone, Copy, Debug, Default)]
@@ -15,10 +18,14 @@ impl Compute for CpuCompute {
         "cpu"
     }
 
-    fn run_mpm(&self, precision: Precision, job: MpmJob<'_>) -> Result<JobOut, FitError> {
+    fn simulation(
+        &self,
+        precision: Precision,
+        sim: Arc<HostSim>,
+    ) -> Result<Box<dyn DynSimulation>, FitError> {
         match precision {
-            Precision::F32 => job.run_on(CpuBackend::<f32>::with_par(Par::Rayon)),
-            Precision::F64 => job.run_on(CpuBackend::<f64>::with_par(Par::Rayon)),
+            Precision::F32 => simulation_on(CpuBackend::<f32>::with_par(Par::Rayon), sim),
+            Precision::F64 => simulation_on(CpuBackend::<f64>::with_par(Par::Rayon), sim),
         }
     }
 

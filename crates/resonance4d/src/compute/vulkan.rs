@@ -1,10 +1,12 @@
 //! A GPU through Vulkan (ash) as a [`Compute`].
 
 use r4d_backend_vulkan::{VulkanEngine, VulkanMpm, VulkanSplat};
-use r4d_optim::compute::{Compute, JobOut, MpmJob, Precision};
+use r4d_mpm::adjoint::host::HostSim;
+use r4d_mpm::DynSimulation;
+use r4d_optim::compute::{simulation_on, Compute, Precision};
 use r4d_optim::FitError;
 use r4d_splat::{Renderer, SplatRenderer};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 /// A GPU through Vulkan directly (ash, `r4d-backend-vulkan`): `VulkanMpm` (f32) and the
 /// Vulkan renderer (built once, reused by every render); the same recordings as wgpu.
@@ -36,8 +38,12 @@ impl Compute for VulkanCompute {
         "vulkan"
     }
 
-    fn run_mpm(&self, _precision: Precision, job: MpmJob<'_>) -> Result<JobOut, FitError> {
-        job.run_on(VulkanMpm::new(self.engine.clone()))
+    fn simulation(
+        &self,
+        _precision: Precision,
+        sim: Arc<HostSim>,
+    ) -> Result<Box<dyn DynSimulation>, FitError> {
+        simulation_on(VulkanMpm::new(self.engine.clone()), sim)
     }
 
     fn with_renderer(

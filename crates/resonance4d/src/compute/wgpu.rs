@@ -2,7 +2,9 @@
 
 use r4d_backend_cpu::splat::CpuSplat;
 use r4d_backend_wgpu::{WgpuContext, WgpuSplat};
-use r4d_optim::compute::{Compute, JobOut, MpmJob, Precision};
+use r4d_mpm::adjoint::host::HostSim;
+use r4d_mpm::DynSimulation;
+use r4d_optim::compute::{simulation_on, Compute, Precision};
 use r4d_optim::FitError;
 use r4d_splat::{Renderer, SplatRenderer};
 use std::sync::{Arc, Mutex};
@@ -45,8 +47,12 @@ impl Compute for WgpuCompute {
         "wgpu"
     }
 
-    fn run_mpm(&self, _precision: Precision, job: MpmJob<'_>) -> Result<JobOut, FitError> {
-        job.run_on(r4d_backend_wgpu::WgpuMpm::new(self.ctx.clone()))
+    fn simulation(
+        &self,
+        _precision: Precision,
+        sim: Arc<HostSim>,
+    ) -> Result<Box<dyn DynSimulation>, FitError> {
+        simulation_on(r4d_backend_wgpu::WgpuMpm::new(self.ctx.clone()), sim)
     }
 
     fn with_renderer(
