@@ -105,7 +105,7 @@ fn main() {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn measure<'a, B>(
+fn measure<B>(
     label: &str,
     make: &dyn Fn() -> Simulation<B>,
     params: &Vec<PhysParams<f32>>,

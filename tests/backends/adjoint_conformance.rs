@@ -8,127 +8,13 @@ use crate::common::gpu::{self, Lease};
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_backend_vulkan::{VulkanEngine, VulkanMpm};
 use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
+use r4d_conformance::scenes::{initial_velocity, two_jellies as scene, weights};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
 use r4d_mpm::adjoint::kernels::MpmAdjointKernels;
 use r4d_mpm::simulation::infallible;
 use r4d_mpm::Simulation;
-use r4d_mpm::{
-    BoundaryCondition, Domain, ForceForm, Material, PartParams, ParticleSet, Shape, SimConfig,
-    SolverConfig, Surface, TimeConfig,
-};
-
-/// Two jelly parts in a bounding box (sticky with the classic force form; slip, plus a friction
-/// ground collider, with MLS), the upper one partly held by a cuboid clamp, the lower one
-/// resting in the box's layers and pushed by an impulse.
-fn scene(force: ForceForm) -> (SimConfig, ParticleSet) {
-    let n = 24;
-    let dx = 1.0 / n as f64;
-    let cfg = SimConfig {
-        domain: Domain {
-            grid_lim: 1.0,
-            n_grid: n,
-        },
-        time: TimeConfig {
-            substep_dt: 2e-4,
-            frame_dt: None,
-            substeps_per_frame: Some(20),
-            frames: 3,
-        },
-        solver: SolverConfig {
-            force,
-            rpic_damping: 0.1,
-            ..Default::default()
-        },
-        parts: vec![
-            PartParams {
-                material: Material::Jelly,
-                youngs_modulus_pa: 3e4,
-                poisson_ratio: 0.3,
-                density_kg_m3: 800.0,
-                ..Default::default()
-            },
-            PartParams {
-                material: Material::Jelly,
-                youngs_modulus_pa: 1e4,
-                poisson_ratio: 0.4,
-                density_kg_m3: 1200.0,
-                ..Default::default()
-            },
-        ],
-        shapes: vec![
-            Shape::Box {
-                min: [0.3, 0.3, 3.2 * dx],
-                max: [0.6, 0.6, 4.0 * dx + 0.15],
-                part: 0,
-                per_cell: 2,
-            },
-            Shape::Box {
-                min: [0.35, 0.35, 4.0 * dx + 0.15],
-                max: [0.55, 0.55, 4.0 * dx + 0.3],
-                part: 1,
-                per_cell: 2,
-            },
-        ],
-        particles: None,
-        boundary: vec![
-            BoundaryCondition::BoundingBox {
-                layers: 3,
-                surface: match force {
-                    ForceForm::Classic => Surface::Sticky,
-                    _ => Surface::Slip,
-                },
-            },
-            BoundaryCondition::SurfaceCollider {
-                point: [0.0, 0.0, 3.6 * dx],
-                normal: [0.02, 0.0, 1.0],
-                surface: Surface::Friction,
-                friction: 0.4,
-                start_time: 0.0,
-                end_time: match force {
-                    ForceForm::Classic => 0.0,
-                    _ => 1.0,
-                },
-            },
-            BoundaryCondition::Cuboid {
-                point: [0.45, 0.45, 4.0 * dx + 0.3],
-                size: [0.05, 0.05, 0.04],
-                velocity: [0.0, 0.0, 0.0],
-                start_time: 0.0,
-                end_time: 1.0,
-                reset: false,
-            },
-            BoundaryCondition::ParticleImpulse {
-                force: [-0.2, 0.1, 0.5],
-                point: [0.4, 0.45, 4.0 * dx + 0.05],
-                size: [0.1, 0.2, 0.1],
-                num_dt: 30,
-                start_time: 0.0,
-            },
-        ],
-    };
-    let scene = ParticleSet::from_shapes(&cfg.shapes, dx);
-    (cfg, scene)
-}
-
-/// Loss weights of frame `f`: a fixed, particle-dependent linear position loss.
-fn weights(f: usize, n: usize) -> Vec<[f32; 3]> {
-    (0..n)
-        .map(|p| {
-            let w = ((p * 7 + f * 3) % 11) as f32 / 11.0 - 0.5;
-            [w, 0.25 * w, 0.5 - w]
-        })
-        .collect()
-}
-
-fn initial_velocity(n: usize) -> Vec<[f32; 3]> {
-    (0..n)
-        .map(|p| {
-            let s = (p % 5) as f32 / 5.0 - 0.4;
-            [0.3 * s, -0.2 * s, -0.2]
-        })
-        .collect()
-}
+use r4d_mpm::{ForceForm, Material, PartParams, ParticleSet};
 
 /// Gradients and initial adjoint of the weighted position loss on backend `b`.
 fn run<B: MpmAdjointKernels<Scalar = f32>>(
@@ -215,7 +101,8 @@ fn rel_l2(a: &[f32], b: &[f32]) -> f64 {
 }
 
 fn device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly(ctx: &Gpu) {
-    for force in [ForceForm::Classic, ForceForm::Mls] {
+    // MLS is the conformance suite's scene (`conformance_suite`).
+    for force in [ForceForm::Classic] {
         let (cfg, sc) = scene(force);
         let sim = HostSim::new(&cfg, &sc).unwrap();
         let params: Vec<PhysParams<f32>> = cfg.parts.iter().map(PhysParams::of).collect();

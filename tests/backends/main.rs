@@ -12,6 +12,7 @@ mod common;
 mod adjoint_conformance;
 mod adjoint_parallel;
 mod backend_conformance;
+mod conformance_suite;
 mod fit_trajectory_gpu;
 mod one_forward;
 mod video_fit_gpu;

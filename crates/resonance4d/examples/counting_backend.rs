@@ -1,6 +1,6 @@
 //! A backend of your own in one file: a `Compute` (what every fit runs on: a simulation and a
-//! renderer) that delegates to the CPU backend and counts the calls, running a video fit that
-//! gives the CPU's result bit for bit:
+//! renderer) that delegates to the CPU backend and counts the calls, passes the conformance
+//! suite and runs a video fit that gives the CPU's result bit for bit:
 //! `cargo run --release -p resonance4d --example counting_backend`
 
 use resonance4d::prelude::*;
@@ -36,6 +36,11 @@ impl Compute for Counting {
 
 /// Runs the example.
 pub fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let counting = Arc::new(Counting::default());
+    print!(
+        "{}",
+        resonance4d::conformance::run(&*counting, &Default::default())?
+    );
     let text = include_str!("jelly_on_floor.toml");
     let mut config = SimConfig::parse(text, "jelly_on_floor.toml".as_ref())?;
     let truth = config.parts.clone();
@@ -52,7 +57,6 @@ pub fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     fit.init.enabled = false;
 
-    let counting = Arc::new(Counting::default());
     problem.compute = counting.clone();
     let mine = run_fit(&problem, &fit, None, &mut NoHooks)?;
     problem.compute = resonance4d::compute::cpu();

@@ -68,6 +68,9 @@ pub use r4d_backend_cpu as backend_cpu;
 pub use r4d_backend_vulkan as backend_vulkan;
 #[cfg(feature = "wgpu")]
 pub use r4d_backend_wgpu as backend_wgpu;
+/// The backend conformance suite (`r4d-conformance`): any [`compute::Compute`] against the CPU.
+#[cfg(feature = "cpu")]
+pub use r4d_conformance as conformance;
 #[cfg(feature = "datasets")]
 pub use r4d_datasets as datasets;
 #[cfg(feature = "eval")]

@@ -33,6 +33,8 @@ impl std::fmt::Debug for AnyState {
 pub trait DynSimulation: Send + Sync {
     /// The backend's name (`"cpu"`, `"wgpu"`, ...).
     fn backend_name(&self) -> &str;
+    /// The scalar type it simulates in (`"f32"`, `"f64"`).
+    fn precision(&self) -> &'static str;
     /// The problem.
     fn host(&self) -> &HostSim;
     /// `slots` (one per parameter slot) in the backend's scalar type.
@@ -151,6 +153,9 @@ fn be<E: std::error::Error + Send + Sync + 'static>(e: E) -> Error {
 impl<B: MpmAdjointKernels> DynSimulation for Simulation<B> {
     fn backend_name(&self) -> &str {
         self.b.name()
+    }
+    fn precision(&self) -> &'static str {
+        B::Scalar::NAME
     }
     fn host(&self) -> &HostSim {
         &self.sim
