@@ -1,24 +1,6 @@
 //! The error type of every loss and metric: it names the offending input.
 
-use std::fmt;
-
-/// Which video an error is about.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Input {
-    /// The rendered video (the one differentiated).
-    Rendered,
-    /// The reference (ground-truth) video.
-    Reference,
-}
-
-impl fmt::Display for Input {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Input::Rendered => "rendered",
-            Input::Reference => "reference",
-        })
-    }
-}
+pub use r4d_frames::Input;
 
 /// Bad input or configuration of a loss or metric.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -160,4 +142,55 @@ pub enum LossError {
     /// An invalid configuration value.
     #[error("invalid loss configuration: {0}")]
     Config(String),
+}
+
+/// A malformed video as the loss reports it (the same variants).
+impl From<r4d_frames::FrameError> for LossError {
+    fn from(e: r4d_frames::FrameError) -> Self {
+        use r4d_frames::FrameError as F;
+        match e {
+            F::DataLength {
+                input,
+                frames,
+                height,
+                width,
+                expected,
+                got,
+            } => LossError::DataLength {
+                input,
+                frames,
+                height,
+                width,
+                expected,
+                got,
+            },
+            F::Empty {
+                input,
+                frames,
+                height,
+                width,
+            } => LossError::Empty {
+                input,
+                frames,
+                height,
+                width,
+            },
+            F::NonFinite {
+                input,
+                frame,
+                row,
+                col,
+                channel,
+                kind,
+            } => LossError::NonFinite {
+                input,
+                frame,
+                row,
+                col,
+                channel,
+                kind,
+            },
+            _ => LossError::Config(e.to_string()),
+        }
+    }
 }

@@ -59,7 +59,8 @@ pub mod banded_loss;
 pub mod bands;
 pub mod dms;
 mod error;
-pub mod io;
+/// PNG folders and `.npy` videos ([`r4d_frames::io`]).
+pub use r4d_frames::io;
 pub mod lpips;
 pub mod metrics;
 mod par;
@@ -74,10 +75,10 @@ mod video;
 pub use banded_loss::{BandedLoss, VideoLoss};
 pub use dms::{Ablation, Dms, DmsConfig, DmsTerms, DmsWeights, L1Loss, SsimLoss};
 pub use error::{Input, LossError};
+pub use r4d_frames::{FrameError, Video};
 pub use real::Real;
 pub use spectral::{FftNorm, Reduction, Spectral, SpectralConfig, SpectralTerms};
 pub use ssim::{MsSsimConfig, Padding, Precision, SsimConfig};
-pub use video::Video;
 
 /// A loss of a rendered video against a reference fixed at construction: its value and its
 /// gradient with respect to the rendered video.

@@ -80,3 +80,10 @@ impl FitError {
         }
     }
 }
+
+/// A malformed video, as the losses report it.
+impl From<r4d_loss::FrameError> for FitError {
+    fn from(e: r4d_loss::FrameError) -> Self {
+        FitError::Loss(e.into())
+    }
+}

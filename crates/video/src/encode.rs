@@ -19,7 +19,7 @@ use openh264::encoder::{
 };
 use openh264::formats::YUVBuffer;
 use openh264::OpenH264API;
-use r4d_loss::Video;
+use r4d_frames::Video;
 use std::path::{Path, PathBuf};
 
 /// The highest frame rate written.
@@ -234,7 +234,7 @@ impl Mp4Writer {
 ///
 /// ```no_run
 /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
-/// let video = r4d_loss::Video::<f32>::zeros(30, 64, 64);
+/// let video = r4d_frames::Video::<f32>::zeros(30, 64, 64);
 /// r4d_video::write_mp4(std::path::Path::new("out.mp4"), &video, 30.0)?;
 /// # Ok(()) }
 /// ```

@@ -71,9 +71,9 @@ pub enum VideoError {
         /// What went wrong.
         message: String,
     },
-    /// A PNG directory or `.npy` video (read by `r4d_loss::io`).
+    /// A PNG directory or `.npy` video (read by `r4d_frames::io`).
     #[error(transparent)]
-    Other(#[from] r4d_loss::io::VideoIoError),
+    Other(#[from] r4d_frames::io::VideoIoError),
 }
 
 impl VideoError {

@@ -13,7 +13,7 @@
 //! * **Frame-rate conversion** ([`resample`], [`resample_indices`]): nearest frame in time.
 //! * **One reader for every format the CLI accepts** ([`read_video`], [`video_fps`]): an `.mp4`
 //!   (also `.m4v`, `.mov`), a folder of PNG frames or a `.npy` (the latter two read by
-//!   [`r4d_loss::io`]).
+//!   [`r4d_frames::io`]).
 //!
 //! ```no_run
 //! # fn main() -> Result<(), r4d_video::VideoError> {
@@ -45,7 +45,7 @@ pub use encode::{
 pub use error::{Result, VideoError};
 pub use resample::{resample, resample_indices, MAX_FRAMES};
 
-use r4d_loss::{Real, Video};
+use r4d_frames::{Real, Video};
 use std::path::Path;
 
 /// Whether `path` names an MP4 container by its extension (`.mp4`, `.m4v`, `.mov`).
@@ -57,12 +57,12 @@ pub fn is_mp4(path: &Path) -> bool {
 }
 
 /// Reads a video in any format the CLI accepts: an H.264 MP4 (see [`read_mp4`]), a folder of
-/// PNG frames or a `.npy` (see [`r4d_loss::io::read_video`]).
+/// PNG frames or a `.npy` (see [`r4d_frames::io::read_video`]).
 pub fn read_video<T: Real>(path: &Path) -> Result<Video<T>> {
     if is_mp4(path) && !path.is_dir() {
         read_mp4(path, None)
     } else {
-        Ok(r4d_loss::io::read_video(path)?)
+        Ok(r4d_frames::io::read_video(path)?)
     }
 }
 

@@ -1,7 +1,7 @@
 //! Frame-rate conversion: the nearest source frame in time, as ffmpeg's `fps` filter does
 //! (no blending, so every output frame is a frame that was captured or rendered).
 
-use r4d_loss::{Real, Video};
+use r4d_frames::{Real, Video};
 
 /// The source frame shown at each output frame when `n` frames at `from` fps are played at
 /// `to` fps: output frame `k` (time `k / to`) shows source frame `round(k * from / to)`.

@@ -1,5 +1,4 @@
 //! The loss crate's integration tests, in one binary: band-wise DMS against the whole-video
-//! loss, and hostile `.npy` headers.
+//! loss.
 
 mod bands;
-mod npy_hostile;

@@ -14,8 +14,8 @@
 //! * Every frame of a video has the first frame's size.
 
 use crate::error::Input;
-use crate::real::Real;
 use crate::video::Video;
+use r4d_math::Real;
 use std::path::{Path, PathBuf};
 
 /// Why a video could not be read or written; names the file.

@@ -1,7 +1,7 @@
 //! Hostile `.npy` headers: sizes read from the file are checked before anything is allocated
 //! or sliced (a shape whose product overflows must not wrap).
 
-use r4d_loss::io::read_video;
+use r4d_frames::io::read_video;
 
 /// A version-1 `.npy` with `header` (padded) and `body`.
 fn npy(header: &str, body: &[u8]) -> Vec<u8> {
@@ -64,7 +64,7 @@ fn a_frame_folder_too_large_for_memory_is_refused_after_its_first_frame() {
     let f = dir.join("frame.png");
     image::RgbImage::new(1000, 1000).save(&f).unwrap();
     let files = vec![f; 1000];
-    let e = r4d_loss::io::read_frames::<f32>(&files, &dir)
+    let e = r4d_frames::io::read_frames::<f32>(&files, &dir)
         .unwrap_err()
         .to_string();
     assert!(
@@ -74,7 +74,7 @@ fn a_frame_folder_too_large_for_memory_is_refused_after_its_first_frame() {
     // Small frames read as before.
     let small = dir.join("small.png");
     image::RgbImage::new(4, 4).save(&small).unwrap();
-    let v = r4d_loss::io::read_frames::<f32>(&vec![small; 3], &dir).unwrap();
+    let v = r4d_frames::io::read_frames::<f32>(&vec![small; 3], &dir).unwrap();
     assert_eq!(v.frames(), 3);
     let _ = std::fs::remove_dir_all(&dir);
 }
