@@ -137,7 +137,7 @@ fn bench(c: &mut Criterion) {
         let bwd_peak = peak_since(base);
         println!(
             "splat {id}: {} visible, {} tile intersections, peak host memory: forward {:.1} MiB, forward+backward {:.1} MiB",
-            stats.visible,
+            stats.visible.unwrap_or(0),
             stats.intersections,
             fwd_peak as f64 / 1048576.0,
             bwd_peak as f64 / 1048576.0
@@ -234,7 +234,7 @@ fn bench_gpu_renderer<B: r4d_splat::SplatKernels>(
             "{name} {id}: {} visible, {} tile intersections; peak device memory: forward \
              {:.1} MiB, forward+backward {:.1} MiB; peak host memory: forward {:.1} MiB, \
              forward+backward {:.1} MiB",
-            r.stats.visible,
+            r.stats.visible.unwrap_or(0),
             r.stats.intersections,
             mib(fwd_dev),
             mib(bwd_dev),

@@ -1,5 +1,6 @@
 //! `--profile`: per-kernel GPU time, measured by the backend's timestamp queries (the Vulkan
-//! backend), printed to stderr when the command ends (also when it fails: the time so far).
+//! backend), and the bytes moved between host and device (the GPU backends of the fits),
+//! printed to stderr when the command ends (also when it fails: the figures so far).
 
 use anyhow::Result;
 use r4d_mpm::KernelTime;
@@ -8,30 +9,42 @@ use std::sync::Arc;
 
 type Times = Box<dyn Fn() -> Result<Vec<KernelTime>>>;
 
-/// Prints the per-kernel times when dropped (nothing when `--profile` is off).
+/// Prints the per-kernel times and the bytes moved when dropped (nothing when `--profile` is
+/// off).
 pub struct Profile {
     times: Option<Times>,
+    moved: Option<(Arc<dyn Compute>, r4d_mpm::MemoryUsage)>,
 }
 
 impl Profile {
     /// On a fit backend: turns its timing on; a backend that cannot measure says so.
     pub fn on_compute(backend: &Arc<dyn Compute>, on: bool) -> Result<Self> {
         if !on {
-            return Ok(Profile { times: None });
+            return Ok(Profile {
+                times: None,
+                moved: None,
+            });
         }
+        let moved = backend.device_memory().map(|m| (backend.clone(), m));
         if !backend.set_profiling(true)? {
-            return Ok(Self::unsupported(backend.name(), true));
+            let mut p = Self::unsupported(backend.name(), true);
+            p.moved = moved;
+            return Ok(p);
         }
         let b = backend.clone();
         Ok(Profile {
             times: Some(Box::new(move || Ok(b.kernel_times()?))),
+            moved,
         })
     }
 
     /// On a Vulkan engine used directly (`simulate`, `render`).
     pub fn on_vulkan(e: &r4d_backend_vulkan::VulkanEngine, on: bool) -> Result<Self> {
         if !on {
-            return Ok(Profile { times: None });
+            return Ok(Profile {
+                times: None,
+                moved: None,
+            });
         }
         if !e.set_profiling(true)? {
             return Ok(Self::unsupported(
@@ -45,6 +58,7 @@ impl Profile {
                 e.finish()?;
                 Ok(e.kernel_times())
             })),
+            moved: None,
         })
     }
 
@@ -56,12 +70,25 @@ impl Profile {
                  Vulkan backend does, with timestamp queries); no per-kernel times will be printed"
             );
         }
-        Profile { times: None }
+        Profile {
+            times: None,
+            moved: None,
+        }
     }
 }
 
 impl Drop for Profile {
     fn drop(&mut self) {
+        if let Some((b, start)) = &self.moved {
+            if let Some(now) = b.device_memory() {
+                let mib = |x: u64| x as f64 / (1u64 << 20) as f64;
+                eprintln!(
+                    "moved between host and device: {:.1} MiB up, {:.1} MiB down",
+                    mib(now.uploaded_bytes - start.uploaded_bytes),
+                    mib(now.downloaded_bytes - start.downloaded_bytes)
+                );
+            }
+        }
         let Some(f) = &self.times else { return };
         match f() {
             Ok(t) => eprint!("{}", table(&t)),

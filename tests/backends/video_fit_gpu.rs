@@ -56,6 +56,9 @@ fn video_fit_parity(compute: std::sync::Arc<dyn resonance4d::compute::Compute>, 
     let (ev2, g2) = gpu.value_and_grad(&start).unwrap();
     let prof = gpu.profile();
     assert!(prof.device_peak_bytes.unwrap_or(0) > 0, "{prof:?}");
+    let (up, down) = (prof.host_to_device_bytes, prof.device_to_host_bytes);
+    eprintln!("{name}: moved {up:?} bytes up, {down:?} down in one evaluation");
+    assert!(up.unwrap_or(0) > 0 && down.unwrap_or(0) > 0, "{prof:?}");
     eprintln!("loss cpu {} gpu {}", ev.total, ev2.total);
     assert!((ev.total - ev2.total).abs() <= 1e-3 * ev.total);
     for part in 0..2 {

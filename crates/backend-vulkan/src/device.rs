@@ -82,6 +82,10 @@ pub(crate) struct Device {
     pub timestamp_bits: u32,
     pub in_use: AtomicU64,
     pub peak: AtomicU64,
+    /// Bytes copied from the host to device buffers (writes, recordings' uniforms and data).
+    pub uploaded: AtomicU64,
+    /// Bytes read back from device buffers.
+    pub downloaded: AtomicU64,
     /// Buffers dropped while a pending command buffer may still use them: freed by
     /// [`Device::collect`] once the engine has waited for its submissions.
     graveyard: Mutex<Vec<(vk::Buffer, Option<Allocation>)>>,
@@ -451,6 +455,8 @@ impl Device {
             float_atomics,
             in_use: AtomicU64::new(0),
             peak: AtomicU64::new(0),
+            uploaded: AtomicU64::new(0),
+            downloaded: AtomicU64::new(0),
             graveyard: Mutex::new(Vec::new()),
             graveyard_bytes: AtomicU64::new(0),
             owned: true,
@@ -646,6 +652,8 @@ impl Device {
             float_atomics,
             in_use: AtomicU64::new(0),
             peak: AtomicU64::new(0),
+            uploaded: AtomicU64::new(0),
+            downloaded: AtomicU64::new(0),
             graveyard: Mutex::new(Vec::new()),
             graveyard_bytes: AtomicU64::new(0),
             owned: false,

@@ -304,6 +304,10 @@ impl VulkanEngine {
 
     /// A host-visible buffer holding `data`.
     fn host_buffer(&self, label: &str, data: &[u8]) -> Result<VkBuffer, VulkanError> {
+        self.inner
+            .dev
+            .uploaded
+            .fetch_add(data.len() as u64, Ordering::Relaxed);
         let b = self
             .inner
             .dev
@@ -467,6 +471,10 @@ impl GpuEngine for VulkanEngine {
         }
         // Everything recorded so far runs now (the one submission of a frame).
         self.flush()?;
+        self.inner
+            .dev
+            .downloaded
+            .fetch_add(bytes, Ordering::Relaxed);
         staging.mapped(|m| m[..bytes as usize].to_vec())
     }
 
@@ -698,6 +706,8 @@ impl GpuEngine for VulkanEngine {
         MemoryUsage {
             bytes_in_use: self.inner.dev.in_use.load(Ordering::Relaxed),
             peak_bytes: self.inner.dev.peak.load(Ordering::Relaxed),
+            uploaded_bytes: self.inner.dev.uploaded.load(Ordering::Relaxed),
+            downloaded_bytes: self.inner.dev.downloaded.load(Ordering::Relaxed),
         }
     }
 }

@@ -69,6 +69,8 @@ pub struct WgpuContext {
     pub limits: wgpu::Limits,
     in_use: Arc<AtomicU64>,
     peak: Arc<AtomicU64>,
+    uploaded: Arc<AtomicU64>,
+    downloaded: Arc<AtomicU64>,
     pipelines: Mutex<HashMap<&'static str, Arc<wgpu::ComputePipeline>>>,
 }
 
@@ -153,6 +155,8 @@ impl WgpuContext {
             limits,
             in_use: Arc::new(AtomicU64::new(0)),
             peak: Arc::new(AtomicU64::new(0)),
+            uploaded: Arc::new(AtomicU64::new(0)),
+            downloaded: Arc::new(AtomicU64::new(0)),
             pipelines: Mutex::new(HashMap::new()),
         })
     }
@@ -165,6 +169,16 @@ impl WgpuContext {
     /// Highest [`Self::bytes_in_use`] since creation or the last [`Self::reset_peak`].
     pub fn peak_bytes(&self) -> u64 {
         self.peak.load(Ordering::Relaxed)
+    }
+
+    /// Bytes written from the host to device buffers since the context was made.
+    pub fn uploaded_bytes(&self) -> u64 {
+        self.uploaded.load(Ordering::Relaxed)
+    }
+
+    /// Bytes read back from device buffers since the context was made.
+    pub fn downloaded_bytes(&self) -> u64 {
+        self.downloaded.load(Ordering::Relaxed)
     }
 
     /// Restarts the peak count from the current usage.
@@ -240,6 +254,8 @@ impl WgpuContext {
         if bytes.is_empty() {
             return;
         }
+        self.uploaded
+            .fetch_add(bytes.len() as u64, Ordering::Relaxed);
         if bytes.len() % 4 == 0 {
             self.queue.write_buffer(&b.buffer, 0, bytes);
         } else {
@@ -262,6 +278,8 @@ impl WgpuContext {
         )?;
         self.queue
             .write_buffer(&b.buffer, 0, bytemuck::bytes_of(value));
+        self.uploaded
+            .fetch_add(std::mem::size_of::<T>() as u64, Ordering::Relaxed);
         Ok(b)
     }
 
@@ -287,6 +305,7 @@ impl WgpuContext {
             return Ok(Vec::new());
         }
         let size = (n as u64).next_multiple_of(4);
+        self.downloaded.fetch_add(n as u64, Ordering::Relaxed);
         let staging = self.alloc::<u8>(
             "readback",
             size as usize,

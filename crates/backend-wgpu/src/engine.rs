@@ -121,6 +121,8 @@ impl GpuEngine for WgpuEngine {
         MemoryUsage {
             bytes_in_use: self.ctx.bytes_in_use(),
             peak_bytes: self.ctx.peak_bytes(),
+            uploaded_bytes: self.ctx.uploaded_bytes(),
+            downloaded_bytes: self.ctx.downloaded_bytes(),
         }
     }
 }

@@ -873,6 +873,13 @@ pub fn table(r: &BenchReport) -> String {
             mib(d as f64)
         );
     }
+    if let (Some(up), Some(down)) = (p.host_to_device_bytes, p.device_to_host_bytes) {
+        s += &format!(
+            "moved between host and device: {:.1} MiB up, {:.1} MiB down\n",
+            mib(up as f64),
+            mib(down as f64)
+        );
+    }
     s += &format!(
         "\nheld before the iteration: {:.1} MiB (scene, particles, 8-bit reference {:.1} MiB)\nmemory_plan (simulation checkpoints + scratch, f32): {:.1} MiB\n",
         mib(r.held_bytes as f64),

@@ -21,6 +21,12 @@ pub struct MemoryUsage {
     pub bytes_in_use: u64,
     /// Highest value `bytes_in_use` has reached.
     pub peak_bytes: u64,
+    /// Bytes copied from the host to the device since the backend was made (buffer writes,
+    /// uploads, the uniforms and data blocks of recordings; 0 for host backends).
+    pub uploaded_bytes: u64,
+    /// Bytes copied from the device to the host since the backend was made (0 for host
+    /// backends).
+    pub downloaded_bytes: u64,
 }
 
 /// GPU time of one kernel, summed over its dispatches (from timestamp queries; a GPU

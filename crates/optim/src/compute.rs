@@ -117,6 +117,11 @@ pub trait Compute: Send + Sync + std::fmt::Debug {
     /// The device's peak of allocated bytes since [`Compute::reset_device_peak`]; `None` for
     /// host backends (their memory is the process heap).
     fn device_peak_bytes(&self) -> Option<u64> {
+        self.device_memory().map(|m| m.peak_bytes)
+    }
+    /// The device's memory accounting: bytes in use, their peak, and the bytes copied between
+    /// host and device so far; `None` for host backends.
+    fn device_memory(&self) -> Option<r4d_mpm::MemoryUsage> {
         None
     }
 }

@@ -15,7 +15,7 @@
 use crate::camera::{Camera, RenderSettings};
 use crate::error::{Error, Result};
 use crate::gaussians::{Deformation, GaussianGrads, Gaussians};
-use crate::kernels::{CameraConsts, SplatKernels, TileBufs};
+use crate::kernels::{CameraConsts, SceneBufs, SceneGradBufs, SplatKernels, TileBufs};
 use crate::project::{Projected, ProjectedGrad};
 use crate::renderer::{Image, SplatRenderer};
 use std::any::Any;
@@ -84,11 +84,11 @@ struct FrameState<B: SplatKernels> {
     d_proj: Option<B::Buf<ProjectedGrad<f32>>>,
 }
 
-fn backend<E: std::error::Error + Send + Sync + 'static>(e: E) -> Error {
+pub(crate) fn backend<E: std::error::Error + Send + Sync + 'static>(e: E) -> Error {
     Error::Backend(Box::new(e))
 }
 
-fn other_backend() -> Error {
+pub(crate) fn other_backend() -> Error {
     Error::Mismatch("the frame was prepared by a renderer of another backend".into())
 }
 
@@ -115,15 +115,26 @@ impl<B: SplatKernels> SplatRenderer<B> {
         settings: &RenderSettings,
     ) -> Result<PreparedFrame> {
         cam.validate("camera").map_err(Error::Mismatch)?;
-        let full = full_image(cam);
         let bufs = self.upload(scene, deform)?;
-        let cc = CameraConsts::new(&full, settings, scene.sh_degree);
-        let proj = self.backend.project(&bufs, &cc).map_err(backend)?;
-        drop(bufs);
+        self.prepare_bufs(&bufs, cam, settings)
+    }
+
+    /// Projects, sorts and bins the uploaded scene `bufs` for the whole image of `cam`.
+    pub(crate) fn prepare_bufs(
+        &mut self,
+        bufs: &SceneBufs<B>,
+        cam: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<PreparedFrame> {
+        let full = full_image(cam);
+        let cc = CameraConsts::new(&full, settings, bufs.sh_degree);
+        let proj = self.backend.project(bufs, &cc).map_err(backend)?;
         let bins = self.backend.bin_tiles(&proj, &cc).map_err(backend)?;
-        self.record(&proj, &bins)?;
+        // The projection stays on the backend (no statistics read back).
+        self.stats.intersections = bins.intersections;
+        self.stats.visible = None;
         let tiles = cc.tiles[0] as usize * cc.tiles[1] as usize;
-        let bytes = scene.len()
+        let bytes = bufs.n
             * (std::mem::size_of::<Projected<f32>>() + std::mem::size_of::<ProjectedGrad<f32>>())
             + 4 * (bins.intersections + tiles + 1);
         Ok(PreparedFrame {
@@ -135,9 +146,9 @@ impl<B: SplatKernels> SplatRenderer<B> {
             }),
             width: full.width,
             height: full.height,
-            gaussians: scene.len(),
-            sh_degree: scene.sh_degree,
-            deformed: deform.is_some(),
+            gaussians: bufs.n,
+            sh_degree: bufs.sh_degree,
+            deformed: bufs.f.is_some(),
             bytes,
         })
     }
@@ -201,18 +212,50 @@ impl<B: SplatKernels> SplatRenderer<B> {
         scene: &Gaussians,
         deform: Option<&Deformation>,
     ) -> Result<GaussianGrads> {
-        if scene.len() != frame.gaussians
-            || scene.sh_degree != frame.sh_degree
-            || deform.is_some() != frame.deformed
+        let g = self.frame_vjp_bufs(frame, scene, deform)?;
+        self.download_grads(g)
+    }
+
+    /// [`SplatRenderer::frame_vjp`] reading back only the gradients of the deformed positions
+    /// and of F ([`crate::Renderer::frame_vjp_motion`]).
+    pub fn frame_vjp_motion(
+        &mut self,
+        frame: PreparedFrame,
+        scene: &Gaussians,
+        deform: &Deformation,
+    ) -> Result<GaussianGrads> {
+        let g = self.frame_vjp_bufs(frame, scene, Some(deform))?;
+        self.download_motion_grads(g)
+    }
+
+    fn frame_vjp_bufs(
+        &mut self,
+        frame: PreparedFrame,
+        scene: &Gaussians,
+        deform: Option<&Deformation>,
+    ) -> Result<SceneGradBufs<B>> {
+        let bufs = self.upload(scene, deform)?;
+        self.frame_vjp_of(frame, &bufs)
+    }
+
+    /// The scene gradient of `frame`, prepared from the uploaded scene `bufs`.
+    pub(crate) fn frame_vjp_of(
+        &mut self,
+        frame: PreparedFrame,
+        bufs: &SceneBufs<B>,
+    ) -> Result<SceneGradBufs<B>> {
+        if bufs.n != frame.gaussians
+            || bufs.sh_degree != frame.sh_degree
+            || bufs.f.is_some() != frame.deformed
         {
             return Err(Error::Mismatch(format!(
                 "the frame was prepared from {} Gaussians of SH degree {}{}, not {} of degree {}{}",
                 frame.gaussians,
                 frame.sh_degree,
                 if frame.deformed { ", deformed" } else { "" },
-                scene.len(),
-                scene.sh_degree,
-                if deform.is_some() { ", deformed" } else { "" },
+                bufs.n,
+                bufs.sh_degree,
+                if bufs.f.is_some() { ", deformed" } else { "" },
             )));
         }
         let st: Box<FrameState<B>> = frame.state.downcast().map_err(|_| other_backend())?;
@@ -228,9 +271,8 @@ impl<B: SplatKernels> SplatRenderer<B> {
             Some(d) => d,
             None => b.zeros(frame.gaussians).map_err(backend)?,
         };
-        let bufs = self.upload(scene, deform)?;
-        let g = b.project_vjp(&bufs, &cc, &proj, &d_proj).map_err(backend)?;
-        drop((bufs, proj, d_proj));
-        self.download_grads(g)
+        let g = b.project_vjp(bufs, &cc, &proj, &d_proj).map_err(backend)?;
+        drop((proj, d_proj));
+        Ok(g)
     }
 }

@@ -60,6 +60,7 @@ pub mod raster;
 pub mod real;
 pub mod reference;
 pub mod renderer;
+pub mod scene_handle;
 pub mod sh;
 pub mod span;
 pub mod weights;
@@ -73,6 +74,7 @@ pub use kernels::{CameraConsts, SplatKernels};
 pub use link::SimLink;
 pub use prepare::{prepare, prepare_with, PrepareConfig, Prepared};
 pub use renderer::{Image, RenderStats, RenderTape, Renderer, SplatRenderer};
+pub use scene_handle::SceneHandle;
 
 #[cfg(test)]
 mod tests;

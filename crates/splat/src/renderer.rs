@@ -7,6 +7,7 @@ use crate::frame::PreparedFrame;
 use crate::gaussians::{Deformation, GaussianGrads, Gaussians};
 use crate::kernels::{CameraConsts, ImageBufs, SceneBufs, SceneGradBufs, SplatKernels, TileBufs};
 use crate::project::Projected;
+use crate::scene_handle::SceneHandle;
 use std::ops::Range;
 
 /// A rendered image, row 0 at the top.
@@ -27,8 +28,9 @@ pub struct Image {
 /// Statistics of the last render.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RenderStats {
-    /// Gaussians that passed culling.
-    pub visible: usize,
+    /// Gaussians that passed culling (counted by [`Renderer::render`] and its VJP; a prepared
+    /// frame leaves the projection on the backend and records `None`).
+    pub visible: Option<usize>,
     /// (tile, Gaussian) pairs.
     pub intersections: usize,
 }
@@ -89,6 +91,54 @@ pub trait Renderer {
         scene: &Gaussians,
         deform: Option<&Deformation>,
     ) -> Result<GaussianGrads>;
+
+    /// [`Renderer::frame_vjp`] for a caller that needs only the gradients of the deformation:
+    /// `means` (the deformed positions) and `f` are filled, the other arrays left empty (a
+    /// GPU backend reads back only those two).
+    fn frame_vjp_motion(
+        &mut self,
+        frame: PreparedFrame,
+        scene: &Gaussians,
+        deform: &Deformation,
+    ) -> Result<GaussianGrads> {
+        let g = self.frame_vjp(frame, scene, Some(deform))?;
+        Ok(GaussianGrads {
+            means: g.means,
+            f: g.f,
+            ..Default::default()
+        })
+    }
+
+    /// Uploads `scene` to this renderer's backend once, for many frames of it
+    /// ([`Renderer::prepare_frame_on`]); the default keeps a host copy.
+    fn upload_scene(&mut self, scene: &Gaussians) -> Result<SceneHandle> {
+        Ok(SceneHandle::host(scene))
+    }
+
+    /// [`Renderer::prepare_frame`] of an uploaded scene deformed by `deform`: only the
+    /// deformed centres and deformation gradients move to the backend.
+    fn prepare_frame_on(
+        &mut self,
+        scene: &mut SceneHandle,
+        deform: &Deformation,
+        cam: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<PreparedFrame> {
+        let g = scene.host_scene()?.clone();
+        self.prepare_frame(&g, Some(deform), cam, settings)
+    }
+
+    /// [`Renderer::frame_vjp_motion`] of a frame prepared by [`Renderer::prepare_frame_on`]
+    /// from the same handle and deformation.
+    fn frame_vjp_motion_on(
+        &mut self,
+        frame: PreparedFrame,
+        scene: &mut SceneHandle,
+        deform: &Deformation,
+    ) -> Result<GaussianGrads> {
+        let g = scene.host_scene()?.clone();
+        self.frame_vjp_motion(frame, &g, deform)
+    }
 }
 
 /// [`Renderer`] over any kernel backend.
@@ -202,13 +252,14 @@ impl<B: SplatKernels> SplatRenderer<B> {
     ) -> Result<()> {
         let be = |e: B::Error| Error::Backend(Box::new(e));
         self.stats.intersections = bins.intersections;
-        self.stats.visible = self
-            .backend
-            .download(proj)
-            .map_err(be)?
-            .iter()
-            .filter(|p| p.radii != [0, 0])
-            .count();
+        self.stats.visible = Some(
+            self.backend
+                .download(proj)
+                .map_err(be)?
+                .iter()
+                .filter(|p| p.radii != [0, 0])
+                .count(),
+        );
         Ok(())
     }
 
@@ -283,6 +334,21 @@ impl<B: SplatKernels> SplatRenderer<B> {
         // The scene's buffers and the intermediates are freed before the gradients come back.
         drop((bufs, proj, d_proj));
         self.download_grads(g)
+    }
+
+    /// Brings the position and deformation-gradient gradients back to the host; the others
+    /// are freed on the backend.
+    pub(crate) fn download_motion_grads(&self, g: SceneGradBufs<B>) -> Result<GaussianGrads> {
+        let be = |e: B::Error| Error::Backend(Box::new(e));
+        let b = &self.backend;
+        Ok(GaussianGrads {
+            means: b.download_owned(g.means).map_err(be)?,
+            f: match g.f {
+                Some(f) => b.download_owned(f).map_err(be)?,
+                None => Vec::new(),
+            },
+            ..Default::default()
+        })
     }
 
     /// Brings scene gradients back to the host, freeing each buffer as it comes.
@@ -381,5 +447,37 @@ impl<B: SplatKernels> Renderer for SplatRenderer<B> {
         deform: Option<&Deformation>,
     ) -> Result<GaussianGrads> {
         SplatRenderer::frame_vjp(self, frame, scene, deform)
+    }
+
+    fn frame_vjp_motion(
+        &mut self,
+        frame: PreparedFrame,
+        scene: &Gaussians,
+        deform: &Deformation,
+    ) -> Result<GaussianGrads> {
+        SplatRenderer::frame_vjp_motion(self, frame, scene, deform)
+    }
+
+    fn upload_scene(&mut self, scene: &Gaussians) -> Result<SceneHandle> {
+        SplatRenderer::upload_scene(self, scene)
+    }
+
+    fn prepare_frame_on(
+        &mut self,
+        scene: &mut SceneHandle,
+        deform: &Deformation,
+        cam: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<PreparedFrame> {
+        SplatRenderer::prepare_frame_on(self, scene, deform, cam, settings)
+    }
+
+    fn frame_vjp_motion_on(
+        &mut self,
+        frame: PreparedFrame,
+        scene: &mut SceneHandle,
+        deform: &Deformation,
+    ) -> Result<GaussianGrads> {
+        SplatRenderer::frame_vjp_motion_on(self, frame, scene, deform)
     }
 }

@@ -19,7 +19,9 @@ use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::simulation::AnyState;
 use r4d_mpm::DynSimulation;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
-use r4d_splat::{Camera, Deformation, Gaussians, PreparedFrame, RenderSettings, Renderer, SimLink};
+use r4d_splat::{
+    Camera, Deformation, Gaussians, PreparedFrame, RenderSettings, Renderer, SceneHandle, SimLink,
+};
 use serde::Serialize;
 use std::cell::RefCell;
 use std::ops::Range;
@@ -202,6 +204,10 @@ pub struct StageProfile {
     pub backward_peak_bytes: usize,
     /// Device peak (simulation and rendering on the GPU), when one is used.
     pub device_peak_bytes: Option<u64>,
+    /// Bytes copied from the host to the device during the evaluation (on a GPU).
+    pub host_to_device_bytes: Option<u64>,
+    /// Bytes copied from the device to the host during the evaluation (on a GPU).
+    pub device_to_host_bytes: Option<u64>,
     /// Row bands per view.
     pub bands: usize,
 }
@@ -537,9 +543,15 @@ impl<'a> Objective<'a> {
             p.validate(&format!("parameters of slot {i}"))?;
         }
         self.compute.reset_device_peak();
+        let before = self.compute.device_memory();
         let r = self.run_on(slots, mode);
+        let after = self.compute.device_memory();
         if let Ok(mut p) = self.profile.lock() {
             p.device_peak_bytes = self.compute.device_peak_bytes();
+            if let (Some(a), Some(b)) = (after, before) {
+                p.host_to_device_bytes = Some(a.uploaded_bytes - b.uploaded_bytes);
+                p.device_to_host_bytes = Some(a.downloaded_bytes - b.downloaded_bytes);
+            }
         }
         r
     }
@@ -646,19 +658,46 @@ impl<'a> Objective<'a> {
             .deformation(&self.problem.scene, &s.x, Some(&f), what)?)
     }
 
+    /// The scene kept on the renderer's device for one evaluation's frames
+    /// ([`Renderer::upload_scene`]), made on first use; `None` on a host backend, whose
+    /// frames read the scene in place.
+    fn scene_on_device<'h>(
+        &self,
+        handle: &'h mut Option<SceneHandle>,
+    ) -> Result<Option<&'h mut SceneHandle>, FitError> {
+        if self.compute.device_memory().is_none() {
+            return Ok(None);
+        }
+        if handle.is_none() {
+            let h = self
+                .with_renderer(|r| r.upload_scene(&self.problem.scene).map_err(FitError::from))?;
+            *handle = Some(h);
+        }
+        Ok(handle.as_mut())
+    }
+
     /// Projects, sorts and bins one simulated frame for the whole image of `cam`
-    /// ([`Renderer::prepare_frame`]).
+    /// ([`Renderer::prepare_frame`]; on a device backend from the scene kept there,
+    /// `handle`).
     fn prepare_frame(
         &self,
+        handle: &mut Option<SceneHandle>,
         s: &Frame,
         cam: &Camera,
         what: &str,
     ) -> Result<PreparedFrame, FitError> {
         let d = self.deformation(s, what)?;
-        self.with_renderer(|r| {
-            r.prepare_frame(&self.problem.scene, Some(&d), cam, &self.problem.settings)
-                .map_err(FitError::from)
-        })
+        let settings = &self.problem.settings;
+        match self.scene_on_device(handle)? {
+            Some(h) => self.with_renderer(|r| {
+                r.prepare_frame_on(h, &d, cam, settings)
+                    .map_err(FitError::from)
+            }),
+            None => self.with_renderer(|r| {
+                r.prepare_frame(&self.problem.scene, Some(&d), cam, settings)
+                    .map_err(FitError::from)
+            }),
+        }
     }
 
     /// Rows `rows` of a prepared frame's colour image.
@@ -685,15 +724,21 @@ impl<'a> Objective<'a> {
     /// particles' positions and deformation gradients (simulation space) to `out`.
     fn frame_vjp_into(
         &self,
+        handle: &mut Option<SceneHandle>,
         s: &Frame,
         p: PreparedFrame,
         out: &mut FrameGrad,
     ) -> Result<(), FitError> {
         let d = self.deformation(s, "reverse sweep")?;
-        let gr = self.with_renderer(|r| {
-            r.frame_vjp(p, &self.problem.scene, Some(&d))
-                .map_err(FitError::from)
-        })?;
+        let gr = match self.scene_on_device(handle)? {
+            Some(h) => {
+                self.with_renderer(|r| r.frame_vjp_motion_on(p, h, &d).map_err(FitError::from))?
+            }
+            None => self.with_renderer(|r| {
+                r.frame_vjp_motion(p, &self.problem.scene, &d)
+                    .map_err(FitError::from)
+            })?,
+        };
         drop(d);
         Ok(self
             .problem
@@ -863,6 +908,8 @@ impl<'a> Objective<'a> {
         let nt = self.time.taps.len();
         let n = self.sim.len();
         prof.bands = 0;
+        // The scene on the renderer's device for this evaluation's frames.
+        let mut handle: Option<SceneHandle> = None;
         for (v, view) in self.problem.views.iter().enumerate() {
             let dms = self.view_loss(view)?;
             let band_rows = dms.band_rows();
@@ -883,7 +930,8 @@ impl<'a> Objective<'a> {
                     if used.saturating_add(next) > budget {
                         break;
                     }
-                    let p = self.prepare_frame(f, &view.camera, &format!("simulated frame {j}"))?;
+                    let what = format!("simulated frame {j}");
+                    let p = self.prepare_frame(&mut handle, f, &view.camera, &what)?;
                     next = p.bytes();
                     used = used.saturating_add(next);
                     prepared[j] = Some(p);
@@ -915,7 +963,8 @@ impl<'a> Objective<'a> {
                                 (Some(p), _) => self.render_rows(p, rows32.clone()).map(Some),
                                 (None, Some(f)) => {
                                     let what = format!("simulated frame {j}");
-                                    let p = self.prepare_frame(f, &view.camera, &what)?;
+                                    let p =
+                                        self.prepare_frame(&mut handle, f, &view.camera, &what)?;
                                     self.render_rows(&p, rows32.clone()).map(Some)
                                 }
                                 (None, None) => Ok(None),
@@ -956,14 +1005,15 @@ impl<'a> Objective<'a> {
                                     // Not kept: prepared again, this band's VJP pulled
                                     // through its projection at once.
                                     let what = format!("simulated frame {j}");
-                                    let mut q = self.prepare_frame(f, &view.camera, &what)?;
+                                    let mut q =
+                                        self.prepare_frame(&mut handle, f, &view.camera, &what)?;
                                     self.render_rows_vjp(&mut q, rows32.clone(), &buf)?;
                                     let gs = grads.as_deref_mut().expect("in the gradient branch");
                                     let acc = gs[j].get_or_insert_with(|| FrameGrad {
                                         x: vec![[0.0; 3]; n],
                                         f: vec![[0.0; 9]; n],
                                     });
-                                    self.frame_vjp_into(f, q, acc)?;
+                                    self.frame_vjp_into(&mut handle, f, q, acc)?;
                                 }
                             }
                         }
@@ -982,7 +1032,7 @@ impl<'a> Objective<'a> {
                         x: vec![[0.0; 3]; n],
                         f: vec![[0.0; 9]; n],
                     });
-                    self.frame_vjp_into(f, p, acc)?;
+                    self.frame_vjp_into(&mut handle, f, p, acc)?;
                 }
                 prof.render_vjp_s += t0.elapsed().as_secs_f64();
             }
@@ -1176,9 +1226,17 @@ impl<'a> Objective<'a> {
 
     fn save_profile(&self, p: &StageProfile) {
         if let Ok(mut slot) = self.profile.lock() {
-            let device = slot.device_peak_bytes;
+            let device = (
+                slot.device_peak_bytes,
+                slot.host_to_device_bytes,
+                slot.device_to_host_bytes,
+            );
             *slot = p.clone();
-            slot.device_peak_bytes = device;
+            (
+                slot.device_peak_bytes,
+                slot.host_to_device_bytes,
+                slot.device_to_host_bytes,
+            ) = device;
         }
     }
 }

@@ -77,8 +77,8 @@ impl Compute for VulkanCompute {
         Ok(self.engine.kernel_times())
     }
 
-    fn device_peak_bytes(&self) -> Option<u64> {
+    fn device_memory(&self) -> Option<r4d_mpm::MemoryUsage> {
         use r4d_gpu::GpuEngine;
-        Some(self.engine.memory_usage().peak_bytes)
+        Some(self.engine.memory_usage())
     }
 }

@@ -74,7 +74,12 @@ impl Compute for WgpuCompute {
         self.ctx.reset_peak();
     }
 
-    fn device_peak_bytes(&self) -> Option<u64> {
-        Some(self.ctx.peak_bytes())
+    fn device_memory(&self) -> Option<r4d_mpm::MemoryUsage> {
+        Some(r4d_mpm::MemoryUsage {
+            bytes_in_use: self.ctx.bytes_in_use(),
+            peak_bytes: self.ctx.peak_bytes(),
+            uploaded_bytes: self.ctx.uploaded_bytes(),
+            downloaded_bytes: self.ctx.downloaded_bytes(),
+        })
     }
 }
