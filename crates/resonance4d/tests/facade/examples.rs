@@ -1,16 +1,16 @@
 //! The examples run as tests (`cargo test` runs their `main`), so every one is checked by the
 //! suite: each asserts its own result.
 
-#[path = "../examples/frame_loop.rs"]
+#[path = "../../examples/frame_loop.rs"]
 mod frame_loop;
 
-#[path = "../examples/fit_video.rs"]
+#[path = "../../examples/fit_video.rs"]
 mod fit_video;
 
-#[path = "../examples/custom_loss.rs"]
+#[path = "../../examples/custom_loss.rs"]
 mod custom_loss;
 
-#[path = "../examples/counting_backend.rs"]
+#[path = "../../examples/counting_backend.rs"]
 mod counting_backend;
 
 #[test]
