@@ -86,7 +86,7 @@ impl Video8 {
     }
 }
 
-/// A reference video as stored by [`BandedDms`]: bytes when the source is 8-bit, else f32.
+/// A reference video as the band-wise losses store it (`r4d_loss::bands::BandedDms`): bytes when the source is 8-bit, else f32.
 /// `From<Video<f32>>` picks the compact form ([`ReferenceVideo::compact`]).
 #[derive(Clone, Debug, PartialEq)]
 pub enum ReferenceVideo {

@@ -2,7 +2,7 @@
 //! holds a problem ([`HostSim`]: config, particles, parameter slots) on backend `B` and runs
 //! its substeps ([`crate::substep::forward`]) on a [`State`]:
 //!
-//! * frame by frame with health checks ([`crate::Simulator`], [`SimState`]): `r4d simulate`,
+//! * frame by frame with health checks ([`crate::Simulator`], [`crate::SimState`]): `r4d simulate`,
 //!   an engine's frame loop ([`frames`]);
 //! * substep by substep with their VJPs ([`Differentiable`]): the fits and the evaluation,
 //!   which checkpoint the forward pass ([`crate::adjoint::checkpoint`]);
