@@ -104,17 +104,19 @@ impl<B: MpmKernels> Simulation<B> {
         let mut pb = sim.setup.particle_bcs.clone();
         pb.push(ParticleBc::default());
         let nb = blocks_per_axis(n);
+        // The state fields are placeholders a state's buffers are swapped with for a forward
+        // substep (no copy); the reverse sweep, which copies a checkpoint in, sizes them.
         let p = Particles {
             count: np,
-            x: b.zeros(np)?,
-            v: b.zeros(np)?,
-            c: b.zeros(np)?,
-            f: b.zeros(np)?,
+            x: b.zeros(0)?,
+            v: b.zeros(0)?,
+            c: b.zeros(0)?,
+            f: b.zeros(0)?,
             x0: b.upload(&sim.x0)?,
             vol0: b.upload(&vol0)?,
             mass: b.zeros(np)?,
             part: b.upload(&sim.slot)?,
-            plastic: b.zeros(np)?,
+            plastic: b.zeros(0)?,
             stress: b.zeros(np)?,
         };
         let g = Grid {
@@ -176,7 +178,30 @@ impl<B: MpmKernels> Simulation<B> {
         params: &[PhysParams<B::Scalar>],
         v0: &[[B::Scalar; 3]],
     ) -> std::result::Result<State<B>, B::Error> {
-        State::upload(&self.b, &self.sim.init(params, v0))
+        // Field by field, so at most one field's host copy is alive ([`HostSim::init`]'s
+        // values).
+        let (b, sim) = (&self.b, &*self.sim);
+        let n = sim.len();
+        let (z, o) = (B::Scalar::c(0.0), B::Scalar::c(1.0));
+        let x: Vec<[B::Scalar; 3]> = sim
+            .x0
+            .iter()
+            .map(|p| p.map(|c| B::Scalar::c(c as f64)))
+            .collect();
+        let x = b.upload(&x)?;
+        let f = b.upload(&vec![[o, z, z, z, o, z, z, z, o]; n])?;
+        let plastic: Vec<[B::Scalar; 2]> = sim
+            .slot
+            .iter()
+            .map(|&p| [params[p as usize].yield_stress, o])
+            .collect();
+        Ok(State {
+            x,
+            v: b.upload(v0)?,
+            c: b.zeros(n)?,
+            f,
+            plastic: b.upload(&plastic)?,
+        })
     }
 
     /// A zero parameter gradient (one entry per slot).
@@ -308,6 +333,7 @@ impl<B: MpmAdjointKernels> Differentiable for Simulation<B> {
                 Tape::new(&self.b, np, n)?,
                 AdjointScratch::new(&self.b, np, n)?,
             ));
+            State::zeros(&self.b, np)?.swap_with(&mut w.p);
         }
         let c = self.sim.consts_at(k);
         let t = SubstepTables {
