@@ -6,34 +6,9 @@ pub use r4d_frames::Input;
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum LossError {
-    /// The data length does not match the stated shape.
-    #[error("{input}: {got} values for {frames} x {height} x {width} x 3 = {expected}")]
-    DataLength {
-        /// The video.
-        input: Input,
-        /// Frames stated.
-        frames: usize,
-        /// Rows stated.
-        height: usize,
-        /// Columns stated.
-        width: usize,
-        /// Values the shape needs.
-        expected: usize,
-        /// Values given.
-        got: usize,
-    },
-    /// A video has no frames or empty frames.
-    #[error("{input} is empty ({frames} frames of {height} x {width})")]
-    Empty {
-        /// The video.
-        input: Input,
-        /// Frames.
-        frames: usize,
-        /// Rows.
-        height: usize,
-        /// Columns.
-        width: usize,
-    },
+    /// A malformed video: its shape, or a NaN or infinite value (names the input).
+    #[error(transparent)]
+    Frame(#[from] r4d_frames::FrameError),
     /// The two videos have different frame counts.
     #[error("reference has {reference} frames, rendered has {rendered}")]
     FrameCount {
@@ -115,22 +90,6 @@ pub enum LossError {
         /// `(window - 1) * 16`.
         min_side_exclusive: usize,
     },
-    /// A NaN or infinite value.
-    #[error("{input}: frame {frame} has {kind} at row {row}, column {col}, channel {channel}")]
-    NonFinite {
-        /// The video.
-        input: Input,
-        /// Frame index.
-        frame: usize,
-        /// Row.
-        row: usize,
-        /// Column.
-        col: usize,
-        /// Channel (0 = R).
-        channel: usize,
-        /// "NaN" or "an infinite value".
-        kind: &'static str,
-    },
     /// A gradient buffer of the wrong length.
     #[error("gradient buffer has {got} values, the rendered video has {expected}")]
     GradientLength {
@@ -142,55 +101,4 @@ pub enum LossError {
     /// An invalid configuration value.
     #[error("invalid loss configuration: {0}")]
     Config(String),
-}
-
-/// A malformed video as the loss reports it (the same variants).
-impl From<r4d_frames::FrameError> for LossError {
-    fn from(e: r4d_frames::FrameError) -> Self {
-        use r4d_frames::FrameError as F;
-        match e {
-            F::DataLength {
-                input,
-                frames,
-                height,
-                width,
-                expected,
-                got,
-            } => LossError::DataLength {
-                input,
-                frames,
-                height,
-                width,
-                expected,
-                got,
-            },
-            F::Empty {
-                input,
-                frames,
-                height,
-                width,
-            } => LossError::Empty {
-                input,
-                frames,
-                height,
-                width,
-            },
-            F::NonFinite {
-                input,
-                frame,
-                row,
-                col,
-                channel,
-                kind,
-            } => LossError::NonFinite {
-                input,
-                frame,
-                row,
-                col,
-                channel,
-                kind,
-            },
-            _ => LossError::Config(e.to_string()),
-        }
-    }
 }

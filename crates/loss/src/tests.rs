@@ -405,8 +405,8 @@ fn bad_input_gives_typed_errors_naming_the_input() {
     let e = loss.value_and_grad_into(&y, &mut g).unwrap_err();
     assert!(matches!(e, LossError::GradientLength { .. }), "{e}");
     assert!(matches!(
-        Video::<f32>::new(2, 4, 4, vec![0.0; 10]).map_err(LossError::from),
-        Err(LossError::DataLength { .. })
+        Video::<f32>::new(2, 4, 4, vec![0.0; 10]),
+        Err(r4d_frames::FrameError::DataLength { .. })
     ));
     let mut c = DmsConfig::default();
     c.spectral.eps = -1.0;

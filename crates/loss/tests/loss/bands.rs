@@ -188,7 +188,7 @@ fn bad_settings_are_typed_errors() {
     nan.data_mut()[7] = f32::NAN;
     assert!(matches!(
         loss.band_terms(0, &nan),
-        Err(LossError::NonFinite { .. })
+        Err(LossError::Frame(r4d_loss::FrameError::NonFinite { .. }))
     ));
 }
 

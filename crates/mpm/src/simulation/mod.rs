@@ -252,12 +252,7 @@ impl<B: MpmKernels> Simulation<B> {
         let w = &mut *guard;
         self.prepare(w, params)?;
         let c = self.sim.consts_at(k);
-        let t = SubstepTables {
-            parts: &w.parts,
-            mats: &w.mats,
-            grid_bcs: &self.grid_bcs,
-            particle_bcs: &self.particle_bcs,
-        };
+        let t = self.tables(&w.parts, &w.mats);
         w.health_unread = true;
         s.swap_with(&mut w.p);
         let r = substep::forward(&self.b, &mut w.p, &mut w.g, &t, &c, None);
@@ -293,6 +288,20 @@ impl<B: MpmKernels> Simulation<B> {
         self.b.write(&mut w.p.mass, &t.mass)?;
         w.params = Some(params.to_vec());
         Ok(())
+    }
+
+    /// The tables a substep reads besides the particles and the grid.
+    fn tables<'t>(
+        &'t self,
+        parts: &'t B::Buf<PartConsts>,
+        mats: &'t B::Buf<[B::Scalar; MAT_CONSTS]>,
+    ) -> SubstepTables<'t, B> {
+        SubstepTables {
+            parts,
+            mats,
+            grid_bcs: &self.grid_bcs,
+            particle_bcs: &self.particle_bcs,
+        }
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Work<B>> {
@@ -336,12 +345,7 @@ impl<B: MpmAdjointKernels> Differentiable for Simulation<B> {
             State::zeros(&self.b, np)?.swap_with(&mut w.p);
         }
         let c = self.sim.consts_at(k);
-        let t = SubstepTables {
-            parts: &w.parts,
-            mats: &w.mats,
-            grid_bcs: &self.grid_bcs,
-            particle_bcs: &self.particle_bcs,
-        };
+        let t = self.tables(&w.parts, &w.mats);
         w.health_unread = true;
         let (tape, scratch) = w.reverse.as_mut().expect("allocated above");
         before.copy_into(&self.b, &mut w.p)?;
