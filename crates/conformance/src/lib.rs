@@ -198,10 +198,10 @@ pub(crate) fn rel(a: f64, b: f64) -> f64 {
 
 /// Relative L2 difference of `got` from `want`.
 pub(crate) fn rel_l2(got: &[f64], want: &[f64]) -> f64 {
-    let d: f64 = got.iter().zip(want).map(|(a, b)| (a - b) * (a - b)).sum();
-    let n: f64 = want.iter().map(|b| b * b).sum();
     if got.len() != want.len() {
         return f64::INFINITY;
     }
+    let d: f64 = got.iter().zip(want).map(|(a, b)| (a - b) * (a - b)).sum();
+    let n: f64 = want.iter().map(|b| b * b).sum();
     (d / n.max(1e-300)).sqrt()
 }

@@ -43,12 +43,10 @@
 //! ```
 //! ([`ReferenceCompute`] is that implementation.)
 
-use crate::record::{FitState, IterRecord};
-use crate::trajectory::{self, FitOptions, Fitted};
 use crate::FitError;
 use r4d_mpm::adjoint::host::HostSim;
 use r4d_mpm::adjoint::kernels::MpmAdjointKernels;
-use r4d_mpm::{DynSimulation, PartParams, ParticleSet, SimConfig, Simulation};
+use r4d_mpm::{DynSimulation, PartParams, Simulation};
 use r4d_splat::{Camera, Deformation, Gaussians, Image, RenderSettings, Renderer};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -171,31 +169,6 @@ pub fn simulation_on<B: MpmAdjointKernels>(
 
 /// Receives frame `j`'s positions of a forward simulation ([`simulate_frames`]).
 pub type FrameSink<'a> = dyn FnMut(usize, &[[f64; 3]]) -> Result<(), FitError> + 'a;
-
-/// [`trajectory::fit_trajectory_resumable`]: the trajectory fit on `compute`'s kernels (in f64
-/// where the backend has a choice).
-#[allow(clippy::too_many_arguments)]
-pub fn fit_trajectory_on(
-    compute: &dyn Compute,
-    config: &SimConfig,
-    scene: &ParticleSet,
-    targets: &[Vec<[f32; 3]>],
-    opts: &FitOptions,
-    resume: Option<FitState>,
-    on_iter: &mut dyn FnMut(&IterRecord),
-    on_checkpoint: &mut dyn FnMut(&FitState),
-) -> Result<Fitted, FitError> {
-    trajectory::fit_trajectory_resumable(
-        compute,
-        config,
-        scene,
-        targets,
-        opts,
-        resume,
-        on_iter,
-        on_checkpoint,
-    )
-}
 
 /// Simulates `frames` frames of `sim` with the parameters `slots` (one per parameter slot) on
 /// `compute`'s kernels, the same substeps as every fit: `on_frame(j, x)` gets frame `j`'s

@@ -549,8 +549,9 @@ impl<'a> Objective<'a> {
         if let Ok(mut p) = self.profile.lock() {
             p.device_peak_bytes = self.compute.device_peak_bytes();
             if let (Some(a), Some(b)) = (after, before) {
-                p.host_to_device_bytes = Some(a.uploaded_bytes - b.uploaded_bytes);
-                p.device_to_host_bytes = Some(a.downloaded_bytes - b.downloaded_bytes);
+                p.host_to_device_bytes = Some(a.uploaded_bytes.saturating_sub(b.uploaded_bytes));
+                p.device_to_host_bytes =
+                    Some(a.downloaded_bytes.saturating_sub(b.downloaded_bytes));
             }
         }
         r
