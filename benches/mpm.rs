@@ -12,7 +12,7 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use r4d_backend_cpu::CpuBackend;
-use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
+use r4d_backend_wgpu::{WgpuBackend, WgpuContext};
 use r4d_mpm::{
     reference::ReferenceBackend, BoundaryCondition, MpmKernels, PartParams, ParticleSet, Shape,
     SimConfig, Simulation, Simulator, Surface,
@@ -126,8 +126,8 @@ fn benches(c: &mut Criterion) {
             bench_backend(
                 c,
                 "wgpu",
-                || WgpuMpm::new(ctx.clone()),
-                |b: &WgpuMpm| {
+                || WgpuBackend::new(ctx.clone()),
+                |b: &WgpuBackend| {
                     let _ = b.engine().context().device.poll(wgpu::PollType::Wait {
                         submission_index: None,
                         timeout: None,
@@ -146,8 +146,8 @@ fn benches(c: &mut Criterion) {
             bench_backend(
                 c,
                 "vulkan",
-                || r4d_backend_vulkan::VulkanMpm::new(e.clone()),
-                |b: &r4d_backend_vulkan::VulkanMpm| {
+                || r4d_backend_vulkan::VulkanBackend::new(e.clone()),
+                |b: &r4d_backend_vulkan::VulkanBackend| {
                     let _ = b.engine().finish();
                 },
                 &[32_000, 100_000],

@@ -6,10 +6,10 @@
 //! * `adjoint_substep/cpu/{forward,backward}/N`: the parallel CPU adjoint
 //!   (`Simulation<CpuBackend<f32>>`, all cores);
 //! * `adjoint_substep/wgpu/{forward,backward}/N`: the device adjoint
-//!   (`Simulation<WgpuMpm>`, the same stepper) when a wgpu adapter exists; every call waits
+//!   (`Simulation<WgpuBackend>`, the same stepper) when a wgpu adapter exists; every call waits
 //!   for the device, so times are execution times;
 //! * `adjoint_substep/vulkan/{forward,backward}/N`: the same on the Vulkan engine
-//!   (`Simulation<VulkanMpm>`; each call ends with `VulkanEngine::finish`).
+//!   (`Simulation<VulkanBackend>`; each call ends with `VulkanEngine::finish`).
 //!
 //! The input of every timed call is the same: the state after 20 warm-up substeps (run on
 //! the CPU, uploaded for wgpu) and, for the backward, an adjoint seeded as by a loss on the
@@ -40,8 +40,8 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use r4d_backend_cpu::{CpuBackend, Par};
-use r4d_backend_vulkan::{VulkanEngine, VulkanMpm};
-use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
+use r4d_backend_vulkan::{VulkanBackend, VulkanEngine};
+use r4d_backend_wgpu::{WgpuBackend, WgpuContext};
 use r4d_gpu::GpuEngine;
 use r4d_mpm::adjoint::checkpoint::Differentiable;
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
@@ -270,7 +270,7 @@ fn bench_wgpu(c: &mut Criterion, cases: &[Case]) {
         reset_peak: &|| ctx.reset_peak(),
         peak_bytes: &|| ctx.peak_bytes(),
     };
-    bench_device(c, cases, &dev, || WgpuMpm::new(ctx.clone()));
+    bench_device(c, cases, &dev, || WgpuBackend::new(ctx.clone()));
 }
 
 fn bench_vulkan(c: &mut Criterion, cases: &[Case]) {
@@ -288,7 +288,7 @@ fn bench_vulkan(c: &mut Criterion, cases: &[Case]) {
         reset_peak: &|| engine.reset_peak(),
         peak_bytes: &|| engine.memory_usage().peak_bytes,
     };
-    bench_device(c, cases, &dev, || VulkanMpm::new(engine.clone()));
+    bench_device(c, cases, &dev, || VulkanBackend::new(engine.clone()));
 }
 
 /// A GPU engine as the bench drives it: waiting for its work and its memory peak.

@@ -20,8 +20,8 @@
 )]
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use r4d_backend_cpu::splat::CpuSplat;
-use r4d_backend_wgpu::{WgpuContext, WgpuSplat};
+use r4d_backend_cpu::CpuBackend;
+use r4d_backend_wgpu::{WgpuBackend, WgpuContext};
 use r4d_splat::{Camera, Deformation, Gaussians, RenderSettings, Renderer, SplatRenderer};
 use resonance4d::alloc::{peak_since, reset_peak, Counting};
 use std::sync::Arc;
@@ -125,7 +125,7 @@ fn bench(c: &mut Criterion) {
         let (g, d) = scene_of(n);
         let cam = Camera::look_at(w, h, 60.0, [0.0, -3.0, 0.5], [0.0; 3], [0.0, 0.0, 1.0]);
         let set = RenderSettings::default();
-        let mut r = SplatRenderer::new(CpuSplat);
+        let mut r = SplatRenderer::new(CpuBackend::default());
         let id = format!("{n}/{w}x{h}");
         let base = reset_peak();
         r.render(g, Some(d), &cam, &set).unwrap();
@@ -169,7 +169,7 @@ fn bench(c: &mut Criterion) {
         "splat_wgpu",
         &cases,
         &scenes,
-        || WgpuSplat::new(ctx.clone()),
+        || WgpuBackend::new(ctx.clone()),
         || ctx.reset_peak(),
         || ctx.peak_bytes(),
     );
@@ -182,7 +182,7 @@ fn bench(c: &mut Criterion) {
                 "splat_vulkan",
                 &cases,
                 &scenes,
-                || r4d_backend_vulkan::VulkanSplat::new(e.clone()),
+                || r4d_backend_vulkan::VulkanBackend::new(e.clone()),
                 || e.reset_peak(),
                 || {
                     use r4d_gpu::GpuEngine;

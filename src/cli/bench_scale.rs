@@ -47,6 +47,11 @@ pub struct BenchScaleArgs {
     /// fit iteration.
     #[arg(long, value_name = "CANDIDATES")]
     init: Option<usize>,
+    /// Read every simulated frame back to the host and upload its deformation, instead of
+    /// keeping frames on the GPU from the simulation to the rasterizer (the same numbers up
+    /// to rounding; for comparing the bytes moved between host and device).
+    #[arg(long)]
+    frames_via_host: bool,
     /// Also write the measurement as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -82,6 +87,7 @@ pub fn run_cmd(a: BenchScaleArgs) -> Result<()> {
         checkpointing,
         band_rows: a.band_rows,
         reference_from_simulation,
+        device_frames: !a.frames_via_host,
     };
     // Every size checked (names the flag) before the backend opens or anything is built.
     scale

@@ -6,7 +6,7 @@ use super::BackendKind;
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use r4d_backend_cpu::splat::CpuSplat;
+use r4d_backend_cpu::CpuBackend;
 use r4d_splat::reference::ReferenceSplat;
 use r4d_splat::{
     load_cameras, Deformation, Gaussians, Image, RasterizeMode, RenderSettings, Renderer, SimLink,
@@ -127,12 +127,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let vulkan = matches!(a.backend, BackendKind::Vulkan);
     let mut _profile = super::profile::Profile::unsupported(a.backend.name(), a.profile && !vulkan);
     let mut renderer: Box<dyn Renderer> = match a.backend {
-        BackendKind::Cpu => Box::new(SplatRenderer::new(CpuSplat)),
+        BackendKind::Cpu => Box::new(SplatRenderer::new(CpuBackend::default())),
         BackendKind::Reference => Box::new(SplatRenderer::new(ReferenceSplat)),
         BackendKind::Wgpu => {
             let ctx = r4d_backend_wgpu::WgpuContext::new()?;
             eprintln!("wgpu adapter: {} ({:?})", ctx.info.name, ctx.info.backend);
-            Box::new(SplatRenderer::new(r4d_backend_wgpu::WgpuSplat::new(
+            Box::new(SplatRenderer::new(r4d_backend_wgpu::WgpuBackend::new(
                 std::sync::Arc::new(ctx),
             )))
         }
@@ -141,7 +141,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 .map_err(|e| anyhow::anyhow!("--backend vulkan: {e}"))?;
             eprintln!("vulkan device: {}", e.device_name());
             _profile = super::profile::Profile::on_vulkan(&e, a.profile)?;
-            Box::new(SplatRenderer::new(r4d_backend_vulkan::VulkanSplat::new(e)))
+            Box::new(SplatRenderer::new(r4d_backend_vulkan::VulkanBackend::new(
+                e,
+            )))
         }
     };
     let link_default = |dir: Option<&Path>| -> Result<Option<SimLink>> {

@@ -2,7 +2,7 @@
 //! `r4d fit --parts`).
 
 use anyhow::{bail, Context, Result};
-use r4d_backend_cpu::splat::CpuSplat;
+use r4d_backend_cpu::CpuBackend;
 use r4d_segment::label_map::label_map;
 use r4d_segment::lift::{lift_with_progress, LiftConfig};
 use r4d_segment::smooth::{smooth_lifted, SmoothConfig};
@@ -290,7 +290,7 @@ fn write_views(
         mode: set.mode.unwrap_or_default(),
     };
     let m = parts.num_parts;
-    let mut r = SplatRenderer::new(CpuSplat);
+    let mut r = SplatRenderer::new(CpuBackend::default());
     let mut shares = Vec::with_capacity(set.cameras.len());
     for (v, cam) in set.cameras.iter().enumerate() {
         let img = r.render(&coloured, None, cam, &settings)?;

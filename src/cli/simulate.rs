@@ -72,7 +72,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         BackendKind::Wgpu => {
             let ctx = r4d_backend_wgpu::WgpuContext::new()?;
             eprintln!("wgpu adapter: {} ({:?})", ctx.info.name, ctx.info.backend);
-            let backend = r4d_backend_wgpu::WgpuMpm::new(std::sync::Arc::new(ctx));
+            let backend = r4d_backend_wgpu::WgpuBackend::new(std::sync::Arc::new(ctx));
             simulate(backend, &a, config, scene, &source, &warnings)
         }
         BackendKind::Vulkan => {
@@ -80,7 +80,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
                 .map_err(|e| anyhow::anyhow!("--backend vulkan: {e}"))?;
             eprintln!("vulkan device: {}", e.device_name());
             let _profile = super::profile::Profile::on_vulkan(&e, a.profile)?;
-            let backend = r4d_backend_vulkan::VulkanMpm::new(e);
+            let backend = r4d_backend_vulkan::VulkanBackend::new(e);
             simulate(backend, &a, config, scene, &source, &warnings)
         }
     }

@@ -1,13 +1,13 @@
 //! The device adjoint against the parallel CPU adjoint, one suite for every GPU engine (wgpu
-//! and Vulkan: `wgpu::*`, `vulkan::*`): the one stepper (`Simulation`) on `WgpuMpm` /
-//! `VulkanMpm` and on `CpuBackend<f32>`, driven by the same checkpointing
+//! and Vulkan: `wgpu::*`, `vulkan::*`): the one stepper (`Simulation`) on `WgpuBackend` /
+//! `VulkanBackend` and on `CpuBackend<f32>`, driven by the same checkpointing
 //! driver: parameter gradients (the bound for elastic scenes: 1e-3 relative) and the
 //! adjoint of the initial state.
 
 use crate::common::gpu::{self, Lease};
 use r4d_backend_cpu::{CpuBackend, Par};
-use r4d_backend_vulkan::{VulkanEngine, VulkanMpm};
-use r4d_backend_wgpu::{WgpuContext, WgpuMpm};
+use r4d_backend_vulkan::{VulkanBackend, VulkanEngine};
+use r4d_backend_wgpu::{WgpuBackend, WgpuContext};
 use r4d_conformance::scenes::{initial_velocity, two_jellies as scene, weights};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
 use r4d_mpm::adjoint::host::{HostSim, HostState, PhysParams};
@@ -76,8 +76,8 @@ fn gpu(
     params: &[PhysParams<f32>],
 ) -> (Vec<PhysParams<f32>>, HostState<f32>) {
     match b {
-        Gpu::Wgpu(ctx) => run(WgpuMpm::new((**ctx).clone()), sim, params),
-        Gpu::Vulkan(e) => run(VulkanMpm::new((**e).clone()), sim, params),
+        Gpu::Wgpu(ctx) => run(WgpuBackend::new((**ctx).clone()), sim, params),
+        Gpu::Vulkan(e) => run(VulkanBackend::new((**e).clone()), sim, params),
     }
 }
 

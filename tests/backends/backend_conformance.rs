@@ -11,7 +11,7 @@
 use crate::common::gpu;
 use r4d_backend_cpu::CpuBackend;
 use r4d_backend_wgpu::testing::gpu_or_skip_with;
-use r4d_backend_wgpu::WgpuMpm;
+use r4d_backend_wgpu::WgpuBackend;
 use r4d_mpm::{MpmKernels, ParticleSet, SimConfig, Simulation, Simulator};
 use std::sync::Arc;
 
@@ -269,7 +269,7 @@ fn wgpu_jelly_beam_with_every_boundary_condition_matches_cpu() {
     compare_elastic(
         "wgpu jelly beam",
         JELLY_BEAM,
-        WgpuMpm::new((*ctx).clone()),
+        WgpuBackend::new((*ctx).clone()),
         20,
     );
 }
@@ -287,7 +287,7 @@ fn wgpu_compare_exchange_scatter_matches_cpu() {
     compare_elastic(
         "wgpu (compare-exchange scatter) two-part object",
         TWO_PART,
-        WgpuMpm::new(Arc::new(c)),
+        WgpuBackend::new(Arc::new(c)),
         20,
     );
 }
@@ -304,7 +304,7 @@ fn wgpu_two_part_object_matches_cpu() {
     compare_elastic(
         "wgpu two-part object",
         TWO_PART,
-        WgpuMpm::new((*ctx).clone()),
+        WgpuBackend::new((*ctx).clone()),
         20,
     );
 }
@@ -372,7 +372,7 @@ fn wgpu_path_dependent_materials_match_cpu() {
     let Some(ctx) = gpu::wgpu("wgpu_plastic") else {
         return;
     };
-    path_dependent_materials_match_cpu("wgpu", || WgpuMpm::new((*ctx).clone()));
+    path_dependent_materials_match_cpu("wgpu", || WgpuBackend::new((*ctx).clone()));
 }
 
 #[test]
@@ -387,13 +387,13 @@ fn vulkan_elastic_scenes_match_cpu() {
     compare_elastic(
         "vulkan jelly beam",
         JELLY_BEAM,
-        r4d_backend_vulkan::VulkanMpm::new(e.clone()),
+        r4d_backend_vulkan::VulkanBackend::new(e.clone()),
         20,
     );
     compare_elastic(
         "vulkan two-part object",
         TWO_PART,
-        r4d_backend_vulkan::VulkanMpm::new(e.clone()),
+        r4d_backend_vulkan::VulkanBackend::new(e.clone()),
         20,
     );
     r4d_backend_vulkan::testing::assert_validation_clean(&e, "vulkan_elastic");
@@ -413,7 +413,7 @@ fn vulkan_compare_exchange_scatter_matches_cpu() {
     compare_elastic(
         "vulkan (compare-exchange scatter) two-part object",
         TWO_PART,
-        r4d_backend_vulkan::VulkanMpm::new(e.clone()),
+        r4d_backend_vulkan::VulkanBackend::new(e.clone()),
         20,
     );
     r4d_backend_vulkan::testing::assert_validation_clean(&e, "vulkan_cas");
@@ -428,6 +428,8 @@ fn vulkan_path_dependent_materials_match_cpu() {
     let Some(e) = gpu::vulkan("vulkan_plastic") else {
         return;
     };
-    path_dependent_materials_match_cpu("vulkan", || r4d_backend_vulkan::VulkanMpm::new(e.clone()));
+    path_dependent_materials_match_cpu("vulkan", || {
+        r4d_backend_vulkan::VulkanBackend::new(e.clone())
+    });
     r4d_backend_vulkan::testing::assert_validation_clean(&e, "vulkan_plastic");
 }

@@ -1,6 +1,6 @@
 //! The GPU engines pass the exported conformance suite (`r4d-conformance`): simulation,
-//! adjoint, renderer and render VJP through their `Compute`, against the CPU in f32, on the
-//! binary's shared engines.
+//! adjoint, renderer and render VJP, and the frames kept on the device (the link kernels), through
+//! their `Compute`, against the CPU in f32, on the binary's shared engines.
 
 #[test]
 #[cfg_attr(
@@ -15,6 +15,10 @@ fn wgpu_passes_the_conformance_suite() {
     let report = r4d_conformance::run(&compute, &Default::default()).unwrap();
     print!("{report}");
     assert_eq!(report.precision, "f32");
+    assert!(
+        report.checks.iter().any(|c| c.name == "linked.vjp.F"),
+        "frames stay on the device: the link checks ran"
+    );
 }
 
 #[test]

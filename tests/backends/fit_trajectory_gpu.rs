@@ -1,4 +1,4 @@
-//! `fit_trajectory` on the wgpu backend (and on the Vulkan engine) (f32, `Simulation<WgpuMpm>`) against the CPU backend (f64,
+//! `fit_trajectory` on the wgpu backend (and on the Vulkan engine) (f32, `Simulation<WgpuBackend>`) against the CPU backend (f64,
 //! `Simulation<CpuBackend<f64>>`): the first iteration's loss and gradient agree to 1e-3 relative and the
 //! fitted parameters to 1% (the CPU-vs-wgpu bound). Skipped without an adapter unless
 //! `R4D_REQUIRE_GPU=1`.

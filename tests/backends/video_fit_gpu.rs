@@ -5,8 +5,8 @@ use crate::common::video::{fit_config, jelly, small_problem};
 use resonance4d::video_fit::fit::NoHooks;
 use resonance4d::video_fit::{run_fit, Objective, Precision};
 
-/// The video fit on the GPU: simulation and reverse sweep (`Simulation<WgpuMpm>`, f32), rendering and
-/// render VJP (`WgpuSplat`), the loss on the CPU. Loss and every parameter gradient agree with
+/// The video fit on the GPU: simulation and reverse sweep (`Simulation<WgpuBackend>`, f32), rendering and
+/// render VJP (`WgpuBackend`), the loss on the CPU. Loss and every parameter gradient agree with
 /// the CPU's f32 run, and a few fit iterations reach the same parameters within 1% (the
 /// bound).
 #[test]
@@ -26,7 +26,7 @@ fn gpu_simulation_matches_the_cpu_in_the_video_fit() {
     video_fit_parity(std::sync::Arc::new(wgpu), "wgpu");
 }
 
-/// The same video-fit parity on the Vulkan engine (`VulkanMpm`, `VulkanSplat`), under the
+/// The same video-fit parity on the Vulkan engine (`VulkanBackend`, `VulkanBackend`), under the
 /// validation layer in CI.
 #[test]
 #[cfg_attr(

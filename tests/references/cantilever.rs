@@ -14,7 +14,7 @@ use crate::common;
 use common::scenes::config;
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
-    BoundaryCondition, ForceForm, Material, MpmKernels as _, PartParams, ParticleSet, Shape,
+    Backend as _, BoundaryCondition, ForceForm, Material, PartParams, ParticleSet, Shape,
     Simulation, Simulator,
 };
 

@@ -6,8 +6,8 @@ use crate::common;
 use common::scenes::{boxed, config, jelly};
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_mpm::{
-    reference::ReferenceBackend, BoundaryCondition, ForceForm, Material, MpmKernels, PartParams,
-    ParticleSet, SimConfig, Simulation, Simulator, Surface,
+    reference::ReferenceBackend, Backend, BoundaryCondition, ForceForm, Material, MpmKernels,
+    PartParams, ParticleSet, SimConfig, Simulation, Simulator, Surface,
 };
 
 fn momentum(m: &[f32], v: &[[f32; 3]]) -> [f64; 3] {

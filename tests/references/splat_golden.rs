@@ -6,7 +6,7 @@
 
 use crate::common;
 use common::{fixture, read_npy, Array};
-use r4d_backend_cpu::splat::CpuSplat;
+use r4d_backend_cpu::CpuBackend;
 use r4d_splat::project::CamParams;
 use r4d_splat::reference::{self, ReferenceSplat, Scene};
 use r4d_splat::{
@@ -254,7 +254,7 @@ fn reference_renderer_matches_gsplat() {
 
 #[test]
 fn cpu_renderer_matches_gsplat() {
-    check_renderer("cpu", &mut SplatRenderer::new(CpuSplat));
+    check_renderer("cpu", &mut SplatRenderer::new(CpuBackend::default()));
 }
 
 #[test]

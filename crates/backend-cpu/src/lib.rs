@@ -1,6 +1,8 @@
 //! # r4d-backend-cpu: the fast CPU backend (rayon)
 //!
-//! Implements [`r4d_mpm::MpmKernels`] on host `Vec`s. It calls the same per-particle and
+//! One backend, [`CpuBackend`], in f32 or f64: the family's base trait
+//! ([`r4d_backend::Backend`], host `Vec`s), the simulator's kernels ([`r4d_mpm::MpmKernels`]
+//! and the reverse sweep's) and the renderer's ([`r4d_splat::SplatKernels`], in [`splat`]). It calls the same per-particle and
 //! per-node functions as [`r4d_mpm::reference`] (the math lives once, in `r4d_mpm::transfer`
 //! and `r4d_mpm::constitutive`) and adds only scheduling and memory layout:
 //!
@@ -16,11 +18,11 @@
 //! * [`Par::Seq`] runs the same code on one thread (tests use it to check determinism).
 //!
 //! Memory: buffers are plain `Vec`s; host memory is measured by the benches' counting
-//! allocator, so [`MpmKernels::memory_usage`] reports zero here.
+//! allocator, so [`Backend::memory_usage`] reports zero here.
 
 use r4d_mpm::kernels::{
-    blocks_per_axis, Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts,
-    BLOCK, HEALTH_OUT_OF_DOMAIN,
+    blocks_per_axis, Backend, Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles,
+    StepConsts, BLOCK, HEALTH_OUT_OF_DOMAIN,
 };
 use r4d_mpm::math::{svd3_many, Mat3, Real, Svd3};
 use r4d_mpm::params::MAT_CONSTS;
@@ -186,13 +188,21 @@ pub(crate) fn for_active_blocks<T: Send>(
     }
 }
 
-impl<T: Real> MpmKernels for CpuBackend<T> {
-    type Scalar = T;
-    r4d_mpm::host_vec_buffers!();
+impl<T: Real> Backend for CpuBackend<T> {
+    r4d_backend::host_vec_backend!();
 
     fn name(&self) -> &'static str {
         "cpu"
     }
+    fn memory_usage(&self) -> MemoryUsage {
+        MemoryUsage::default()
+    }
+}
+
+impl<T: Real> MpmKernels for CpuBackend<T> {
+    type Scalar = T;
+    r4d_mpm::host_vec_accumulate!();
+
     fn particle_bcs(
         &self,
         p: &mut Particles<Self>,
@@ -388,10 +398,6 @@ impl<T: Real> MpmKernels for CpuBackend<T> {
             record(&mut g.health[0], code, c.substep, i, val);
         }
         Ok(())
-    }
-
-    fn memory_usage(&self) -> MemoryUsage {
-        MemoryUsage::default()
     }
 }
 

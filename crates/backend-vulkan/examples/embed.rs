@@ -9,7 +9,7 @@
 //! will do: `VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json`).
 
 use r4d_backend_vulkan::ash::{self, vk};
-use r4d_backend_vulkan::{HostDevice, VulkanEngine, VulkanMpm};
+use r4d_backend_vulkan::{HostDevice, VulkanBackend, VulkanEngine};
 use r4d_gpu::GpuEngine;
 use r4d_mpm::{ParticleSet, SimConfig, Simulation, Simulator};
 
@@ -83,7 +83,7 @@ type = "bounding_box"
 "#,
         )?;
         let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
-        let mut sim = Simulation::new(VulkanMpm::new(engine.clone()), &cfg, scene, "embed")?;
+        let mut sim = Simulation::new(VulkanBackend::new(engine.clone()), &cfg, scene, "embed")?;
         let mut state = sim.init_state(&cfg.parts)?;
         for _ in 0..cfg.time.frames {
             sim.step_frame(&mut state, &cfg.parts)?;

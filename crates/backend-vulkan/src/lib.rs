@@ -5,8 +5,8 @@
 //! the SPIR-V that `r4d-shaders` compiles from the WGSL ([`r4d_shaders::Kernel::spirv_words`]),
 //! their descriptor set layouts come from the reflected [`r4d_shaders::Kernel::bindings`],
 //! device memory is sub-allocated by `gpu-allocator`. So the simulator and the renderer on
-//! Vulkan are [`VulkanMpm`] and [`VulkanSplat`]: `r4d_gpu::GpuMpm` / `GpuSplat` over this
-//! engine, nothing written twice.
+//! Vulkan are one backend, [`VulkanBackend`]: `r4d_gpu::Gpu` over this engine, nothing
+//! written twice.
 //!
 //! Recordings are appended to one pending command buffer (a compute dispatch, fill or copy
 //! per command, a full memory barrier between commands); a read submits it and waits, so a
@@ -26,11 +26,9 @@ pub use ash;
 pub use device::VkBuffer;
 pub use engine::VulkanEngine;
 
-/// The simulator's kernels (forward and reverse) on Vulkan.
-pub type VulkanMpm = r4d_gpu::GpuMpm<VulkanEngine>;
-
-/// The renderer's kernels (forward and backward) on Vulkan.
-pub type VulkanSplat = r4d_gpu::GpuSplat<VulkanEngine>;
+/// The backend on Vulkan: the simulator's kernels (forward and reverse) and the renderer's
+/// (forward and backward) over one set of device buffers.
+pub type VulkanBackend = r4d_gpu::Gpu<VulkanEngine>;
 
 /// A Vulkan device the host application created and keeps (embedding: the engine shares
 /// the application's instance, device and a queue; [`VulkanEngine::from_host`]).

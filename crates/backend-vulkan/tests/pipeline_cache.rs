@@ -2,7 +2,7 @@
 //! foreign file is ignored (the engine compiles from scratch), never trusted.
 
 use r4d_backend_vulkan::testing::vulkan_or_skip;
-use r4d_backend_vulkan::VulkanMpm;
+use r4d_backend_vulkan::VulkanBackend;
 use r4d_mpm::{ParticleSet, SimConfig, Simulation, Simulator};
 
 fn simulate() -> Option<Vec<[f32; 3]>> {
@@ -23,7 +23,8 @@ type = "bounding_box"
     )
     .unwrap();
     let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
-    let mut sim = Simulation::new(VulkanMpm::new(engine.clone()), &cfg, scene, "cache").unwrap();
+    let mut sim =
+        Simulation::new(VulkanBackend::new(engine.clone()), &cfg, scene, "cache").unwrap();
     let mut s = sim.init_state(&cfg.parts).unwrap();
     sim.step_frame(&mut s, &cfg.parts).unwrap();
     let x = sim.positions(&s).unwrap();

@@ -4,7 +4,7 @@
 //! CI (the query pool's reset, writes and reads are checked there).
 
 use r4d_backend_vulkan::testing::{assert_validation_clean, vulkan_or_skip};
-use r4d_backend_vulkan::VulkanMpm;
+use r4d_backend_vulkan::VulkanBackend;
 use r4d_mpm::{ParticleSet, SimConfig, Simulation, Simulator};
 
 const SUBSTEPS: u64 = 12;
@@ -26,7 +26,8 @@ type = "bounding_box"
     ))
     .unwrap();
     let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
-    let mut sim = Simulation::new(VulkanMpm::new(engine.clone()), &cfg, scene, "profile").unwrap();
+    let mut sim =
+        Simulation::new(VulkanBackend::new(engine.clone()), &cfg, scene, "profile").unwrap();
     let mut s = sim.init_state(&cfg.parts).unwrap();
     sim.step_frame(&mut s, &cfg.parts).unwrap();
     sim.positions(&s).unwrap()

@@ -4,9 +4,9 @@
 //! backend's bounds, `crates/backend-wgpu/tests/wgpu/splat.rs`). Skipped without a Vulkan device
 //! unless `R4D_REQUIRE_GPU=1`.
 
-use r4d_backend_cpu::splat::CpuSplat;
+use r4d_backend_cpu::CpuBackend;
 use r4d_backend_vulkan::testing::vulkan_or_skip;
-use r4d_backend_vulkan::VulkanSplat;
+use r4d_backend_vulkan::VulkanBackend;
 use r4d_splat::{
     load_cameras, Deformation, GaussianGrads, RenderSettings, Renderer, SplatRenderer,
 };
@@ -39,8 +39,8 @@ fn renders_and_gradients_match_the_cpu_on_the_golden_scenes() {
     let Some(engine) = vulkan_or_skip("vulkan renderer") else {
         return;
     };
-    let mut vk = SplatRenderer::new(VulkanSplat::new(engine.clone()));
-    let mut cpu = SplatRenderer::new(CpuSplat);
+    let mut vk = SplatRenderer::new(VulkanBackend::new(engine.clone()));
+    let mut cpu = SplatRenderer::new(CpuBackend::default());
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/splat");
     for name in [
         "sh0_basic",

@@ -3,20 +3,17 @@
 //! becomes one command encoder (one compute pass per dispatch, bind groups from the kernels'
 //! reflected layouts) and one queue submission.
 //!
-//! [`WgpuMpm`] and [`WgpuSplat`] are the simulator's and the renderer's kernels on it: their
-//! stages are recorded once in `r4d_gpu` (`GpuMpm`, `GpuSplat`), so nothing here knows a
-//! kernel.
+//! [`WgpuBackend`] is the backend on it (the simulator's and the renderer's kernels): their
+//! stages are recorded once in `r4d_gpu` (`Gpu`), so nothing here knows a kernel.
 
 use crate::context::{GpuBuffer, WgpuContext, WgpuError};
 use r4d_gpu::{Command, GpuEngine, Recording, Resource};
 use r4d_mpm::kernels::MemoryUsage;
 use std::sync::Arc;
 
-/// The simulator's kernels (forward and reverse) on wgpu.
-pub type WgpuMpm = r4d_gpu::GpuMpm<WgpuEngine>;
-
-/// The renderer's kernels (forward and backward) on wgpu.
-pub type WgpuSplat = r4d_gpu::GpuSplat<WgpuEngine>;
+/// The backend on wgpu: the simulator's kernels (forward and reverse) and the renderer's
+/// (forward and backward) over one set of device buffers.
+pub type WgpuBackend = r4d_gpu::Gpu<WgpuEngine>;
 
 /// A wgpu device as an engine of recordings.
 #[derive(Clone)]

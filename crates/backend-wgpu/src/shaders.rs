@@ -66,6 +66,11 @@ mod tests {
             fields!(Health; code, substep, particle, value_bits),
         );
         check(
+            "LinkConsts",
+            size_of::<r4d_splat::LinkConsts>(),
+            fields!(r4d_splat::LinkConsts; to_world, rot, inv_scale, simulated, particles),
+        );
+        check(
             "Counts",
             size_of::<r4d_gpu::Counts>(),
             &[("particles", 0), ("n_grid", 4)],

@@ -12,6 +12,7 @@
 //! | `adjoint.x0`, `adjoint.F0` | adjoint of the initial state | 1e-3 relative L2 |
 //! | `render.mean`, `render.max` | colour and alpha, mean and max abs difference | 1e-6, 1e-3 |
 //! | `render_vjp.<array>` | every gradient array of the render VJP | 5e-3 relative L2 |
+//! | `linked.render.*`, `linked.vjp.{x,F}` | a backend whose frames stay on its device ([`Compute::frames_on_device`]): a simulated frame's own buffers through the device link and the renderer, and the particle gradients back, against the host link and the CPU renderer | 1e-6, 1e-3; 5e-3 relative L2 |
 //!
 //! The scenes ([`scenes`]): two jelly parts under gravity with a bounding box, a friction
 //! collider, a clamp and an impulse (3 frames of 20 substeps, initial velocities), and 240
@@ -27,6 +28,7 @@
 //! assert!(report.checks.iter().all(|c| c.error <= c.bound));
 //! ```
 
+mod linked;
 pub mod scenes;
 mod simulation;
 mod splat;
@@ -179,6 +181,9 @@ pub fn run(compute: &dyn Compute, tol: &Tolerances) -> Result<Report, Failure> {
     };
     let precision = simulation::run(compute, tol, &mut checks)?;
     splat::run(compute, tol, &mut checks)?;
+    if compute.frames_on_device() {
+        linked::run(compute, tol, &mut checks)?;
+    }
     Ok(Report {
         backend: checks.backend,
         precision,

@@ -3,7 +3,7 @@
 
 use crate::scenes::splats;
 use crate::{rel_l2, Checks, Failure, Tolerances};
-use r4d_backend_cpu::splat::CpuSplat;
+use r4d_backend_cpu::CpuBackend;
 use r4d_optim::compute::Compute;
 use r4d_optim::FitError;
 use r4d_splat::{GaussianGrads, Image, RenderSettings, Renderer, SplatRenderer};
@@ -30,7 +30,7 @@ pub(crate) fn run(
         background: [0.1, 0.2, 0.3],
         ..Default::default()
     };
-    let mut cpu = SplatRenderer::new(CpuSplat);
+    let mut cpu = SplatRenderer::new(CpuBackend::default());
     // Weights that vary over the image and the channels.
     let n = (cam.width * cam.height * 3) as usize;
     let w: Vec<f32> = (0..n)

@@ -49,6 +49,9 @@ pub struct BenchScale {
     pub band_rows: usize,
     /// Reference from a simulation at other parameters (`true`) or the rest frame.
     pub reference_from_simulation: bool,
+    /// Keep simulated frames on the device from the simulation to the rasterizer where the
+    /// backend can ([`Objective::device_frames`]; `false` reads them back to the host).
+    pub device_frames: bool,
 }
 
 /// The largest benchmark a user can ask for: sizes past these are refused before anything
@@ -210,6 +213,7 @@ impl Default for BenchScale {
             checkpointing: Checkpointing::Nested(20),
             band_rows: r4d_optim::video::problem::DEFAULT_BAND_ROWS,
             reference_from_simulation: true,
+            device_frames: true,
         }
     }
 }
@@ -605,6 +609,7 @@ pub fn run(
     obj.precision = Precision::F32;
     obj.checkpointing = s.checkpointing;
     obj.set_band_rows(s.band_rows)?;
+    obj.device_frames = s.device_frames;
     obj.heap = heap.clone();
     let span = heap.as_ref().map(|h| h.start());
     let t = Instant::now();

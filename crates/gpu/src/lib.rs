@@ -6,12 +6,13 @@
 //! (wgpu today, Vulkan/ash next) allocates buffers, moves bytes and executes recordings, and
 //! knows nothing about MPM.
 //!
-//! [`GpuMpm`] implements the simulator's kernel traits ([`r4d_mpm::MpmKernels`] forward,
-//! [`r4d_mpm::adjoint::kernels::MpmAdjointKernels`] reverse) and [`GpuSplat`] the renderer's
-//! ([`r4d_splat::SplatKernels`], forward and backward) once for every engine: a new GPU
-//! backend implements [`GpuEngine`] (six methods) and gets the whole differentiable simulator
-//! (the stage order of `r4d_mpm::substep`, the driver `r4d_mpm::Simulation`) and
-//! renderer (`r4d_splat::SplatRenderer`).
+//! [`Gpu`] is one backend of the family ([`r4d_backend::Backend`]) for every engine: it
+//! implements the simulator's kernel traits ([`r4d_mpm::MpmKernels`] forward,
+//! [`r4d_mpm::adjoint::kernels::MpmAdjointKernels`] reverse) and the renderer's
+//! ([`r4d_splat::SplatKernels`], forward and backward) once: a new GPU backend implements
+//! [`GpuEngine`] (six methods) and gets the whole differentiable simulator (the stage order
+//! of `r4d_mpm::substep`, the driver `r4d_mpm::Simulation`) and renderer
+//! (`r4d_splat::SplatRenderer`), over one set of buffers.
 //!
 //! ```
 //! use r4d_gpu::{Recording, Resource};
@@ -26,13 +27,15 @@
 //! assert!(matches!(r.commands[1].bindings()[0], Resource::Uniform(0)));
 //! ```
 
+pub mod backend;
 pub mod engine;
 pub mod mpm;
 pub mod mpm_vjp;
 pub mod recording;
 pub mod splat;
 
+pub use backend::Gpu;
 pub use engine::{GpuBuf, GpuEngine};
-pub use mpm::{Counts, GpuMpm};
+pub use mpm::Counts;
 pub use recording::{Command, Recording, Resource};
-pub use splat::{GpuSplat, SplatProjectParams};
+pub use splat::SplatProjectParams;

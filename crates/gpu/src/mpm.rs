@@ -1,4 +1,4 @@
-//! [`r4d_mpm::MpmKernels`] for every GPU engine: particles and grid live in device buffers;
+//! [`r4d_mpm::MpmKernels`] for [`Gpu`] on every engine: particles and grid live in device buffers;
 //! the host sees them only through `download`. Each stage is one recording of
 //! `r4d-shaders`' MPM kernels (`wgsl/mpm/`), mirroring the per-particle and per-node
 //! functions of `r4d_mpm::transfer` and `r4d_mpm::constitutive`:
@@ -14,14 +14,14 @@
 //! from the CPU backend by rounding (not bitwise reproducible run to run); the conformance
 //! tests bound the difference.
 
+use crate::backend::Gpu;
 use crate::engine::{GpuBuf, GpuEngine};
 use crate::recording::Recording;
 use bytemuck::{Pod, Zeroable};
-use r4d_mpm::kernels::{Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts};
+use r4d_mpm::kernels::{Grid, GridBc, MpmKernels, ParticleBc, Particles, StepConsts};
 use r4d_mpm::params::MAT_CONSTS;
 use r4d_mpm::PartConsts;
 use r4d_shaders::mpm as k;
-use std::sync::Mutex;
 
 /// Per-dispatch sizes (`Counts` in `wgsl/lib/structs.wgsl`).
 #[repr(C)]
@@ -46,79 +46,8 @@ impl Counts {
     }
 }
 
-/// The MPM kernels on GPU engine `E`.
-pub struct GpuMpm<E: GpuEngine> {
-    engine: E,
-    /// `g2p`'s per-substep problem record (`1 + 2 particles` words, first armed to `u32::MAX`).
-    health_scratch: Mutex<Option<GpuBuf<E, u32>>>,
-    /// The reverse particle stage's private records (see [`crate::mpm_vjp`]).
-    pub(crate) reverse_records: Mutex<Option<crate::mpm_vjp::ReverseRecords<E>>>,
-}
-
-impl<E: GpuEngine> GpuMpm<E> {
-    /// The kernels on an engine (anything that converts into one, such as a wgpu context).
-    pub fn new(engine: impl Into<E>) -> Self {
-        GpuMpm {
-            engine: engine.into(),
-            health_scratch: Mutex::new(None),
-            reverse_records: Mutex::new(None),
-        }
-    }
-
-    /// The engine.
-    pub fn engine(&self) -> &E {
-        &self.engine
-    }
-}
-
-/// The name of an element type, as a buffer label.
-fn label<T>() -> &'static str {
-    std::any::type_name::<T>()
-}
-
-impl<E: GpuEngine> MpmKernels for GpuMpm<E> {
+impl<E: GpuEngine> MpmKernels for Gpu<E> {
     type Scalar = f32;
-    type Buf<T: Pod + Send + Sync> = GpuBuf<E, T>;
-    type Error = E::Error;
-
-    fn name(&self) -> &'static str {
-        self.engine.name()
-    }
-
-    fn upload<T: Pod + Send + Sync>(&self, data: &[T]) -> Result<GpuBuf<E, T>, E::Error> {
-        GpuBuf::upload(&self.engine, label::<T>(), data)
-    }
-
-    fn zeros<T: Pod + Send + Sync>(&self, len: usize) -> Result<GpuBuf<E, T>, E::Error> {
-        GpuBuf::zeros(&self.engine, label::<T>(), len)
-    }
-
-    fn download<T: Pod + Send + Sync>(&self, buf: &GpuBuf<E, T>) -> Result<Vec<T>, E::Error> {
-        buf.download(&self.engine)
-    }
-
-    fn write<T: Pod + Send + Sync>(
-        &self,
-        buf: &mut GpuBuf<E, T>,
-        data: &[T],
-    ) -> Result<(), E::Error> {
-        assert_eq!(buf.len, data.len(), "write: same length");
-        if data.is_empty() {
-            return Ok(());
-        }
-        self.engine.write(&buf.raw, bytemuck::cast_slice(data))
-    }
-
-    fn copy<T: Pod + Send + Sync>(
-        &self,
-        src: &GpuBuf<E, T>,
-        dst: &mut GpuBuf<E, T>,
-    ) -> Result<(), E::Error> {
-        let mut r = Recording::new();
-        let (s, d) = (r.buf(&src.raw), r.buf(&dst.raw));
-        r.copy(s, d, src.bytes().min(dst.bytes()));
-        self.engine.execute(r)
-    }
 
     fn accumulate<const N: usize>(
         &self,
@@ -129,6 +58,26 @@ impl<E: GpuEngine> MpmKernels for GpuMpm<E> {
         let n = N * add.len();
         let mut r = Recording::new();
         let bind = [r.uniform(&Counts::new(n, 0)), r.data(add), r.buf(&dst.raw)];
+        r.dispatch(&k::ADD_VJP, n as u32, &bind);
+        self.engine.execute(r)
+    }
+
+    fn accumulate_buf<const N: usize>(
+        &self,
+        dst: &mut GpuBuf<E, [f32; N]>,
+        add: &GpuBuf<E, [f32; N]>,
+    ) -> Result<(), E::Error> {
+        assert_eq!(dst.len, add.len, "accumulate_buf: same length");
+        let n = N * add.len;
+        if n == 0 {
+            return Ok(());
+        }
+        let mut r = Recording::new();
+        let bind = [
+            r.uniform(&Counts::new(n, 0)),
+            r.buf(&add.raw),
+            r.buf(&dst.raw),
+        ];
         r.dispatch(&k::ADD_VJP, n as u32, &bind);
         self.engine.execute(r)
     }
@@ -245,9 +194,5 @@ impl<E: GpuEngine> MpmKernels for GpuMpm<E> {
         let health = r.buf(&g.health.raw);
         r.dispatch_groups(&k::HEALTH, [1, 1, 1], &[cb, sc, health]);
         self.engine.execute(r)
-    }
-
-    fn memory_usage(&self) -> MemoryUsage {
-        self.engine.memory_usage()
     }
 }

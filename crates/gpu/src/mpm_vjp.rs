@@ -1,4 +1,4 @@
-//! The reverse stages of a substep on any GPU engine ([`MpmAdjointKernels`] for [`GpuMpm`]), run
+//! The reverse stages of a substep on any GPU engine ([`MpmAdjointKernels`] for [`Gpu`]), run
 //! in the order `r4d_mpm::substep::reverse` gives by the one differentiable stepper
 //! `r4d_mpm::Simulation` (so the checkpointing driver, the forward
 //! re-run with its tape and the per-slot chain rule are the CPU's).
@@ -33,8 +33,9 @@
 //! initial F adjoint within 1.4e-4 except sand's 1.2e-2 (f32 near the Drucker-Prager apex)
 //! and snow's 1.4e-3.
 
+use crate::backend::Gpu;
 use crate::engine::{GpuBuf, GpuEngine};
-use crate::mpm::{Counts, GpuMpm};
+use crate::mpm::Counts;
 use crate::recording::Recording;
 use r4d_mpm::adjoint::kernels::{AdjointScratch, MpmAdjointKernels};
 use r4d_mpm::kernels::{Grid, GridBc, Particles, StepConsts};
@@ -55,7 +56,7 @@ pub(crate) struct ReverseRecords<E: GpuEngine> {
     info: GpuBuf<E, f32>,
 }
 
-impl<E: GpuEngine> MpmAdjointKernels for GpuMpm<E> {
+impl<E: GpuEngine> MpmAdjointKernels for Gpu<E> {
     fn g2p_vjp(
         &self,
         before: &State<Self>,

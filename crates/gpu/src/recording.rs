@@ -1,5 +1,5 @@
 //! A recording: the commands of a GPU stage over buffer handles, built once by
-//! [`crate::GpuMpm`] and executed by an engine ([`crate::GpuEngine::execute`]).
+//! [`crate::Gpu`] and executed by an engine ([`crate::GpuEngine::execute`]).
 
 use bytemuck::Pod;
 use r4d_shaders::Kernel;

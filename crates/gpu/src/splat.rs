@@ -42,11 +42,12 @@
 //!   clamp-masked dL/dcolour, from which `project_vjp_sh.wgsl` writes dL/dsh; the sections are
 //!   then copied into the separate gradient buffers on the device.
 
+use crate::backend::Gpu;
 use crate::engine::{GpuBuf, GpuEngine};
 use crate::recording::{Recording, Resource};
 use bytemuck::{Pod, Zeroable};
 use r4d_shaders::splat as k;
-use r4d_splat::kernels::{ImageBufs, SceneBufs, SceneGradBufs, TileBufs};
+use r4d_splat::kernels::{ImageBufs, LinkBufs, SceneBufs, SceneGradBufs, TileBufs};
 use r4d_splat::project::{Projected, ProjectedGrad};
 use r4d_splat::{CameraConsts, SplatKernels};
 
@@ -73,7 +74,7 @@ pub struct SplatProjectParams {
 }
 
 impl SplatProjectParams {
-    fn of<E: GpuEngine>(scene: &SceneBufs<GpuSplat<E>>) -> Self {
+    fn of<E: GpuEngine>(scene: &SceneBufs<Gpu<E>>) -> Self {
         let k = r4d_splat::gaussians::sh_coeffs(scene.sh_degree) as u32;
         SplatProjectParams {
             n: scene.n as u32,
@@ -95,24 +96,7 @@ const SECTION_OPACITY: (usize, usize) = (10, 1);
 /// dL/dF, present when the scene is deformed: it ends the buffer.
 const SECTION_F: (usize, usize) = (17, 9);
 
-/// The renderer's kernels on GPU engine `E`.
-pub struct GpuSplat<E: GpuEngine> {
-    engine: E,
-}
-
-impl<E: GpuEngine> GpuSplat<E> {
-    /// The kernels on an engine (anything that converts into one, such as a wgpu context).
-    pub fn new(engine: impl Into<E>) -> Self {
-        GpuSplat {
-            engine: engine.into(),
-        }
-    }
-
-    /// The engine.
-    pub fn engine(&self) -> &E {
-        &self.engine
-    }
-
+impl<E: GpuEngine> Gpu<E> {
     /// A zero-filled buffer of `len` elements, allocated with at least one element so that it
     /// satisfies the minimum binding size of a runtime-sized array of `T`.
     fn zeros_bindable<T: Pod>(
@@ -123,7 +107,11 @@ impl<E: GpuEngine> GpuSplat<E> {
         GpuBuf::zeros_with_capacity(&self.engine, label, len, len.max(1))
     }
 
-    fn zeros<T: Pod>(&self, label: &'static str, len: usize) -> Result<GpuBuf<E, T>, E::Error> {
+    fn zeros_labelled<T: Pod>(
+        &self,
+        label: &'static str,
+        len: usize,
+    ) -> Result<GpuBuf<E, T>, E::Error> {
         GpuBuf::zeros(&self.engine, label, len)
     }
 }
@@ -181,22 +169,7 @@ fn tile_rows(cam: &CameraConsts) -> u32 {
     cam.rows[1].div_ceil(t) - cam.rows[0] / t
 }
 
-impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
-    type Buf<T: Pod + Send + Sync> = GpuBuf<E, T>;
-    type Error = E::Error;
-
-    fn upload<T: Pod + Send + Sync>(&self, data: &[T]) -> Result<GpuBuf<E, T>, E::Error> {
-        GpuBuf::upload(&self.engine, "splat_upload", data)
-    }
-
-    fn download<T: Pod + Send + Sync>(&self, buf: &GpuBuf<E, T>) -> Result<Vec<T>, E::Error> {
-        buf.download(&self.engine)
-    }
-
-    fn zeros<T: Pod + Send + Sync>(&self, len: usize) -> Result<GpuBuf<E, T>, E::Error> {
-        self.zeros_bindable("splat_zeros", len)
-    }
-
+impl<E: GpuEngine> SplatKernels for Gpu<E> {
     fn project(
         &self,
         scene: &SceneBufs<Self>,
@@ -235,11 +208,11 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
     ) -> Result<TileBufs<Self>, E::Error> {
         let n = proj.len;
         let tiles = (cam.tiles[0] * cam.tiles[1]) as usize;
-        let offsets = self.zeros::<u32>("splat_tile_offsets", tiles + 1)?;
+        let offsets = self.zeros_labelled::<u32>("splat_tile_offsets", tiles + 1)?;
         let empty = |offsets: GpuBuf<E, u32>| -> Result<TileBufs<Self>, E::Error> {
             Ok(TileBufs {
                 offsets,
-                ids: self.zeros::<u32>("splat_tile_ids", 0)?,
+                ids: self.zeros_labelled::<u32>("splat_tile_ids", 0)?,
                 intersections: 0,
             })
         };
@@ -247,8 +220,8 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
             return empty(offsets);
         }
         // n + 1 counts: the last stays 0 and scans to the total.
-        let counts = self.zeros::<u32>("splat_tile_counts", n + 1)?;
-        let total = self.zeros::<u32>("splat_intersections", 1)?;
+        let counts = self.zeros_labelled::<u32>("splat_tile_counts", n + 1)?;
+        let total = self.zeros_labelled::<u32>("splat_intersections", 1)?;
         let params = [n as u32, 0, 0, 0];
         {
             let mut r = Recording::new();
@@ -265,7 +238,7 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
         }
         let keys_a = self.zeros_bindable::<TileKey>("splat_tile_keys", m)?;
         let keys_b = self.zeros_bindable::<TileKey>("splat_tile_keys", m)?;
-        let ids = self.zeros::<u32>("splat_tile_ids", m)?;
+        let ids = self.zeros_labelled::<u32>("splat_tile_ids", m)?;
         let mut r = Recording::new();
         let (cam_u, params_u) = (r.uniform(cam), r.uniform(&params));
         let (a, b) = (r.buf(&keys_a.raw), r.buf(&keys_b.raw));
@@ -297,11 +270,11 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
         let w = cam.size[0] as usize;
         let h = cam.band_height() as usize;
         let img = ImageBufs {
-            rgb: self.zeros::<f32>("splat_rgb", w * h * 3)?,
-            alpha: self.zeros::<f32>("splat_alpha", w * h)?,
-            depth: self.zeros::<f32>("splat_depth", w * h)?,
-            t_final: self.zeros::<f32>("splat_t_final", w * h)?,
-            last: self.zeros::<u32>("splat_last", w * h)?,
+            rgb: self.zeros_labelled::<f32>("splat_rgb", w * h * 3)?,
+            alpha: self.zeros_labelled::<f32>("splat_alpha", w * h)?,
+            depth: self.zeros_labelled::<f32>("splat_depth", w * h)?,
+            t_final: self.zeros_labelled::<f32>("splat_t_final", w * h)?,
+            last: self.zeros_labelled::<u32>("splat_last", w * h)?,
         };
         let tx = cam.tiles[0];
         let ty = tile_rows(cam);
@@ -386,6 +359,56 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
 
     /// `project_vjp.wgsl` (one thread per Gaussian, into one sectioned buffer), then
     /// `project_vjp_sh.wgsl` (dL/dsh) and copies of the sections into the gradient buffers.
+    fn deform(
+        &self,
+        link: &LinkBufs<Self>,
+        x: &GpuBuf<E, [f32; 3]>,
+        f_sim: &GpuBuf<E, [f32; 9]>,
+        means: &mut GpuBuf<E, [f32; 3]>,
+        f: &mut GpuBuf<E, [[f32; 3]; 3]>,
+    ) -> Result<(), E::Error> {
+        let n = link.consts.simulated;
+        if n == 0 {
+            return Ok(());
+        }
+        let mut r = Recording::new();
+        let bind = [
+            r.uniform(&link.consts),
+            r.buf(&link.simulated.raw),
+            r.buf(&x.raw),
+            r.buf(&f_sim.raw),
+            r.buf(&means.raw),
+            r.buf(&f.raw),
+        ];
+        r.dispatch(&k::LINK_DEFORM, n, &bind);
+        self.engine.execute(r)
+    }
+
+    fn deform_vjp(
+        &self,
+        link: &LinkBufs<Self>,
+        d_means: &GpuBuf<E, [f32; 3]>,
+        d_f: &GpuBuf<E, [[f32; 3]; 3]>,
+        dx: &mut GpuBuf<E, [f32; 3]>,
+        df_sim: &mut GpuBuf<E, [f32; 9]>,
+    ) -> Result<(), E::Error> {
+        let n = link.consts.simulated;
+        if n == 0 {
+            return Ok(());
+        }
+        let mut r = Recording::new();
+        let bind = [
+            r.uniform(&link.consts),
+            r.buf(&link.simulated.raw),
+            r.buf(&d_means.raw),
+            r.buf(&d_f.raw),
+            r.buf(&dx.raw),
+            r.buf(&df_sim.raw),
+        ];
+        r.dispatch(&k::LINK_DEFORM_VJP, n, &bind);
+        self.engine.execute(r)
+    }
+
     fn project_vjp(
         &self,
         scene: &SceneBufs<Self>,
@@ -402,13 +425,13 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
         );
         let params = SplatProjectParams::of(scene);
         let out = SceneGradBufs {
-            means: self.zeros::<[f32; 3]>("splat_d_means", n)?,
-            log_scales: self.zeros::<[f32; 3]>("splat_d_log_scales", n)?,
-            quats: self.zeros::<[f32; 4]>("splat_d_quats", n)?,
-            opacity_logits: self.zeros::<f32>("splat_d_opacity_logits", n)?,
+            means: self.zeros_labelled::<[f32; 3]>("splat_d_means", n)?,
+            log_scales: self.zeros_labelled::<[f32; 3]>("splat_d_log_scales", n)?,
+            quats: self.zeros_labelled::<[f32; 4]>("splat_d_quats", n)?,
+            opacity_logits: self.zeros_labelled::<f32>("splat_d_opacity_logits", n)?,
             sh: self.zeros_bindable::<f32>("splat_d_sh", n * params.sh_len as usize)?,
             f: match scene.f {
-                Some(_) => Some(self.zeros::<[[f32; 3]; 3]>("splat_d_f", n)?),
+                Some(_) => Some(self.zeros_labelled::<[[f32; 3]; 3]>("splat_d_f", n)?),
                 None => None,
             },
         };
@@ -419,7 +442,7 @@ impl<E: GpuEngine> SplatKernels for GpuSplat<E> {
             Some(_) => SECTION_F.0 + SECTION_F.1,
             None => SECTION_F.0,
         };
-        let packed = self.zeros::<f32>("splat_project_vjp_sections", n * width)?;
+        let packed = self.zeros_labelled::<f32>("splat_project_vjp_sections", n * width)?;
         let mut r = Recording::new();
         let f = match &scene.f {
             Some(f) => r.buf(&f.raw),

@@ -1,9 +1,9 @@
 //! The dispatch lists of a substep, forward and reverse, as any engine receives them: a
 //! tracing engine (host byte buffers, copies and clears executed, dispatches only recorded and
 //! checked against the kernels' reflected bindings) runs the one stepper `Simulation` on
-//! `GpuMpm`. No GPU needed.
+//! `Gpu`. No GPU needed.
 
-use r4d_gpu::{Command, GpuEngine, GpuMpm, Recording, Resource};
+use r4d_gpu::{Command, Gpu, GpuEngine, Recording, Resource};
 use r4d_mpm::adjoint::checkpoint::Differentiable;
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
 use r4d_mpm::kernels::MemoryUsage;
@@ -139,7 +139,7 @@ fn a_substep_dispatches_its_stages_in_the_order_of_substep_forward_and_reverse()
     let cfg = SimConfig::parse(CONFIG, std::path::Path::new("trace.toml")).unwrap();
     let scene = ParticleSet::from_shapes(&cfg.shapes, cfg.domain.dx());
     let sim = HostSim::new(&cfg, &scene).unwrap();
-    let gpu = GpuMpm::<TraceEngine>::new(TraceEngine::default());
+    let gpu = Gpu::<TraceEngine>::new(TraceEngine::default());
     let d = Simulation::with_host(gpu, &sim).unwrap();
     let params: Vec<PhysParams<f32>> = cfg.parts.iter().map(PhysParams::of).collect();
     let before = d.init(&params, &vec![[0.0; 3]; sim.len()]).unwrap();

@@ -1,11 +1,11 @@
 //! The kernel-level backend trait ([`MpmKernels`]) and the device-side data it works on.
 //!
 //! A backend implements one method per stage of a substep (`particle_bcs`, `p2g`,
-//! `grid_update`, `g2p`) plus buffer transfer; everything above (the substep loop, frames,
-//! error checks, and later checkpointing and the reverse sweep) is written once in
-//! [`crate::sim`], generic over the backend. Buffers are associated types owned by the
-//! backend: the CPU backends use `Vec<T>`, a GPU backend keeps device buffers and crosses to the
-//! host only in [`MpmKernels::download`].
+//! `grid_update`, `g2p`) on top of the family's base trait [`Backend`] (buffers, transfers,
+//! errors, memory accounting); everything above (the substep order in [`crate::substep`],
+//! the driver [`crate::Simulation`] with its checkpoints and reverse sweep) is written once,
+//! generic over the backend. The CPU backends' buffers are `Vec<T>`; a GPU backend keeps
+//! device buffers and crosses to the host only in [`Backend::download`].
 //!
 //! All structs uploaded to a device are `#[repr(C)]` + [`bytemuck::Pod`] and defined here once.
 
@@ -14,20 +14,7 @@ use crate::math::Real;
 use crate::params::MAT_CONSTS;
 use bytemuck::{Pod, Zeroable};
 
-/// Memory a backend has allocated, in bytes (for benches and `memory_plan` checks).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct MemoryUsage {
-    /// Bytes currently allocated by the backend.
-    pub bytes_in_use: u64,
-    /// Highest value `bytes_in_use` has reached.
-    pub peak_bytes: u64,
-    /// Bytes copied from the host to the device since the backend was made (buffer writes,
-    /// uploads, the uniforms and data blocks of recordings; 0 for host backends).
-    pub uploaded_bytes: u64,
-    /// Bytes copied from the device to the host since the backend was made (0 for host
-    /// backends).
-    pub downloaded_bytes: u64,
-}
+pub use r4d_backend::{AnyBuf, Backend, MemoryUsage};
 
 /// GPU time of one kernel, summed over its dispatches (from timestamp queries; a GPU
 /// backend's `kernel_times`, printed by the CLI's `--profile`).
@@ -218,42 +205,24 @@ pub fn blocks_per_axis(n: usize) -> usize {
 ///
 /// Every backend must compute what the reference kernels in [`crate::reference`] compute,
 /// up to floating-point summation order.
-pub trait MpmKernels: Sized + Send + Sync + 'static {
+pub trait MpmKernels: Backend {
     /// The scalar type of the particle and grid state (`f32` on a GPU; the host backends are
     /// generic, `f64` being the gradient oracle).
     type Scalar: Real;
-    /// A typed buffer owned by the backend.
-    type Buf<T: Pod + Send + Sync>: Send + Sync;
-    /// Errors the backend can't prevent (device lost, out of memory).
-    type Error: std::error::Error + Send + Sync + 'static;
 
-    /// A short name for reports (`"cpu"`, `"reference"`, `"wgpu"`).
-    fn name(&self) -> &'static str;
-    /// Copies host data into a new buffer.
-    fn upload<T: Pod + Send + Sync>(&self, data: &[T]) -> Result<Self::Buf<T>, Self::Error>;
-    /// A new zero-filled buffer of `len` elements.
-    fn zeros<T: Pod + Send + Sync>(&self, len: usize) -> Result<Self::Buf<T>, Self::Error>;
-    /// Copies a buffer back to the host.
-    fn download<T: Pod + Send + Sync>(&self, buf: &Self::Buf<T>) -> Result<Vec<T>, Self::Error>;
-    /// Overwrites a buffer with host data of the same length.
-    fn write<T: Pod + Send + Sync>(
-        &self,
-        buf: &mut Self::Buf<T>,
-        data: &[T],
-    ) -> Result<(), Self::Error>;
-
-    /// Copies `src` into `dst` (same length), on the backend.
-    fn copy<T: Pod + Send + Sync>(
-        &self,
-        src: &Self::Buf<T>,
-        dst: &mut Self::Buf<T>,
-    ) -> Result<(), Self::Error>;
     /// `dst[i] += add[i]` element-wise (same length), on the backend: how a loss gradient
     /// enters an adjoint state.
     fn accumulate<const N: usize>(
         &self,
         dst: &mut Self::Buf<[Self::Scalar; N]>,
         add: &[[Self::Scalar; N]],
+    ) -> Result<(), Self::Error>;
+    /// `dst[i] += add[i]` element-wise (same length) for a buffer `add` already on the
+    /// backend: how a loss gradient computed on the device enters an adjoint state.
+    fn accumulate_buf<const N: usize>(
+        &self,
+        dst: &mut Self::Buf<[Self::Scalar; N]>,
+        add: &Self::Buf<[Self::Scalar; N]>,
     ) -> Result<(), Self::Error>;
 
     /// Impulses and velocity overrides (particle boundary conditions) of this substep.
@@ -293,53 +262,15 @@ pub trait MpmKernels: Sized + Send + Sync + 'static {
         g: &mut Grid<Self>,
         c: &StepConsts,
     ) -> Result<(), Self::Error>;
-    /// Memory the backend has allocated.
-    fn memory_usage(&self) -> MemoryUsage;
 }
 
-/// Implements the buffer methods of [`MpmKernels`] for a host backend whose buffers are
-/// `Vec<T>` and whose error is [`std::convert::Infallible`] (the reference and CPU backends).
-/// Use inside the `impl MpmKernels for ...` block.
+/// Implements [`MpmKernels::accumulate`] and [`MpmKernels::accumulate_buf`] for a host backend whose buffers are `Vec<T>` and
+/// whose error is [`std::convert::Infallible`] (the reference and CPU backends; their buffer
+/// methods come from [`r4d_backend::host_vec_backend!`]). Use inside the
+/// `impl MpmKernels for ...` block.
 #[macro_export]
-macro_rules! host_vec_buffers {
+macro_rules! host_vec_accumulate {
     () => {
-        type Buf<E: bytemuck::Pod + Send + Sync> = Vec<E>;
-        type Error = std::convert::Infallible;
-
-        fn upload<E: bytemuck::Pod + Send + Sync>(
-            &self,
-            data: &[E],
-        ) -> Result<Vec<E>, std::convert::Infallible> {
-            Ok(data.to_vec())
-        }
-        fn zeros<E: bytemuck::Pod + Send + Sync>(
-            &self,
-            len: usize,
-        ) -> Result<Vec<E>, std::convert::Infallible> {
-            Ok(vec![E::zeroed(); len])
-        }
-        fn download<E: bytemuck::Pod + Send + Sync>(
-            &self,
-            buf: &Vec<E>,
-        ) -> Result<Vec<E>, std::convert::Infallible> {
-            Ok(buf.clone())
-        }
-        fn write<E: bytemuck::Pod + Send + Sync>(
-            &self,
-            buf: &mut Vec<E>,
-            data: &[E],
-        ) -> Result<(), std::convert::Infallible> {
-            buf.copy_from_slice(data);
-            Ok(())
-        }
-        fn copy<E: bytemuck::Pod + Send + Sync>(
-            &self,
-            src: &Vec<E>,
-            dst: &mut Vec<E>,
-        ) -> Result<(), std::convert::Infallible> {
-            dst.copy_from_slice(src);
-            Ok(())
-        }
         fn accumulate<const N: usize>(
             &self,
             dst: &mut Vec<[Self::Scalar; N]>,
@@ -352,6 +283,13 @@ macro_rules! host_vec_buffers {
                 }
             }
             Ok(())
+        }
+        fn accumulate_buf<const N: usize>(
+            &self,
+            dst: &mut Vec<[Self::Scalar; N]>,
+            add: &Vec<[Self::Scalar; N]>,
+        ) -> Result<(), std::convert::Infallible> {
+            self.accumulate(dst, add)
         }
     };
 }

@@ -70,7 +70,7 @@ pub mod transfer_avx;
 pub use boundary::{BoundaryCondition, Surface};
 pub use config::{Domain, ForceForm, OutOfDomain, SimConfig, SolverConfig, TimeConfig};
 pub use error::{Error, Result};
-pub use kernels::{Grid, KernelTime, MemoryUsage, MpmKernels, Particles, StepConsts};
+pub use kernels::{Backend, Grid, KernelTime, MemoryUsage, MpmKernels, Particles, StepConsts};
 pub use material::{Material, PartConsts, PartParams, PARAM_LIMITS};
 
 /// The explicit viscous stress of a `fluid` is stable for

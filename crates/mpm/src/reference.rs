@@ -6,7 +6,8 @@ use crate::adjoint::kernels::{AdjointScratch, MpmAdjointKernels};
 use crate::adjoint::particle_vjp::{particle_stage_vjp, ParticleForward};
 use crate::adjoint::transfer_vjp::{g2p_vjp, grid_node_vjp};
 use crate::kernels::{
-    Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts, HEALTH_OUT_OF_DOMAIN,
+    Backend, Grid, GridBc, MemoryUsage, MpmKernels, ParticleBc, Particles, StepConsts,
+    HEALTH_OUT_OF_DOMAIN,
 };
 use crate::material::PartConsts;
 use crate::math::Real;
@@ -39,13 +40,21 @@ impl<T: Real> ReferenceBackend<T> {
     }
 }
 
-impl<T: Real> MpmKernels for ReferenceBackend<T> {
-    type Scalar = T;
-    crate::host_vec_buffers!();
+impl<T: Real> Backend for ReferenceBackend<T> {
+    r4d_backend::host_vec_backend!();
 
     fn name(&self) -> &'static str {
         "reference"
     }
+    fn memory_usage(&self) -> MemoryUsage {
+        MemoryUsage::default()
+    }
+}
+
+impl<T: Real> MpmKernels for ReferenceBackend<T> {
+    type Scalar = T;
+    crate::host_vec_accumulate!();
+
     fn particle_bcs(
         &self,
         p: &mut Particles<Self>,
@@ -148,10 +157,6 @@ impl<T: Real> MpmKernels for ReferenceBackend<T> {
         }
         g.health[0] = h;
         Ok(())
-    }
-
-    fn memory_usage(&self) -> MemoryUsage {
-        MemoryUsage::default()
     }
 }
 

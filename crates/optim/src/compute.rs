@@ -100,6 +100,14 @@ pub trait Compute: Send + Sync + std::fmt::Debug {
             FitError::backend_msg(self.name(), "with_renderer did not call the renderer")
         })
     }
+    /// Whether simulated frames can stay on the device between the simulation and the
+    /// renderer: the renderer is of the same backend type as the simulation, so it binds the
+    /// simulation's buffers ([`DynSimulation::frame_buffers`],
+    /// [`Renderer::prepare_frame_linked`]). `false` (the default) reads each frame back to the
+    /// host and uploads its deformation.
+    fn frames_on_device(&self) -> bool {
+        false
+    }
     /// Starts a new device-memory peak ([`Compute::device_peak_bytes`]).
     fn reset_device_peak(&self) {}
     /// Turns per-kernel GPU timing on or off (`--profile`); returns whether this backend

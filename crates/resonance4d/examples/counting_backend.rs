@@ -30,7 +30,7 @@ impl Compute for Counting {
         f: &mut dyn FnMut(&mut dyn Renderer) -> Result<(), FitError>,
     ) -> Result<(), FitError> {
         self.renderer_uses.fetch_add(1, Relaxed);
-        f(&mut SplatRenderer::new(CpuSplat))
+        f(&mut SplatRenderer::new(CpuBackend::default()))
     }
 }
 

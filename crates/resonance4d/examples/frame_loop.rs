@@ -54,7 +54,7 @@ pub fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     let mut sim = Simulation::new(CpuBackend::<f32>::default(), &config, particles, "jelly")?;
     let mut state = sim.init_state(&config.parts)?;
-    let mut renderer = SplatRenderer::new(CpuSplat);
+    let mut renderer = SplatRenderer::new(CpuBackend::default());
     let mut frames = Vec::new();
     for _ in 0..config.time.frames {
         sim.step_frame(&mut state, &config.parts)?;

@@ -62,6 +62,9 @@ pub use r4d_eval::bench_scale;
 #[cfg(feature = "eval")]
 pub use r4d_eval::diagnostics as fit_diagnostics;
 
+/// The backend family's base trait ([`backend::Backend`]: buffers, transfers, errors, memory
+/// accounting) that the simulator's and the renderer's kernel traits extend.
+pub use r4d_backend as backend;
 #[cfg(feature = "cpu")]
 pub use r4d_backend_cpu as backend_cpu;
 #[cfg(feature = "vulkan")]

@@ -15,18 +15,20 @@ pub use crate::compute::{Compute, Precision};
 pub use r4d_loss::{Dms, DmsConfig, L1Loss, Loss, SsimLoss, Video};
 pub use r4d_mpm::adjoint::host::HostSim;
 pub use r4d_mpm::{
-    BoundaryCondition, DynSimulation, Material, MpmKernels, PartParams, ParticleSet, Shape,
-    SimConfig, SimState, Simulation, Simulator, State, Surface,
+    Backend, BoundaryCondition, DynSimulation, Material, MpmKernels, PartParams, ParticleSet,
+    Shape, SimConfig, SimState, Simulation, Simulator, State, Surface,
 };
 pub use r4d_optim::video::fit::NoHooks;
 pub use r4d_optim::video::{
     run_fit, run_fit_with_loss, FitConfig, FitOutcome, Objective, VideoProblem, View,
 };
 pub use r4d_optim::{FitError, Initializer, LatinHypercubeInit, ParamKind};
-pub use r4d_splat::{Camera, Gaussians, RenderSettings, Renderer, SimLink, SplatRenderer};
+pub use r4d_splat::{
+    Camera, Gaussians, RenderSettings, Renderer, SimLink, SplatKernels, SplatRenderer,
+};
 
 #[cfg(feature = "cpu")]
-pub use r4d_backend_cpu::{splat::CpuSplat, CpuBackend};
+pub use r4d_backend_cpu::CpuBackend;
 #[cfg(feature = "vulkan")]
 pub use r4d_backend_vulkan::VulkanEngine;
 #[cfg(feature = "wgpu")]

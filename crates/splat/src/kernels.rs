@@ -1,10 +1,11 @@
 //! The kernel-level backend trait: one method per stage of the renderer and its VJP, over
-//! backend-owned buffers. A new backend implements [`SplatKernels`]; everything above it
-//! ([`crate::SplatRenderer`]) is written once.
+//! the buffers of the family's base trait [`Backend`]. A new backend implements
+//! [`SplatKernels`]; everything above it ([`crate::SplatRenderer`]) is written once.
 
 use crate::camera::{Camera, RasterizeMode, RenderSettings};
 use crate::project::{CamParams, Projected, ProjectedGrad};
 use bytemuck::{Pod, Zeroable};
+pub use r4d_backend::{AnyBuf, Backend, MemoryUsage};
 
 // SAFETY: `repr(C)`, ten f32 and two u32: no padding, every bit pattern valid.
 unsafe impl Zeroable for Projected<f32> {}
@@ -107,6 +108,35 @@ impl CameraConsts {
     }
 }
 
+/// The simulation link as the kernels see it ([`crate::SimLink`] in f32, shader-friendly):
+/// particle `s < simulated` moves Gaussian `simulated[s]` ([`LinkBufs::simulated`]) to
+/// `A x + t` with deformation gradient `R^T F R` (see [`crate::link::link_point`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct LinkConsts {
+    /// Simulation to world, rows `[A_i0, A_i1, A_i2, t_i]` (`A = R^T / scale`,
+    /// `t = R^T (centre - shift / scale)`).
+    pub to_world: [[f32; 4]; 3],
+    /// The world-to-simulation rotation `R`, rows (4th entry unused).
+    pub rot: [[f32; 4]; 3],
+    /// `1 / scale`.
+    pub inv_scale: f32,
+    /// Simulated Gaussians (particles `0 .. simulated` move one each).
+    pub simulated: u32,
+    /// Particles in a simulated frame (simulated plus filling).
+    pub particles: u32,
+    /// Padding (a uniform is a multiple of 16 bytes).
+    pub _pad: u32,
+}
+
+/// A simulation link in backend buffers.
+pub struct LinkBufs<B: SplatKernels> {
+    /// The transform.
+    pub consts: LinkConsts,
+    /// Scene index of the Gaussian particle `s` moves, `consts.simulated` entries.
+    pub simulated: B::Buf<u32>,
+}
+
 /// A scene in backend buffers.
 pub struct SceneBufs<B: SplatKernels> {
     /// Number of Gaussians.
@@ -170,27 +200,7 @@ pub struct SceneGradBufs<B: SplatKernels> {
 }
 
 /// The stages of the renderer on one backend.
-pub trait SplatKernels: Sized + Send + Sync + 'static {
-    /// A typed buffer owned by the backend (CPU: `Vec<T>`).
-    type Buf<T: Pod + Send + Sync>: Send + Sync;
-    /// The backend's error.
-    type Error: std::error::Error + Send + Sync + 'static;
-    /// Copies host data into a buffer.
-    fn upload<T: Pod + Send + Sync>(&self, data: &[T]) -> Result<Self::Buf<T>, Self::Error>;
-    /// Copies a buffer back to the host.
-    fn download<T: Pod + Send + Sync>(&self, buf: &Self::Buf<T>) -> Result<Vec<T>, Self::Error>;
-    /// Brings a buffer back to the host, consuming it (the CPU backend hands its `Vec` over
-    /// without a copy; the default downloads).
-    fn download_owned<T: Pod + Send + Sync>(
-        &self,
-        buf: Self::Buf<T>,
-    ) -> Result<Vec<T>, Self::Error> {
-        self.download(&buf)
-    }
-    /// A zero-filled buffer of `len` elements (the default uploads zeros).
-    fn zeros<T: Pod + Send + Sync>(&self, len: usize) -> Result<Self::Buf<T>, Self::Error> {
-        self.upload(&vec![T::zeroed(); len])
-    }
+pub trait SplatKernels: Backend {
     /// Projects every Gaussian (culled ones get radii (0, 0)).
     fn project(
         &self,
@@ -224,6 +234,31 @@ pub trait SplatKernels: Sized + Send + Sync + 'static {
         tape: Option<&ImageBufs<Self>>,
         d_rgb: &Self::Buf<f32>,
         d_proj: &mut Self::Buf<ProjectedGrad<f32>>,
+    ) -> Result<(), Self::Error>;
+    /// Moves the simulated Gaussians to a simulated frame through the link: for particle
+    /// `s < link.consts.simulated`, `means[simulated[s]] = link_point(x[s])` and
+    /// `f[simulated[s]] = link_f(f_sim[s])` ([`crate::link::link_point`],
+    /// [`crate::link::link_f`]; `f_sim` row-major, simulation space); every other entry is
+    /// left as it is.
+    fn deform(
+        &self,
+        link: &LinkBufs<Self>,
+        x: &Self::Buf<[f32; 3]>,
+        f_sim: &Self::Buf<[f32; 9]>,
+        means: &mut Self::Buf<[f32; 3]>,
+        f: &mut Self::Buf<[[f32; 3]; 3]>,
+    ) -> Result<(), Self::Error>;
+    /// VJP of [`SplatKernels::deform`]: **adds** to `dx` and `df_sim` (one entry per
+    /// particle; filling particles untouched) the gradient of a loss whose gradient with
+    /// respect to the moved Gaussians is `d_means`, `d_f` ([`crate::link::link_point_vjp`],
+    /// [`crate::link::link_f_vjp`]).
+    fn deform_vjp(
+        &self,
+        link: &LinkBufs<Self>,
+        d_means: &Self::Buf<[f32; 3]>,
+        d_f: &Self::Buf<[[f32; 3]; 3]>,
+        dx: &mut Self::Buf<[f32; 3]>,
+        df_sim: &mut Self::Buf<[f32; 9]>,
     ) -> Result<(), Self::Error>;
     /// VJP of [`SplatKernels::project`].
     fn project_vjp(

@@ -17,7 +17,7 @@
 //!   [`covariance`] (and their VJPs), generic over `f32`/`f64`.
 //! * Kernel trait: [`SplatKernels`] (project, bin_tiles, rasterize, rasterize_vjp,
 //!   project_vjp over backend buffers); [`reference::ReferenceSplat`] is the single-threaded
-//!   reference, `r4d_backend_cpu::splat::CpuSplat` the parallel one.
+//!   reference, `r4d_backend_cpu::CpuBackend` the parallel one.
 //! * [`Renderer`], implemented once by [`SplatRenderer`] for every backend; [`frame`]:
 //!   one frame projected, sorted and binned once, then rendered and differentiated in row
 //!   bands.
@@ -70,7 +70,7 @@ pub use camera_io::{load_cameras, CameraSet};
 pub use error::{Error, Result};
 pub use frame::PreparedFrame;
 pub use gaussians::{Deformation, GaussianGrads, Gaussians};
-pub use kernels::{CameraConsts, SplatKernels};
+pub use kernels::{AnyBuf, Backend, CameraConsts, LinkConsts, SplatKernels};
 pub use link::SimLink;
 pub use prepare::{prepare, prepare_with, PrepareConfig, Prepared};
 pub use renderer::{Image, RenderStats, RenderTape, Renderer, SplatRenderer};

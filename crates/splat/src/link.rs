@@ -9,6 +9,9 @@
 
 use crate::error::{Error, Result};
 use crate::gaussians::{Deformation, GaussianGrads, Gaussians};
+use crate::kernels::LinkConsts;
+#[cfg(doc)]
+use crate::kernels::SplatKernels;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -255,6 +258,123 @@ impl SimLink {
     }
 }
 
+impl SimLink {
+    /// The link as the kernels take it ([`SplatKernels::deform`]).
+    pub fn consts(&self) -> LinkConsts {
+        let r = &self.rotation;
+        // t = R^T (centre - shift / scale)
+        let c: [f64; 3] = [0, 1, 2].map(|i| self.centre[i] - self.shift[i] / self.scale);
+        LinkConsts {
+            to_world: [0, 1, 2].map(|i| {
+                let t: f64 = (0..3).map(|k| r[k][i] * c[k]).sum();
+                [
+                    (r[0][i] / self.scale) as f32,
+                    (r[1][i] / self.scale) as f32,
+                    (r[2][i] / self.scale) as f32,
+                    t as f32,
+                ]
+            }),
+            rot: [0, 1, 2].map(|i| [r[i][0] as f32, r[i][1] as f32, r[i][2] as f32, 0.0]),
+            inv_scale: (1.0 / self.scale) as f32,
+            simulated: self.simulated.len() as u32,
+            particles: (self.simulated.len() + self.filled) as u32,
+            _pad: 0,
+        }
+    }
+}
+
+/// A particle's position (simulation space) in the world, in f32 as the kernels compute it:
+/// `A x + t` ([`LinkConsts::to_world`]).
+#[inline]
+pub fn link_point(c: &LinkConsts, x: [f32; 3]) -> [f32; 3] {
+    c.to_world
+        .map(|r| r[0] * x[0] + r[1] * x[1] + r[2] * x[2] + r[3])
+}
+
+/// A particle's deformation gradient (row-major, simulation space) in the world frame:
+/// `R^T F R`.
+#[inline]
+pub fn link_f(c: &LinkConsts, f: [f32; 9]) -> [[f32; 3]; 3] {
+    let r = &c.rot;
+    let mut fr = [[0.0f32; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            fr[i][j] = f[3 * i] * r[0][j] + f[3 * i + 1] * r[1][j] + f[3 * i + 2] * r[2][j];
+        }
+    }
+    let mut out = [[0.0f32; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            out[i][j] = r[0][i] * fr[0][j] + r[1][i] * fr[1][j] + r[2][i] * fr[2][j];
+        }
+    }
+    out
+}
+
+/// VJP of [`link_point`]: `dL/dx = R dL/dmean / scale`.
+#[inline]
+pub fn link_point_vjp(c: &LinkConsts, g: [f32; 3]) -> [f32; 3] {
+    c.rot
+        .map(|r| (r[0] * g[0] + r[1] * g[1] + r[2] * g[2]) * c.inv_scale)
+}
+
+/// VJP of [`link_f`]: `dL/dF = R dL/dF_world R^T` (row-major).
+#[inline]
+pub fn link_f_vjp(c: &LinkConsts, g: [[f32; 3]; 3]) -> [f32; 9] {
+    let r = &c.rot;
+    // R G, then (R G) R^T.
+    let mut rg = [[0.0f32; 3]; 3];
+    for a in 0..3 {
+        for e in 0..3 {
+            rg[a][e] = r[a][0] * g[0][e] + r[a][1] * g[1][e] + r[a][2] * g[2][e];
+        }
+    }
+    let mut out = [0.0f32; 9];
+    for a in 0..3 {
+        for b in 0..3 {
+            out[3 * a + b] = rg[a][0] * r[b][0] + rg[a][1] * r[b][1] + rg[a][2] * r[b][2];
+        }
+    }
+    out
+}
+
+/// [`SplatKernels::deform`] on host slices (the reference and CPU backends): sizes as the
+/// kernel's contract says (`x`, `f_sim` one entry per particle, `means`, `f` per Gaussian).
+pub fn deform_host(
+    c: &LinkConsts,
+    simulated: &[u32],
+    x: &[[f32; 3]],
+    f_sim: &[[f32; 9]],
+    means: &mut [[f32; 3]],
+    f: &mut [[[f32; 3]; 3]],
+) {
+    for (s, &g) in simulated.iter().enumerate().take(c.simulated as usize) {
+        means[g as usize] = link_point(c, x[s]);
+        f[g as usize] = link_f(c, f_sim[s]);
+    }
+}
+
+/// [`SplatKernels::deform_vjp`] on host slices (adds into `dx`, `df_sim`).
+pub fn deform_vjp_host(
+    c: &LinkConsts,
+    simulated: &[u32],
+    d_means: &[[f32; 3]],
+    d_f: &[[[f32; 3]; 3]],
+    dx: &mut [[f32; 3]],
+    df_sim: &mut [[f32; 9]],
+) {
+    for (s, &g) in simulated.iter().enumerate().take(c.simulated as usize) {
+        let gx = link_point_vjp(c, d_means[g as usize]);
+        for a in 0..3 {
+            dx[s][a] += gx[a];
+        }
+        let gf = link_f_vjp(c, d_f[g as usize]);
+        for a in 0..9 {
+            df_sim[s][a] += gf[a];
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -381,5 +501,83 @@ mod tests {
         assert_eq!(dx[3], [0.0; 3]);
         // Mismatched sizes are an error, not an out-of-bounds write.
         assert!(l.deformation_vjp(&g, &mut dx[..2], &mut df).is_err());
+    }
+
+    /// The kernels' f32 link ([`SimLink::consts`], [`deform_host`], [`deform_vjp_host`]) agrees
+    /// with the f64 host link ([`SimLink::deformation`], [`SimLink::deformation_vjp`]) to f32
+    /// rounding, leaves static Gaussians alone and gives filling particles nothing.
+    #[test]
+    fn kernel_link_matches_the_host_link() {
+        let (c, s) = (0.4f64.cos(), 0.4f64.sin());
+        let l = SimLink {
+            scene_gaussians: 5,
+            simulated: vec![3, 1, 4],
+            filled: 2,
+            rotation: [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]],
+            centre: [0.2, -0.1, 0.5],
+            scale: 1.7,
+            shift: [1.0, 1.0, 1.0],
+        };
+        let scene = Gaussians {
+            means: (0..5).map(|i| [i as f32, 0.5, -0.25]).collect(),
+            log_scales: vec![[0.0; 3]; 5],
+            quats: vec![[1.0, 0.0, 0.0, 0.0]; 5],
+            opacity_logits: vec![0.0; 5],
+            sh: vec![0.0; 5 * 48],
+            ..Default::default()
+        };
+        let x: Vec<[f32; 3]> = (0..5)
+            .map(|i| [0.8 + 0.1 * i as f32, 1.2, 0.9 - 0.03 * i as f32])
+            .collect();
+        let f: Vec<[[f32; 3]; 3]> = (0..5)
+            .map(|i| {
+                let a = 0.07 * i as f32;
+                [[1.0 + a, 0.1, 0.0], [-0.2, 0.95, a], [0.05, -a, 1.02]]
+            })
+            .collect();
+        let f9: Vec<[f32; 9]> = f
+            .iter()
+            .map(|m| [m[0], m[1], m[2]].concat().try_into().unwrap())
+            .collect();
+        let want = l.deformation(&scene, &x, Some(&f), "t").unwrap();
+        let k = l.consts();
+        let eye = [[1.0f32, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let (mut means, mut fw) = (scene.means.clone(), vec![eye; 5]);
+        deform_host(&k, &l.simulated, &x, &f9, &mut means, &mut fw);
+        for g in 0..5 {
+            for a in 0..3 {
+                assert!((means[g][a] - want.means[g][a]).abs() < 1e-6, "mean {g}");
+                for b in 0..3 {
+                    assert!((fw[g][a][b] - want.f[g][a][b]).abs() < 1e-6, "F {g}");
+                }
+            }
+        }
+        let gr = GaussianGrads {
+            means: (0..5).map(|i| [0.3, -0.2 * i as f32, 0.7]).collect(),
+            f: (0..5)
+                .map(|i| {
+                    [
+                        [0.1 * i as f32, 0.2, -0.3],
+                        [0.4, -0.5, 0.6],
+                        [0.7, 0.8, -0.9],
+                    ]
+                })
+                .collect(),
+            ..Default::default()
+        };
+        let (mut dx, mut df) = (vec![[0.0f32; 3]; 5], vec![[0.0f32; 9]; 5]);
+        l.deformation_vjp(&gr, &mut dx, &mut df).unwrap();
+        let (mut kx, mut kf) = (vec![[0.0f32; 3]; 5], vec![[0.0f32; 9]; 5]);
+        deform_vjp_host(&k, &l.simulated, &gr.means, &gr.f, &mut kx, &mut kf);
+        for p in 0..5 {
+            for a in 0..3 {
+                assert!((kx[p][a] - dx[p][a]).abs() < 1e-6, "dx {p}");
+            }
+            for a in 0..9 {
+                assert!((kf[p][a] - df[p][a]).abs() < 1e-6, "dF {p}");
+            }
+        }
+        assert_eq!(kx[3], [0.0; 3]);
+        assert_eq!(kf[4], [0.0; 9]);
     }
 }

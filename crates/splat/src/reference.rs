@@ -351,15 +351,17 @@ fn scene_of(s: &crate::kernels::SceneBufs<ReferenceSplat>) -> Scene<f32> {
     }
 }
 
+impl r4d_backend::Backend for ReferenceSplat {
+    r4d_backend::host_vec_backend!();
+    fn name(&self) -> &'static str {
+        "reference"
+    }
+    fn memory_usage(&self) -> r4d_backend::MemoryUsage {
+        r4d_backend::MemoryUsage::default()
+    }
+}
+
 impl crate::SplatKernels for ReferenceSplat {
-    type Buf<T: bytemuck::Pod + Send + Sync> = Vec<T>;
-    type Error = std::convert::Infallible;
-    fn upload<T: bytemuck::Pod + Send + Sync>(&self, data: &[T]) -> Result<Vec<T>, Self::Error> {
-        Ok(data.to_vec())
-    }
-    fn download<T: bytemuck::Pod + Send + Sync>(&self, b: &Vec<T>) -> Result<Vec<T>, Self::Error> {
-        Ok(b.clone())
-    }
     fn project(
         &self,
         scene: &crate::kernels::SceneBufs<Self>,
@@ -426,6 +428,30 @@ impl crate::SplatKernels for ReferenceSplat {
         );
         Ok(())
     }
+    fn deform(
+        &self,
+        link: &crate::kernels::LinkBufs<Self>,
+        x: &Vec<[f32; 3]>,
+        f_sim: &Vec<[f32; 9]>,
+        means: &mut Vec<[f32; 3]>,
+        f: &mut Vec<[[f32; 3]; 3]>,
+    ) -> Result<(), std::convert::Infallible> {
+        crate::link::deform_host(&link.consts, &link.simulated, x, f_sim, means, f);
+        Ok(())
+    }
+
+    fn deform_vjp(
+        &self,
+        link: &crate::kernels::LinkBufs<Self>,
+        d_means: &Vec<[f32; 3]>,
+        d_f: &Vec<[[f32; 3]; 3]>,
+        dx: &mut Vec<[f32; 3]>,
+        df_sim: &mut Vec<[f32; 9]>,
+    ) -> Result<(), std::convert::Infallible> {
+        crate::link::deform_vjp_host(&link.consts, &link.simulated, d_means, d_f, dx, df_sim);
+        Ok(())
+    }
+
     fn project_vjp(
         &self,
         scene: &crate::kernels::SceneBufs<Self>,

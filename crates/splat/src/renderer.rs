@@ -5,7 +5,10 @@ use crate::camera::{Camera, RenderSettings};
 use crate::error::{Error, Result};
 use crate::frame::PreparedFrame;
 use crate::gaussians::{Deformation, GaussianGrads, Gaussians};
-use crate::kernels::{CameraConsts, ImageBufs, SceneBufs, SceneGradBufs, SplatKernels, TileBufs};
+use crate::kernels::{
+    AnyBuf, CameraConsts, ImageBufs, SceneBufs, SceneGradBufs, SplatKernels, TileBufs,
+};
+use crate::link::SimLink;
 use crate::project::Projected;
 use crate::scene_handle::SceneHandle;
 use std::ops::Range;
@@ -138,6 +141,51 @@ pub trait Renderer {
     ) -> Result<GaussianGrads> {
         let g = scene.host_scene()?.clone();
         self.frame_vjp_motion(frame, &g, deform)
+    }
+
+    /// Attaches a simulation link to a scene this renderer uploaded, so that its frames can
+    /// come from particle buffers on the backend ([`Renderer::prepare_frame_linked`]). A
+    /// renderer without device buffers refuses.
+    fn link_scene(&mut self, scene: &mut SceneHandle, link: &SimLink) -> Result<()> {
+        let _ = (scene, link);
+        Err(Error::Mismatch(
+            "this renderer keeps no scene on a device to link".into(),
+        ))
+    }
+
+    /// [`Renderer::prepare_frame`] of a linked scene ([`Renderer::link_scene`]) with its
+    /// simulated Gaussians at particle positions `x` (`[f32; 3]`) and deformation gradients
+    /// `f_sim` (`[f32; 9]`, row-major, simulation space): buffers of this renderer's backend
+    /// (a simulation's [`AnyBuf`]s), so nothing crosses to the host.
+    fn prepare_frame_linked(
+        &mut self,
+        scene: &mut SceneHandle,
+        x: &AnyBuf,
+        f_sim: &AnyBuf,
+        cam: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<PreparedFrame> {
+        let _ = (scene, x, f_sim, cam, settings);
+        Err(Error::Mismatch(
+            "this renderer keeps no scene on a device to link".into(),
+        ))
+    }
+
+    /// The gradient of the rows VJPs added to a frame prepared by
+    /// [`Renderer::prepare_frame_linked`] (same handle and particles) with respect to the
+    /// particles' positions and deformation gradients, as buffers of the backend (`[f32; 3]`
+    /// and row-major `[f32; 9]` per particle).
+    fn frame_vjp_linked(
+        &mut self,
+        frame: PreparedFrame,
+        scene: &mut SceneHandle,
+        x: &AnyBuf,
+        f_sim: &AnyBuf,
+    ) -> Result<(AnyBuf, AnyBuf)> {
+        let _ = (frame, scene, x, f_sim);
+        Err(Error::Mismatch(
+            "this renderer keeps no scene on a device to link".into(),
+        ))
     }
 }
 
@@ -479,5 +527,30 @@ impl<B: SplatKernels> Renderer for SplatRenderer<B> {
         deform: &Deformation,
     ) -> Result<GaussianGrads> {
         SplatRenderer::frame_vjp_motion_on(self, frame, scene, deform)
+    }
+
+    fn link_scene(&mut self, scene: &mut SceneHandle, link: &SimLink) -> Result<()> {
+        SplatRenderer::link_scene(self, scene, link)
+    }
+
+    fn prepare_frame_linked(
+        &mut self,
+        scene: &mut SceneHandle,
+        x: &AnyBuf,
+        f_sim: &AnyBuf,
+        cam: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<PreparedFrame> {
+        SplatRenderer::prepare_frame_linked(self, scene, x, f_sim, cam, settings)
+    }
+
+    fn frame_vjp_linked(
+        &mut self,
+        frame: PreparedFrame,
+        scene: &mut SceneHandle,
+        x: &AnyBuf,
+        f_sim: &AnyBuf,
+    ) -> Result<(AnyBuf, AnyBuf)> {
+        SplatRenderer::frame_vjp_linked(self, frame, scene, x, f_sim)
     }
 }

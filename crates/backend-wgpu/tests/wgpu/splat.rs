@@ -6,11 +6,11 @@
 //! `rasterize_vjp` cases (multi-level scans, many depth ties, tiles with thousands of
 //! Gaussians, capped alphas), an empty render and the WGSL struct layouts.
 
-use r4d_backend_cpu::splat::CpuSplat;
+use r4d_backend_cpu::CpuBackend;
 use r4d_backend_wgpu::testing::{gpu_or_skip, gpu_or_skip_with};
+use r4d_backend_wgpu::WgpuBackend;
 use r4d_backend_wgpu::WgpuContext;
-use r4d_backend_wgpu::WgpuSplat;
-use r4d_splat::kernels::{SceneBufs, TileBufs};
+use r4d_splat::kernels::{Backend, SceneBufs, TileBufs};
 use r4d_splat::project::Projected;
 use r4d_splat::{
     load_cameras, Camera, CameraConsts, CameraSet, Deformation, GaussianGrads, Gaussians,
@@ -232,8 +232,8 @@ fn golden_renders_match_gsplat_and_cpu() {
         return;
     };
     println!("adapter: {}", ctx.info.name);
-    let mut gpu_r = SplatRenderer::new(WgpuSplat::new(ctx));
-    let mut cpu_r = SplatRenderer::new(CpuSplat);
+    let mut gpu_r = SplatRenderer::new(WgpuBackend::new(ctx));
+    let mut cpu_r = SplatRenderer::new(CpuBackend::default());
     for name in SCENES {
         let c = load(name);
         let s = settings(&c);
@@ -326,8 +326,8 @@ fn gradients_match_cpu_and_gsplat() {
             "compare-exchange"
         };
         println!("adapter {}: {scatter}", ctx.info.name);
-        let mut r = SplatRenderer::new(WgpuSplat::new(Arc::new(ctx)));
-        let mut cpu = SplatRenderer::new(CpuSplat);
+        let mut r = SplatRenderer::new(WgpuBackend::new(Arc::new(ctx)));
+        let mut cpu = SplatRenderer::new(CpuBackend::default());
         let mut worst: Vec<(&str, f64, f64)> = Vec::new();
         for name in SCENES {
             let c = load(name);
@@ -458,8 +458,8 @@ fn projection_and_tile_lists_match_cpu() {
     let Some(ctx) = gpu("projection_and_tile_lists_match_cpu") else {
         return;
     };
-    let gb = WgpuSplat::new(ctx);
-    let cb = CpuSplat;
+    let gb = WgpuBackend::new(ctx);
+    let cb = CpuBackend::default();
     for name in SCENES {
         let c = load(name);
         let s = settings(&c);
@@ -571,8 +571,8 @@ fn large_synthetic_binning_and_compositing_match_cpu() {
     let Some(ctx) = gpu("large_synthetic_binning_and_compositing_match_cpu") else {
         return;
     };
-    let gb = WgpuSplat::new(ctx);
-    let cb = CpuSplat;
+    let gb = WgpuBackend::new(ctx);
+    let cb = CpuBackend::default();
     for (w, h, n, seed) in [
         (1920u32, 1080u32, 150_000usize, 1u64),
         (33, 17, 3000, 2),
@@ -648,8 +648,8 @@ fn synthetic_rasterize_vjp_matches_cpu() {
             return;
         };
         let native = ctx.float_atomics;
-        let gb = WgpuSplat::new(Arc::new(ctx));
-        let cb = CpuSplat;
+        let gb = WgpuBackend::new(Arc::new(ctx));
+        let cb = CpuBackend::default();
         for (w, h, n, seed) in [(320u32, 180u32, 20_000usize, 4u64), (33, 17, 3000, 5)] {
             let cam = Camera::look_at(w, h, 60.0, [0.0, -3.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0]);
             let s = RenderSettings {
@@ -728,7 +728,7 @@ fn prepared_frames_render_and_differentiate_bands_as_the_whole_image() {
     let Some(ctx) = gpu("prepared_frames_render_and_differentiate_bands_as_the_whole_image") else {
         return;
     };
-    let mut r = SplatRenderer::new(WgpuSplat::new(ctx));
+    let mut r = SplatRenderer::new(WgpuBackend::new(ctx));
     for name in SCENES {
         let c = load(name);
         let s = settings(&c);
@@ -780,7 +780,7 @@ fn empty_renders_are_background_with_zero_gradients() {
     let Some(ctx) = gpu("empty_renders_are_background_with_zero_gradients") else {
         return;
     };
-    let mut r = SplatRenderer::new(WgpuSplat::new(ctx));
+    let mut r = SplatRenderer::new(WgpuBackend::new(ctx));
     let cam = Camera::look_at(40, 24, 60.0, [0.0, -3.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0]);
     let s = RenderSettings {
         background: [0.1, 0.2, 0.3],

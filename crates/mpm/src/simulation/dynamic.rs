@@ -12,6 +12,7 @@ use crate::material::PartParams;
 use crate::math::Real;
 use crate::params::PhysParams;
 use crate::state::State;
+use r4d_backend::AnyBuf;
 use std::any::Any;
 
 /// A particle state (or its adjoint) of a [`DynSimulation`]: its backend's [`State`], boxed.
@@ -74,6 +75,17 @@ pub trait DynSimulation: Send + Sync {
     fn add_to_x(&self, adj: &mut AnyState, dx: &[[f64; 3]]) -> Result<()>;
     /// Adds `df` to the deformation gradients of the adjoint `adj`.
     fn add_to_f(&self, adj: &mut AnyState, df: &[[f64; 9]]) -> Result<()>;
+    /// Copies of the positions (`[S; 3]`) and row-major deformation gradients (`[S; 9]`) of
+    /// `s` made on the backend, `S` its scalar type: nothing crosses to the host, and a
+    /// renderer of the same backend reads them where they are.
+    fn frame_buffers(&self, s: &AnyState) -> Result<(AnyBuf, AnyBuf)>;
+    /// Adds `dx` and `df`, buffers of this backend (`[S; 3]` and `[S; 9]` per particle), to
+    /// the positions and deformation gradients of the adjoint `adj`, on the backend.
+    fn add_buffers(&self, adj: &mut AnyState, dx: &AnyBuf, df: &AnyBuf) -> Result<()>;
+    /// Reads and clears the health record the substeps keep on the backend: the code of the
+    /// first problem since the last read (0 none; `HEALTH_*` in [`crate::kernels`]). One
+    /// small record crosses to the host.
+    fn take_health_code(&self) -> Result<u32>;
 }
 
 fn wrong(backend: &str, op: &'static str, message: String) -> Error {
@@ -249,6 +261,49 @@ impl<B: MpmAdjointKernels> DynSimulation for Simulation<B> {
         let d = self.per_particle(df, "add_to_f")?;
         let a = self.state_mut(adj, "add_to_f")?;
         a.add_to_f(&self.b, &d).map_err(be)
+    }
+    fn frame_buffers(&self, s: &AnyState) -> Result<(AnyBuf, AnyBuf)> {
+        let s = self.state(s, "frame_buffers")?;
+        let n = self.sim.len();
+        let mut x = self.b.zeros::<[B::Scalar; 3]>(n).map_err(be)?;
+        self.b.copy(&s.x, &mut x).map_err(be)?;
+        let mut f = self.b.zeros::<[B::Scalar; 9]>(n).map_err(be)?;
+        self.b.copy(&s.f, &mut f).map_err(be)?;
+        Ok((AnyBuf::new(&self.b, x, n), AnyBuf::new(&self.b, f, n)))
+    }
+    fn add_buffers(&self, adj: &mut AnyState, dx: &AnyBuf, df: &AnyBuf) -> Result<()> {
+        let n = self.sim.len();
+        let name = self.b.name();
+        let check = |a: &AnyBuf, what: &str| {
+            if a.len() != n {
+                return Err(wrong(
+                    name,
+                    "add_buffers",
+                    format!("{} {what} for {n} particles", a.len()),
+                ));
+            }
+            Ok(())
+        };
+        check(dx, "position gradients")?;
+        check(df, "deformation gradient gradients")?;
+        let other = |a: &AnyBuf| {
+            wrong(
+                name,
+                "add_buffers",
+                format!(
+                    "a buffer of backend {} or of another scalar type",
+                    a.backend()
+                ),
+            )
+        };
+        let x = dx.get::<B, [B::Scalar; 3]>().ok_or_else(|| other(dx))?;
+        let f = df.get::<B, [B::Scalar; 9]>().ok_or_else(|| other(df))?;
+        let a = self.state_mut(adj, "add_buffers")?;
+        self.b.accumulate_buf(&mut a.x, x).map_err(be)?;
+        self.b.accumulate_buf(&mut a.f, f).map_err(be)
+    }
+    fn take_health_code(&self) -> Result<u32> {
+        Ok(self.take_health()?.code)
     }
 }
 

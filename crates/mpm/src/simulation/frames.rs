@@ -101,7 +101,7 @@ impl<B: MpmKernels> Simulation<B> {
     }
 
     /// Reads and clears the grid's health record.
-    fn take_health(&self) -> Result<Health> {
+    pub(crate) fn take_health(&self) -> Result<Health> {
         let mut w = self.lock();
         let h = self.b.download(&w.g.health).map_err(be)?[0];
         if h.code != 0 {

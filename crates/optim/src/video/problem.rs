@@ -16,6 +16,7 @@ use r4d_loss::ssim::ms_ssim;
 use r4d_loss::{BandedLoss, DmsConfig, DmsTerms, MsSsimConfig, Video, VideoLoss};
 use r4d_mpm::adjoint::checkpoint::{value_and_grad, Checkpointing, Differentiable};
 use r4d_mpm::adjoint::host::{HostSim, PhysParams};
+use r4d_mpm::kernels::AnyBuf;
 use r4d_mpm::simulation::AnyState;
 use r4d_mpm::DynSimulation;
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
@@ -266,6 +267,11 @@ pub struct Objective<'a> {
     /// needs them (slower, the same values). `None`: [`DEFAULT_FRAME_CACHE_BYTES`] on a
     /// host backend (the frames are heap), no limit on a device backend (device memory).
     pub frame_cache_bytes: Option<usize>,
+    /// Keep simulated frames on the device from the simulation to the rasterizer where the
+    /// backend can ([`Compute::frames_on_device`]; default `true`). `false` reads every frame
+    /// back to the host and uploads its deformation (the same numbers up to the rounding of
+    /// the link's transform; for comparing the bytes moved).
+    pub device_frames: bool,
     profile: Mutex<StageProfile>,
     /// Measures the heap peaks of [`Objective::profile`] (`None`: peaks are 0). The caller
     /// supplies it (the `r4d` binary: its counting allocator); the objective never touches a
@@ -403,6 +409,7 @@ impl<'a> Objective<'a> {
             precision: Precision::F64,
             compute: problem.compute.clone(),
             frame_cache_bytes: None,
+            device_frames: true,
             profile: Mutex::new(StageProfile::default()),
             heap: None,
         };
@@ -558,8 +565,11 @@ impl<'a> Objective<'a> {
     }
 
     /// Runs on the objective's backend: the simulation and its reverse sweep on its
-    /// [`Compute::simulation`], each frame's positions and deformation gradients downloaded
-    /// for the renderer and the loss, the loss's gradient added to the adjoint state there.
+    /// [`Compute::simulation`]. On a host backend each frame's positions and deformation
+    /// gradients are read for the renderer and the loss, and the loss's gradient is added to
+    /// the adjoint state from the host; on a device backend ([`Objective::on_device`]) frames
+    /// and their gradients stay there ([`DynSimulation::frame_buffers`],
+    /// [`Renderer::prepare_frame_linked`], [`DynSimulation::add_buffers`]).
     fn run_on(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
         let d = self.compute.simulation(self.precision, self.sim.clone())?;
         let d: &dyn DynSimulation = &*d;
@@ -570,19 +580,46 @@ impl<'a> Objective<'a> {
             .init(&phys, &vec![[0.0; 3]; self.sim.len()])
             .map_err(err)?;
         let grad0 = d.zero_grad().map_err(err)?;
-        // Each field is converted before the next is read back.
-        let read = |s: &AnyState| -> Result<Frame, FitError> {
+        let on_device = self.on_device();
+        // Positions to the host, converted before the deformation gradients are read back.
+        let host_x = |s: &AnyState| -> Result<Vec<[f32; 3]>, FitError> {
             let x = d.positions_f64(s).map_err(err)?;
-            let x = x.iter().map(|p| p.map(|c| c as f32)).collect();
+            Ok(x.iter().map(|p| p.map(|c| c as f32)).collect())
+        };
+        let read = |j: usize, s: &AnyState| -> Result<Frame, FitError> {
+            let what = format!("simulated frame {j}");
+            if on_device {
+                // The frame stays on the device; the domain is checked from the substeps'
+                // health record (a few bytes), and the positions are read back only for the
+                // initial state or when the record holds a problem.
+                let code = d.take_health_code().map_err(err)?;
+                if j == 0 || code != 0 {
+                    self.check_domain(&host_x(s)?, &what)?;
+                }
+                let (x, f) = d.frame_buffers(s).map_err(err)?;
+                return Ok(Frame::Device { x, f });
+            }
+            let x = host_x(s)?;
+            self.check_domain(&x, &what)?;
             let f = d.deformation_gradients_f64(s).map_err(err)?;
             let f = f.iter().map(|m| m.map(|c| c as f32)).collect();
-            Ok(Frame { x, f })
+            Ok(Frame::Host { x, f })
         };
         let add = |adj: &mut AnyState, g: &FrameGrad| -> Result<(), FitError> {
-            let x: Vec<[f64; 3]> = g.x.iter().map(|p| p.map(f64::from)).collect();
-            let f: Vec<[f64; 9]> = g.f.iter().map(|m| m.map(f64::from)).collect();
-            d.add_to_x(adj, &x).map_err(err)?;
-            d.add_to_f(adj, &f).map_err(err)
+            match g {
+                FrameGrad::Host { x, f } => {
+                    let x: Vec<[f64; 3]> = x.iter().map(|p| p.map(f64::from)).collect();
+                    let f: Vec<[f64; 9]> = f.iter().map(|m| m.map(f64::from)).collect();
+                    d.add_to_x(adj, &x).map_err(err)?;
+                    d.add_to_f(adj, &f).map_err(err)
+                }
+                FrameGrad::Device(parts) => {
+                    for (x, f) in parts {
+                        d.add_buffers(adj, x, f).map_err(err)?;
+                    }
+                    Ok(())
+                }
+            }
         };
         let (ev, back, videos) = self.run_with(name, d, &init, &phys, grad0, mode, &read, &add)?;
         let g = match back {
@@ -622,22 +659,44 @@ impl<'a> Objective<'a> {
         })
     }
 
-    /// Renders one simulated frame from `cam` (a view's camera or a band of it).
-    fn render_frame(&self, s: &Frame, cam: &Camera, what: &str) -> Result<Vec<f32>, FitError> {
-        let d = self.deformation(s, what)?;
-        self.with_renderer(|r| {
-            r.render(&self.problem.scene, Some(&d), cam, &self.problem.settings)
-                .map(|img| img.rgb)
-                .map_err(FitError::from)
-        })
+    /// Whether frames stay on the backend's device between the simulation and the renderer:
+    /// [`Objective::device_frames`] and a backend that can ([`Compute::frames_on_device`]).
+    fn on_device(&self) -> bool {
+        self.device_frames && self.compute.frames_on_device()
     }
 
-    /// An exploded simulation: a particle outside the grid's interior or non-finite.
-    fn check_domain(&self, s: &Frame, what: &str) -> Result<(), FitError> {
+    /// Renders one simulated frame from `cam` (a view's camera).
+    fn render_frame(
+        &self,
+        handle: &mut Option<SceneHandle>,
+        s: &Frame,
+        cam: &Camera,
+        what: &str,
+    ) -> Result<Vec<f32>, FitError> {
+        match s {
+            Frame::Host { .. } => {
+                let d = self.deformation(s, what)?;
+                self.with_renderer(|r| {
+                    r.render(&self.problem.scene, Some(&d), cam, &self.problem.settings)
+                        .map(|img| img.rgb)
+                        .map_err(FitError::from)
+                })
+            }
+            Frame::Device { .. } => {
+                let p = self.prepare_frame(handle, s, cam, what)?;
+                let rows = 0..p.size().1;
+                self.render_rows(&p, rows)
+            }
+        }
+    }
+
+    /// An exploded simulation: a particle (positions `x`) outside the grid's interior or
+    /// non-finite.
+    fn check_domain(&self, x: &[[f32; 3]], what: &str) -> Result<(), FitError> {
         let setup = &self.sim.setup;
         let inv_dx = 1.0 / setup.dx;
         let hi = setup.n as f64 - 1.5;
-        if let Some(i) = s.x.iter().position(|p| {
+        if let Some(i) = x.iter().position(|p| {
             !p.iter().all(|&c| {
                 let g = c as f64 * inv_dx;
                 g.is_finite() && (0.5..hi).contains(&g)
@@ -648,15 +707,22 @@ impl<'a> Objective<'a> {
         Ok(())
     }
 
+    /// The deformation of the scene by a host frame.
     fn deformation(&self, s: &Frame, what: &str) -> Result<Deformation, FitError> {
-        let f: Vec<[[f32; 3]; 3]> =
-            s.f.iter()
-                .map(|m| [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
-                .collect();
+        let Frame::Host { x, f } = s else {
+            return Err(FitError::backend_msg(
+                self.compute.name(),
+                "a device frame has no host deformation",
+            ));
+        };
+        let f: Vec<[[f32; 3]; 3]> = f
+            .iter()
+            .map(|m| [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
+            .collect();
         Ok(self
             .problem
             .link
-            .deformation(&self.problem.scene, &s.x, Some(&f), what)?)
+            .deformation(&self.problem.scene, x, Some(&f), what)?)
     }
 
     /// The scene kept on the renderer's device for one evaluation's frames
@@ -670,8 +736,15 @@ impl<'a> Objective<'a> {
             return Ok(None);
         }
         if handle.is_none() {
-            let h = self
-                .with_renderer(|r| r.upload_scene(&self.problem.scene).map_err(FitError::from))?;
+            let link = &self.problem.link;
+            let linked = self.on_device();
+            let h = self.with_renderer(|r| {
+                let mut h = r.upload_scene(&self.problem.scene)?;
+                if linked {
+                    r.link_scene(&mut h, link)?;
+                }
+                Ok(h)
+            })?;
             *handle = Some(h);
         }
         Ok(handle.as_mut())
@@ -687,8 +760,17 @@ impl<'a> Objective<'a> {
         cam: &Camera,
         what: &str,
     ) -> Result<PreparedFrame, FitError> {
-        let d = self.deformation(s, what)?;
         let settings = &self.problem.settings;
+        if let Frame::Device { x, f } = s {
+            let h = self.scene_on_device(handle)?.ok_or_else(|| {
+                FitError::backend_msg(self.compute.name(), "a device frame without a device")
+            })?;
+            return self.with_renderer(|r| {
+                r.prepare_frame_linked(h, x, f, cam, settings)
+                    .map_err(FitError::from)
+            });
+        }
+        let d = self.deformation(s, what)?;
         match self.scene_on_device(handle)? {
             Some(h) => self.with_renderer(|r| {
                 r.prepare_frame_on(h, &d, cam, settings)
@@ -730,6 +812,29 @@ impl<'a> Objective<'a> {
         p: PreparedFrame,
         out: &mut FrameGrad,
     ) -> Result<(), FitError> {
+        if let Frame::Device { x, f } = s {
+            let h = self.scene_on_device(handle)?.ok_or_else(|| {
+                FitError::backend_msg(self.compute.name(), "a device frame without a device")
+            })?;
+            let g =
+                self.with_renderer(|r| r.frame_vjp_linked(p, h, x, f).map_err(FitError::from))?;
+            return match out {
+                FrameGrad::Device(parts) => {
+                    parts.push(g);
+                    Ok(())
+                }
+                FrameGrad::Host { .. } => Err(FitError::backend_msg(
+                    self.compute.name(),
+                    "a device frame's gradient into a host gradient",
+                )),
+            };
+        }
+        let FrameGrad::Host { x: out_x, f: out_f } = out else {
+            return Err(FitError::backend_msg(
+                self.compute.name(),
+                "a host frame's gradient into a device gradient",
+            ));
+        };
         let d = self.deformation(s, "reverse sweep")?;
         let gr = match self.scene_on_device(handle)? {
             Some(h) => {
@@ -741,10 +846,7 @@ impl<'a> Objective<'a> {
             })?,
         };
         drop(d);
-        Ok(self
-            .problem
-            .link
-            .deformation_vjp(&gr, &mut out.x, &mut out.f)?)
+        Ok(self.problem.link.deformation_vjp(&gr, out_x, out_f)?)
     }
 
     /// For each of `n` simulated frames, the last video frame (tap) that reads it
@@ -829,6 +931,7 @@ impl<'a> Objective<'a> {
         let taps = &self.time.taps;
         let last_use = self.last_uses(frames.len());
         let mut sum = 0.0;
+        let mut handle: Option<SceneHandle> = None;
         for v in &self.problem.views {
             let (h, w) = (v.video.height(), v.video.width());
             let cfg = ms_ssim_config(&v.name, h, w)?;
@@ -842,7 +945,7 @@ impl<'a> Objective<'a> {
                         let f = frames[j]
                             .as_ref()
                             .ok_or_else(|| FitError::Input(format!("{what} was not stored")))?;
-                        renders[j] = Some(self.render_frame(f, &v.camera, &what)?);
+                        renders[j] = Some(self.render_frame(&mut handle, f, &v.camera, &what)?);
                     }
                 }
                 let f0 = renders[j0].as_deref().expect("rendered above");
@@ -870,6 +973,7 @@ impl<'a> Objective<'a> {
     /// Renders every view at full size from the stored frames (forward-only runs).
     fn render_videos(&self, frames: &[Option<Frame>]) -> Result<Vec<Video<f32>>, FitError> {
         let mut out = Vec::new();
+        let mut handle: Option<SceneHandle> = None;
         for v in &self.problem.views {
             let (h, w) = (v.video.height(), v.video.width());
             let mut renders: Vec<Option<Vec<f32>>> = frames
@@ -877,7 +981,10 @@ impl<'a> Objective<'a> {
                 .enumerate()
                 .map(|(j, f)| {
                     f.as_ref()
-                        .map(|f| self.render_frame(f, &v.camera, &format!("simulated frame {j}")))
+                        .map(|f| {
+                            let what = format!("simulated frame {j}");
+                            self.render_frame(&mut handle, f, &v.camera, &what)
+                        })
                         .transpose()
                 })
                 .collect::<Result<_, _>>()?;
@@ -1010,10 +1117,7 @@ impl<'a> Objective<'a> {
                                         self.prepare_frame(&mut handle, f, &view.camera, &what)?;
                                     self.render_rows_vjp(&mut q, rows32.clone(), &buf)?;
                                     let gs = grads.as_deref_mut().expect("in the gradient branch");
-                                    let acc = gs[j].get_or_insert_with(|| FrameGrad {
-                                        x: vec![[0.0; 3]; n],
-                                        f: vec![[0.0; 9]; n],
-                                    });
+                                    let acc = gs[j].get_or_insert_with(|| FrameGrad::zeros(f, n));
                                     self.frame_vjp_into(&mut handle, f, q, acc)?;
                                 }
                             }
@@ -1029,10 +1133,7 @@ impl<'a> Objective<'a> {
                         continue;
                     };
                     let p = p.take().expect("pulled frames are kept");
-                    let acc = gs[j].get_or_insert_with(|| FrameGrad {
-                        x: vec![[0.0; 3]; n],
-                        f: vec![[0.0; 9]; n],
-                    });
+                    let acc = gs[j].get_or_insert_with(|| FrameGrad::zeros(f, n));
                     self.frame_vjp_into(&mut handle, f, p, acc)?;
                 }
                 prof.render_vjp_s += t0.elapsed().as_secs_f64();
@@ -1060,7 +1161,7 @@ impl<'a> Objective<'a> {
         params: &D::Params,
         grad0: D::Grad,
         mode: Mode,
-        read: &dyn Fn(&D::State) -> Result<Frame, FitError>,
+        read: &dyn Fn(usize, &D::State) -> Result<Frame, FitError>,
         add: &dyn Fn(&mut D::State, &FrameGrad) -> Result<(), FitError>,
     ) -> Result<(Evaluation, Option<(D::State, D::Grad)>, Vec<Video<f32>>), FitError> {
         let spf = self.sim.setup.substeps_per_frame;
@@ -1075,8 +1176,7 @@ impl<'a> Objective<'a> {
         let store = |f: usize, s: &D::State| {
             if need[f] && error.borrow().is_none() {
                 let t = Instant::now();
-                let what = format!("simulated frame {f}");
-                let r = read(s).and_then(|fr| self.check_domain(&fr, &what).map(|_| fr));
+                let r = read(f, s);
                 *read_time.borrow_mut() += t.elapsed().as_secs_f64();
                 match r {
                     Ok(fr) => stored.borrow_mut()[f] = Some(fr),
@@ -1275,16 +1375,32 @@ pub(crate) fn ms_ssim_config(name: &str, h: usize, w: usize) -> Result<MsSsimCon
 /// (forward-only runs).
 pub(crate) type RunOut = (Evaluation, Option<Vec<PhysParams<f64>>>, Vec<Video<f32>>);
 
-/// A simulated frame on the host: positions and row-major deformation gradients.
-struct Frame {
-    x: Vec<[f32; 3]>,
-    f: Vec<[f32; 9]>,
+/// A simulated frame: positions and row-major deformation gradients, on the host or left on
+/// the backend's device (copies of the state's buffers the renderer reads there).
+enum Frame {
+    Host { x: Vec<[f32; 3]>, f: Vec<[f32; 9]> },
+    Device { x: AnyBuf, f: AnyBuf },
 }
 
-/// A frame's rendering gradient with respect to positions and deformation gradients.
-struct FrameGrad {
-    x: Vec<[f32; 3]>,
-    f: Vec<[f32; 9]>,
+/// A frame's rendering gradient with respect to positions and deformation gradients: summed
+/// on the host, or on the device as the list of its parts (one per view, and per band where
+/// a frame was not kept), each added to the adjoint state there.
+enum FrameGrad {
+    Host { x: Vec<[f32; 3]>, f: Vec<[f32; 9]> },
+    Device(Vec<(AnyBuf, AnyBuf)>),
+}
+
+impl FrameGrad {
+    /// A zero gradient for `n` particles, where frame `s` lives.
+    fn zeros(s: &Frame, n: usize) -> FrameGrad {
+        match s {
+            Frame::Host { .. } => FrameGrad::Host {
+                x: vec![[0.0; 3]; n],
+                f: vec![[0.0; 9]; n],
+            },
+            Frame::Device { .. } => FrameGrad::Device(Vec::new()),
+        }
+    }
 }
 
 /// A non-finite parameter gradient is an error.

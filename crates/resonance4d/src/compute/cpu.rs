@@ -1,6 +1,5 @@
 //! The CPU backend as a [`Compute`]: all cores (rayon), f32 or f64.
 
-use r4d_backend_cpu::splat::CpuSplat;
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_mpm::adjoint::host::HostSim;
 use r4d_mpm::DynSimulation;
@@ -33,6 +32,6 @@ impl Compute for CpuCompute {
         &self,
         f: &mut dyn FnMut(&mut dyn Renderer) -> Result<(), FitError>,
     ) -> Result<(), FitError> {
-        f(&mut SplatRenderer::new(CpuSplat))
+        f(&mut SplatRenderer::new(CpuBackend::default()))
     }
 }

@@ -1,6 +1,6 @@
 //! A GPU through Vulkan (ash) as a [`Compute`].
 
-use r4d_backend_vulkan::{VulkanEngine, VulkanMpm, VulkanSplat};
+use r4d_backend_vulkan::{VulkanBackend, VulkanEngine};
 use r4d_mpm::adjoint::host::HostSim;
 use r4d_mpm::DynSimulation;
 use r4d_optim::compute::{simulation_on, Compute, Precision};
@@ -8,11 +8,11 @@ use r4d_optim::FitError;
 use r4d_splat::{Renderer, SplatRenderer};
 use std::sync::{Arc, Mutex};
 
-/// A GPU through Vulkan directly (ash, `r4d-backend-vulkan`): `VulkanMpm` (f32) and the
+/// A GPU through Vulkan directly (ash, `r4d-backend-vulkan`): `VulkanBackend` (f32) and the
 /// Vulkan renderer (built once, reused by every render); the same recordings as wgpu.
 pub struct VulkanCompute {
     engine: VulkanEngine,
-    renderer: Mutex<Option<SplatRenderer<VulkanSplat>>>,
+    renderer: Mutex<Option<SplatRenderer<VulkanBackend>>>,
 }
 
 impl std::fmt::Debug for VulkanCompute {
@@ -43,7 +43,7 @@ impl Compute for VulkanCompute {
         _precision: Precision,
         sim: Arc<HostSim>,
     ) -> Result<Box<dyn DynSimulation>, FitError> {
-        simulation_on(VulkanMpm::new(self.engine.clone()), sim)
+        simulation_on(VulkanBackend::new(self.engine.clone()), sim)
     }
 
     fn with_renderer(
@@ -54,9 +54,13 @@ impl Compute for VulkanCompute {
             .renderer
             .lock()
             .map_err(|_| FitError::backend_msg("vulkan", "the renderer panicked earlier"))?;
-        let r =
-            guard.get_or_insert_with(|| SplatRenderer::new(VulkanSplat::new(self.engine.clone())));
+        let r = guard
+            .get_or_insert_with(|| SplatRenderer::new(VulkanBackend::new(self.engine.clone())));
         f(r)
+    }
+
+    fn frames_on_device(&self) -> bool {
+        true
     }
 
     fn reset_device_peak(&self) {

@@ -1,7 +1,7 @@
 //! A GPU through wgpu as a [`Compute`].
 
-use r4d_backend_cpu::splat::CpuSplat;
-use r4d_backend_wgpu::{WgpuContext, WgpuSplat};
+use r4d_backend_cpu::CpuBackend;
+use r4d_backend_wgpu::{WgpuBackend, WgpuContext};
 use r4d_mpm::adjoint::host::HostSim;
 use r4d_mpm::DynSimulation;
 use r4d_optim::compute::{simulation_on, Compute, Precision};
@@ -9,13 +9,13 @@ use r4d_optim::FitError;
 use r4d_splat::{Renderer, SplatRenderer};
 use std::sync::{Arc, Mutex};
 
-/// A GPU through wgpu: `WgpuMpm` (f32, state and gradients on the device) and, by default,
+/// A GPU through wgpu: `WgpuBackend` (f32, state and gradients on the device) and, by default,
 /// the wgpu renderer (built once, reused by every render).
 pub struct WgpuCompute {
     ctx: Arc<WgpuContext>,
     /// Render (and differentiate the renderer) on the GPU (default); `false`: on the CPU.
     pub render_on_gpu: bool,
-    renderer: Mutex<Option<SplatRenderer<WgpuSplat>>>,
+    renderer: Mutex<Option<SplatRenderer<WgpuBackend>>>,
 }
 
 impl std::fmt::Debug for WgpuCompute {
@@ -52,7 +52,7 @@ impl Compute for WgpuCompute {
         _precision: Precision,
         sim: Arc<HostSim>,
     ) -> Result<Box<dyn DynSimulation>, FitError> {
-        simulation_on(r4d_backend_wgpu::WgpuMpm::new(self.ctx.clone()), sim)
+        simulation_on(r4d_backend_wgpu::WgpuBackend::new(self.ctx.clone()), sim)
     }
 
     fn with_renderer(
@@ -60,14 +60,18 @@ impl Compute for WgpuCompute {
         f: &mut dyn FnMut(&mut dyn Renderer) -> Result<(), FitError>,
     ) -> Result<(), FitError> {
         if !self.render_on_gpu {
-            return f(&mut SplatRenderer::new(CpuSplat));
+            return f(&mut SplatRenderer::new(CpuBackend::default()));
         }
         let mut guard = self
             .renderer
             .lock()
             .map_err(|_| FitError::backend_msg("wgpu", "the GPU renderer panicked earlier"))?;
-        let r = guard.get_or_insert_with(|| SplatRenderer::new(WgpuSplat::new(self.ctx.clone())));
+        let r = guard.get_or_insert_with(|| SplatRenderer::new(WgpuBackend::new(self.ctx.clone())));
         f(r)
+    }
+
+    fn frames_on_device(&self) -> bool {
+        self.render_on_gpu
     }
 
     fn reset_device_peak(&self) {

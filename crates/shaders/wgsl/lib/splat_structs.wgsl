@@ -129,3 +129,15 @@ fn splat_tile_rect(p: Projected, tiles: vec2<u32>) -> vec4<u32> {
 fn splat_visible(p: Projected) -> bool {
     return p.radius_x != 0u || p.radius_y != 0u;
 }
+
+// The simulation link (`r4d_splat::kernels::LinkConsts`): particle `s < simulated` moves
+// Gaussian `simulated[s]` to `A x + t` (rows `to_world[i] = [A_i0, A_i1, A_i2, t_i]`) with
+// deformation gradient `R^T F R` (`rot` the rows of R).
+struct LinkConsts {
+    to_world: array<vec4<f32>, 3>,
+    rot: array<vec4<f32>, 3>,
+    inv_scale: f32,
+    simulated: u32,
+    particles: u32,
+    _pad: u32,
+}
