@@ -1,4 +1,8 @@
-//! Physics and references nobody here wrote: conservation and beam theory, PhysGaussian trajectories, gsplat renders, pytorch-msssim / LPIPS values, segmentation.
+//! References nobody here wrote that need the whole program: the official LPIPS values (the
+//! `r4d metrics` command among them) and PhysFlow-made fluid scenes read as datasets. The
+//! single-crate references live with their crates: physics, PhysGaussian trajectories and
+//! gsplat renders in `crates/backend-cpu/tests/references`, the loss and metric goldens in
+//! `crates/loss/tests/loss`, segmentation in `crates/segment/tests/segment`.
 //!
 //! One test binary per axis, a module per topic; run one module with
 //! `cargo test --test references -- MODULE::`.
@@ -6,15 +10,5 @@
 #[path = "../common/mod.rs"]
 mod common;
 
-mod cantilever;
-mod fluids_physics;
-mod loss_goldens;
 mod lpips;
-mod materials;
 mod physflow_fluids;
-mod physgaussian_import;
-mod physics;
-mod segment;
-mod segment_plant;
-mod splat_golden;
-mod trajectory_metrics;

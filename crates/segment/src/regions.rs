@@ -20,7 +20,7 @@
 //! (a part and the static scene on one smooth surface — an object painted on a wall — keep
 //! their boundary). The prior is a product: a Gaussian whose own evidence gives a part
 //! (almost) nothing is not moved to it, so two parts on one smooth surface keep most of
-//! their boundary too (measured in `tests/references/segment_plant.rs`).
+//! their boundary too (measured in `crates/segment/tests/segment/segment_plant.rs`).
 //!
 //! **Static.** The background entry is scaled too, but only one way and only where the
 //! region's strongest part outweighs the static scene in it: by `(R_0 / R_max)^q`. A part's
@@ -455,7 +455,7 @@ fn invert3(k: &[[f64; 3]; 3]) -> Option<([[f64; 3]; 3], f64)> {
 /// posterior restores a thin part that most views erase (the potted plant's stem: its
 /// region's summed votes favour the soil, seed 2), the summed votes keep a surface that a
 /// view with a clean record covers with a neighbour's dilated mask (the pot's inner wall,
-/// seed 1); their mean is right on both (`tests/references/segment_plant.rs`).
+/// seed 1); their mean is right on both (`crates/segment/tests/segment/segment_plant.rs`).
 pub(crate) fn region_evidence(lifted: &crate::Lifted) -> Option<Vec<f64>> {
     let s = lifted.num_parts + 1;
     if lifted.summed_weights.len() != lifted.class_weights.len() {

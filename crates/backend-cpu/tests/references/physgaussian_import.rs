@@ -4,11 +4,9 @@
 //! Jelly: every particle within 0.05 dx at every frame. Metal, sand, plasticine (path
 //! dependent): centroid within 0.25 dx and bounding box within 0.5 dx at every frame.
 
-use crate::common;
-
-use common::{fixture, read_npz, Array};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{physgaussian, MpmKernels, ParticleSet, Simulation, Simulator};
+use r4d_testkit::{fixture, read_npz, Array};
 
 struct Run {
     dx: f64,

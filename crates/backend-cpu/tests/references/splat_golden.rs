@@ -4,14 +4,13 @@
 //! gradient array within 5e-3 relative L2 with matching sign patterns. Run for the
 //! single-threaded reference (f32 and f64) and the parallel CPU backend.
 
-use crate::common;
-use common::{fixture, read_npy, Array};
 use r4d_backend_cpu::CpuBackend;
 use r4d_splat::project::CamParams;
 use r4d_splat::reference::{self, ReferenceSplat, Scene};
 use r4d_splat::{
     load_cameras, Deformation, GaussianGrads, Gaussians, RenderSettings, Renderer, SplatRenderer,
 };
+use r4d_testkit::{fixture, read_npy, Array};
 use std::path::PathBuf;
 
 const SCENES: [&str; 5] = [

@@ -9,14 +9,12 @@
 //! `tests/fixtures/mpm/README.md` for what PhysGaussian's solver gets on the same stubby beam
 //! (-1.1% against Timoshenko).
 
-use crate::common;
-
-use common::scenes::config;
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
     Backend as _, BoundaryCondition, ForceForm, Material, PartParams, ParticleSet, Shape,
     Simulation, Simulator,
 };
+use r4d_testkit::scenes::config;
 
 const E: f64 = 1e6;
 const NU: f64 = 0.3;

@@ -7,15 +7,13 @@
 //!
 //! Run with `--nocapture` to see the worst error of every quantity.
 
-use crate::common;
-
-use common::{fixture, read_npz, Array};
 use r4d_loss::metrics::{l1, psnr};
 use r4d_loss::ssim::{ms_ssim, ssim};
 use r4d_loss::{
     Dms, DmsConfig, DmsWeights, FftNorm, MsSsimConfig, Real, Reduction, SpectralConfig, SsimConfig,
     Video,
 };
+use r4d_testkit::{fixture, read_npz, Array};
 use serde_json::Value;
 use std::collections::BTreeMap;
 

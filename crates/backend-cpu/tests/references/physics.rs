@@ -1,14 +1,12 @@
 //! Physics checks of the simulator: conservation, analytic free fall, determinism of the
 //! parallel backend and agreement with the single-threaded reference.
 
-use crate::common;
-
-use common::scenes::{boxed, config, jelly};
 use r4d_backend_cpu::{CpuBackend, Par};
 use r4d_mpm::{
     reference::ReferenceBackend, Backend, BoundaryCondition, ForceForm, Material, MpmKernels,
     PartParams, ParticleSet, SimConfig, Simulation, Simulator, Surface,
 };
+use r4d_testkit::scenes::{boxed, config, jelly};
 
 fn momentum(m: &[f32], v: &[[f32; 3]]) -> [f64; 3] {
     let mut p = [0.0; 3];

@@ -1,9 +1,8 @@
 //! Point-trajectory metrics against `tests/fixtures/metrics` (numpy + scipy cKDTree goldens,
 //! copied to `tests/fixtures/metrics`): every variant, every pair, the trajectory means.
 
-use crate::common;
-use common::{fixture, read_npz, Array};
 use r4d_loss::trajectory::{cloud_metrics, trajectory_metrics, CloudMetrics, REFERENCE_TAUS};
+use r4d_testkit::{fixture, read_npz, Array};
 use serde_json::Value;
 
 fn cloud(a: &Array) -> Vec<[f64; 3]> {

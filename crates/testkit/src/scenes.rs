@@ -1,5 +1,4 @@
 //! Scene builders shared by the physics tests.
-#![allow(dead_code)]
 
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{

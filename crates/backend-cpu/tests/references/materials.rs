@@ -1,13 +1,11 @@
 //! Every material shows its signature, checked with numbers.
 
-use crate::common;
-
-use common::scenes::{bbox, boxed, config, jelly, sim};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::{
     BoundaryCondition, Material, PartParams, ParticleSet, Shape, SimConfig, SimState, Simulation,
     Simulator, Surface,
 };
+use r4d_testkit::scenes::{bbox, boxed, config, jelly, sim};
 
 fn forever() -> f64 {
     f64::INFINITY

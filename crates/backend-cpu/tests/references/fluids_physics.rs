@@ -4,15 +4,13 @@
 //! PAC-NeRF's non-Newtonian model) below its yield stress comes to rest with its shape, above
 //! it flows to a lower mound; PhysFlow's `non_newtonian` does not keep its shape below it.
 
-use crate::common;
-
-use common::scenes::{bbox, config};
 use r4d_backend_cpu::CpuBackend;
 use r4d_mpm::math::Mat3;
 use r4d_mpm::{
     BoundaryCondition, Material, PartParams, ParticleSet, Shape, SimConfig, SimState, Simulation,
     Simulator, Surface,
 };
+use r4d_testkit::scenes::{bbox, config};
 
 const FLOOR: f64 = 0.125;
 
