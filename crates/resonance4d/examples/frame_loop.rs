@@ -1,6 +1,8 @@
 //! An engine's frame loop, headless: each frame steps the simulation and draws its Gaussians
 //! (positions and covariances deformed by the particles' F), then writes the frame as a PNG:
-//! `cargo run --release -p resonance4d --example frame_loop [OUT_DIR (default: a temp dir)]`
+//! `cargo run --release -p resonance4d --example frame_loop [OUT_DIR (default: a temp dir)]`.
+//! Simulation and renderer share one backend type, so the renderer reads the particles where
+//! the simulation left them (on a GPU backend nothing of a frame leaves the device).
 
 use resonance4d::loss::{io::write_png_dir, Video};
 use resonance4d::prelude::*;
@@ -55,18 +57,14 @@ pub fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut sim = Simulation::new(CpuBackend::<f32>::default(), &config, particles, "jelly")?;
     let mut state = sim.init_state(&config.parts)?;
     let mut renderer = SplatRenderer::new(CpuBackend::default());
+    let mut scene = renderer.upload_scene(&gaussians)?;
+    renderer.link_scene(&mut scene, &link)?;
     let mut frames = Vec::new();
     for _ in 0..config.time.frames {
         sim.step_frame(&mut state, &config.parts)?;
-        let x = sim.positions(&state)?;
-        let f: Vec<[[f32; 3]; 3]> = sim
-            .deformation_gradients(&state)?
-            .iter()
-            .map(|m| [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
-            .collect();
-        let deformed = link.deformation(&gaussians, &x, Some(&f), "frame")?;
-        let image = renderer.render(&gaussians, Some(&deformed), &camera, &settings)?;
-        frames.push(image.rgb);
+        let (x, f) = sim.state_buffers(&state.state)?;
+        let frame = renderer.prepare_frame_linked(&mut scene, &x, &f, &camera, &settings)?;
+        frames.push(renderer.render_rows(&frame, 0..camera.height)?.rgb);
     }
     let video = Video::from_frames(120, 160, frames.iter().map(|f| f.as_slice()))?;
     write_png_dir(out.as_ref(), &video)?;

@@ -162,6 +162,21 @@ fn be<E: std::error::Error + Send + Sync + 'static>(e: E) -> Error {
     Error::backend(e)
 }
 
+impl<B: crate::MpmKernels> Simulation<B> {
+    /// Copies of the positions (`[S; 3]`) and row-major deformation gradients (`[S; 9]`) of
+    /// `s` made on the backend ([`DynSimulation::frame_buffers`] for a typed state): a
+    /// renderer of the same backend draws them where they are
+    /// (`r4d_splat::Renderer::prepare_frame_linked`), nothing crosses to the host.
+    pub fn state_buffers(&self, s: &State<B>) -> Result<(AnyBuf, AnyBuf)> {
+        let n = self.sim.len();
+        let mut x = self.b.zeros::<[B::Scalar; 3]>(n).map_err(be)?;
+        self.b.copy(&s.x, &mut x).map_err(be)?;
+        let mut f = self.b.zeros::<[B::Scalar; 9]>(n).map_err(be)?;
+        self.b.copy(&s.f, &mut f).map_err(be)?;
+        Ok((AnyBuf::new(&self.b, x, n), AnyBuf::new(&self.b, f, n)))
+    }
+}
+
 impl<B: MpmAdjointKernels> DynSimulation for Simulation<B> {
     fn backend_name(&self) -> &str {
         self.b.name()
@@ -263,13 +278,7 @@ impl<B: MpmAdjointKernels> DynSimulation for Simulation<B> {
         a.add_to_f(&self.b, &d).map_err(be)
     }
     fn frame_buffers(&self, s: &AnyState) -> Result<(AnyBuf, AnyBuf)> {
-        let s = self.state(s, "frame_buffers")?;
-        let n = self.sim.len();
-        let mut x = self.b.zeros::<[B::Scalar; 3]>(n).map_err(be)?;
-        self.b.copy(&s.x, &mut x).map_err(be)?;
-        let mut f = self.b.zeros::<[B::Scalar; 9]>(n).map_err(be)?;
-        self.b.copy(&s.f, &mut f).map_err(be)?;
-        Ok((AnyBuf::new(&self.b, x, n), AnyBuf::new(&self.b, f, n)))
+        self.state_buffers(self.state(s, "frame_buffers")?)
     }
     fn add_buffers(&self, adj: &mut AnyState, dx: &AnyBuf, df: &AnyBuf) -> Result<()> {
         let n = self.sim.len();
