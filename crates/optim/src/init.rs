@@ -337,27 +337,7 @@ impl LatinHypercubeInit {
     /// invalid space, an `include` point that does not fit it, or no candidates at all.
     pub fn sample(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
         space.validate()?;
-        for (j, p) in self.include.iter().enumerate() {
-            if p.len() != space.dims() {
-                return Err(Error::InvalidInclude {
-                    position: j,
-                    message: format!(
-                        "{} values for {} parameters ({})",
-                        p.len(),
-                        space.dims(),
-                        space.names.join(", ")
-                    ),
-                });
-            }
-            for ((&t, &(lo, hi)), name) in p.iter().zip(&space.bounds).zip(&space.names) {
-                if !(t.is_finite() && lo <= t && t <= hi) {
-                    return Err(Error::InvalidInclude {
-                        position: j,
-                        message: format!("parameter '{name}' = {t} is outside [{lo}, {hi}]"),
-                    });
-                }
-            }
-        }
+        check_include(space, &self.include)?;
         let mut points: Vec<Vec<f64>> = latin_hypercube(self.candidates, space.dims(), self.seed)
             .into_iter()
             .map(|u| {
@@ -372,6 +352,127 @@ impl LatinHypercubeInit {
             return Err(Error::NoCandidates);
         }
         Ok(points)
+    }
+}
+
+/// Checks that every extra candidate has one value per parameter, within the bounds.
+fn check_include(space: &SearchSpace, include: &[Vec<f64>]) -> Result<(), Error> {
+    for (j, p) in include.iter().enumerate() {
+        if p.len() != space.dims() {
+            return Err(Error::InvalidInclude {
+                position: j,
+                message: format!(
+                    "{} values for {} parameters ({})",
+                    p.len(),
+                    space.dims(),
+                    space.names.join(", ")
+                ),
+            });
+        }
+        for ((&t, &(lo, hi)), name) in p.iter().zip(&space.bounds).zip(&space.names) {
+            if !(t.is_finite() && lo <= t && t <= hi) {
+                return Err(Error::InvalidInclude {
+                    position: j,
+                    message: format!("parameter '{name}' = {t} is outside [{lo}, {hi}]"),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Grid initialisation: the centres of a regular grid of `k` cells per parameter in log10
+/// space ([`log_space`]), `k` the largest with `k^dims <= candidates` (at least 1: the box's
+/// centre), plus the `include` points; all are evaluated and ranked. Deterministic (no seed):
+/// every decade of every parameter is covered alike, which suits one or two free parameters;
+/// with more, the Latin hypercube ([`LatinHypercubeInit`]) covers each parameter's range with
+/// far fewer candidates.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LogGridInit {
+    /// The most grid points evaluated (the grid has `k^dims` of them).
+    pub candidates: usize,
+    /// How many of the best candidates [`InitOutcome::top_k`] lists (default 4).
+    pub top_k: usize,
+    /// Evaluate candidates concurrently with rayon (default `true`).
+    pub parallel: bool,
+    /// With `parallel`, at most this many evaluations at once (`None`: the pool's threads).
+    pub max_concurrent: Option<usize>,
+    /// Extra candidates evaluated too (one positive finite value per parameter, within the
+    /// bounds).
+    pub include: Vec<Vec<f64>>,
+}
+
+impl Default for LogGridInit {
+    fn default() -> Self {
+        LogGridInit {
+            candidates: 32,
+            top_k: 4,
+            parallel: true,
+            max_concurrent: None,
+            include: Vec::new(),
+        }
+    }
+}
+
+impl LogGridInit {
+    /// Cells per parameter for `dims` parameters: the largest `k >= 1` with
+    /// `k^dims <= candidates`.
+    pub fn points_per_axis(&self, dims: usize) -> usize {
+        let mut k = 1usize;
+        while (k + 1)
+            .checked_pow(dims as u32)
+            .is_some_and(|n| n <= self.candidates)
+        {
+            k += 1;
+        }
+        k
+    }
+
+    /// The grid points (the first parameter varying slowest), then `include`.
+    pub fn sample(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
+        space.validate()?;
+        check_include(space, &self.include)?;
+        if self.candidates == 0 && self.include.is_empty() {
+            return Err(Error::NoCandidates);
+        }
+        let d = space.dims();
+        let mut points = Vec::new();
+        if self.candidates > 0 {
+            let k = self.points_per_axis(d);
+            let total = k.pow(d as u32);
+            for i in 0..total {
+                let mut rest = i;
+                let mut p = vec![0.0; d];
+                for a in (0..d).rev() {
+                    let cell = rest % k;
+                    rest /= k;
+                    let (lo, hi) = space.bounds[a];
+                    p[a] = log_space((cell as f64 + 0.5) / k as f64, lo, hi);
+                }
+                points.push(p);
+            }
+        }
+        points.extend(self.include.iter().cloned());
+        Ok(points)
+    }
+}
+
+impl Initializer for LogGridInit {
+    fn candidates(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
+        self.sample(space)
+    }
+
+    fn top_k(&self) -> usize {
+        self.top_k
+    }
+
+    fn parallel(&self) -> bool {
+        self.parallel
+    }
+
+    fn max_concurrent(&self) -> usize {
+        self.max_concurrent.unwrap_or(usize::MAX)
     }
 }
 
@@ -398,6 +499,50 @@ mod tests {
     use super::*;
     use std::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Mutex;
+
+    /// The grid covers each parameter's decades alike (cell centres in log10 space), uses
+    /// at most `candidates` points, and ranks the point nearest the optimum first.
+    #[test]
+    fn log_grid_covers_the_box_in_log_space() {
+        let space = SearchSpace::new(
+            vec!["E".into(), "density".into()],
+            vec![(1e3, 1e7), (100.0, 10_000.0)],
+        )
+        .unwrap();
+        let g = LogGridInit {
+            candidates: 20,
+            parallel: false,
+            ..Default::default()
+        };
+        assert_eq!(g.points_per_axis(2), 4);
+        let pts = g.sample(&space).unwrap();
+        assert_eq!(pts.len(), 16);
+        // E's cells are decades 1e3..1e4, ..: centres at 10^3.5, 10^4.5, ...
+        let es: Vec<f64> = pts.iter().step_by(4).map(|p| p[0].log10()).collect();
+        for (e, want) in es.iter().zip([3.5, 4.5, 5.5, 6.5]) {
+            assert!((e - want).abs() < 1e-12, "{es:?}");
+        }
+        let out = g
+            .initialize(&space, &|_, t| {
+                Ok(-((t[0].log10() - 5.4).abs() + (t[1].log10() - 2.3).abs()))
+            })
+            .unwrap();
+        let best = &out.best;
+        assert!((best[0].log10() - 5.5).abs() < 1e-9 && (best[1].log10() - 2.25).abs() < 1e-9);
+        // One parameter, fewer candidates than cells of two: the box's centre.
+        let one = LogGridInit {
+            candidates: 1,
+            ..Default::default()
+        };
+        let c = one.sample(&space).unwrap();
+        assert_eq!(c.len(), 1);
+        assert!((c[0][0].log10() - 5.0).abs() < 1e-12);
+        let none = LogGridInit {
+            candidates: 0,
+            ..Default::default()
+        };
+        assert!(matches!(none.sample(&space), Err(Error::NoCandidates)));
+    }
 
     /// Any sampler is an initializer: the trait's evaluation, failure handling and ranking
     /// come with `candidates` and `top_k`.

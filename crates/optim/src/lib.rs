@@ -69,7 +69,7 @@ pub use error::FitError;
 pub use heap::{HeapProbe, HeapSpan};
 pub use init::{
     evaluate_candidate, Candidate, Evaluate, InitOutcome, Initializer, LatinHypercubeInit,
-    SearchSpace,
+    LogGridInit, SearchSpace,
 };
 pub use lhs::{latin_hypercube, log_space};
 pub use restarts::{Restart, RestartsConfig, ShearRestarts};

@@ -8,7 +8,7 @@
 //!
 //! The card's four interfaces are here: [`Simulator`] (the MPM simulation on any backend),
 //! [`Renderer`] (Gaussian splatting), [`Loss`] (DMS, SSIM, L1) and [`Initializer`] (the Latin
-//! hypercube), with the types they take.
+//! hypercube, a log grid), with the types they take.
 
 pub use crate::builder::ProblemBuilder;
 pub use crate::compute::{Compute, Precision};
@@ -22,7 +22,7 @@ pub use r4d_optim::video::fit::NoHooks;
 pub use r4d_optim::video::{
     run_fit, run_fit_with_loss, FitConfig, FitOutcome, Objective, VideoProblem, View,
 };
-pub use r4d_optim::{FitError, Initializer, LatinHypercubeInit, ParamKind};
+pub use r4d_optim::{FitError, Initializer, LatinHypercubeInit, LogGridInit, ParamKind};
 pub use r4d_splat::{
     Camera, Gaussians, RenderSettings, Renderer, SimLink, SplatKernels, SplatRenderer,
 };

@@ -42,6 +42,7 @@
 //! [init]                  # simulation-driven initialisation
 //! enabled = true
 //! candidates = 32         # Latin hypercube samples in log10 space
+//! sampler = "latin_hypercube" # or "grid": a log10 grid of at most `candidates` points
 //! frames = 16             # frames simulated per candidate
 //! seed = 0
 //! top_k = 4
@@ -92,6 +93,29 @@ pub struct InitConfig {
     pub top_k: usize,
     /// Also evaluate the simulation config's parameters as a candidate.
     pub include_start: bool,
+    /// How candidates are sampled: `latin_hypercube` (default, the paper's; seeded) or
+    /// `grid` (the centres of a log10 grid with at most `candidates` points; no seed). Not
+    /// part of the checkpoint's fingerprint while the default.
+    #[serde(skip_serializing_if = "InitSampler::is_default")]
+    pub sampler: InitSampler,
+}
+
+/// How the initialisation samples its candidates (`[init] sampler`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InitSampler {
+    /// A seeded Latin hypercube in log10 space ([`crate::LatinHypercubeInit`]).
+    #[default]
+    LatinHypercube,
+    /// The centres of a regular log10 grid ([`crate::LogGridInit`]).
+    Grid,
+}
+
+impl InitSampler {
+    /// Whether it is the default (Latin hypercube).
+    pub fn is_default(&self) -> bool {
+        *self == InitSampler::LatinHypercube
+    }
 }
 
 impl Default for InitConfig {
@@ -103,6 +127,7 @@ impl Default for InitConfig {
             seed: 0,
             top_k: 4,
             include_start: false,
+            sampler: InitSampler::LatinHypercube,
         }
     }
 }
@@ -685,6 +710,18 @@ mod tests {
     /// `[valley]`: parsed from TOML, refused naming its key, unknown keys refused, and
     /// off unless `evals > 0` (then not part of the serialised settings, so a fit's
     /// fingerprint does not change with it).
+    #[test]
+    fn init_sampler_parses_and_stays_out_of_the_default_fingerprint() {
+        let parse = |t: &str| toml::from_str::<FitConfig>(t);
+        let c = parse("[init]\nsampler = \"grid\"\ncandidates = 9\n").unwrap();
+        assert_eq!(c.init.sampler, InitSampler::Grid);
+        assert!(parse("[init]\nsampler = \"sobol\"\n").is_err());
+        // The default is not serialised, so a default config's fingerprint is unchanged.
+        let text = toml::to_string(&FitConfig::default()).unwrap();
+        assert!(!text.contains("sampler"), "{text}");
+        assert!(toml::to_string(&c).unwrap().contains("sampler = \"grid\""));
+    }
+
     #[test]
     fn valley_settings_parse_and_bad_ones_are_refused() {
         let parse = |t: &str| toml::from_str::<FitConfig>(t);

@@ -1,7 +1,7 @@
 //! The fit loop: simulation-driven initialisation, then AdamW on `xi = log(theta)` with bound
 //! and gradient clipping; a record per iteration and a resumable checkpoint.
 
-use super::config::{FitConfig, OptimizerKind};
+use super::config::{FitConfig, InitSampler, OptimizerKind};
 use super::problem::{Evaluation, Objective, VideoProblem};
 use crate::descent::{self, keep_best, Rate, Stepper};
 use crate::record::{mix_json, Fingerprint, FlatProbe, Terms};
@@ -13,7 +13,8 @@ use crate::valley::ValleyRound;
 use crate::FitError;
 use crate::{
     evaluate_candidate, Candidate, GradientSampling, InitOutcome, Initializer, LatinHypercubeInit,
-    LogDomainOptimizer, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs, ValleySearch,
+    LogDomainOptimizer, LogGridInit, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs,
+    ValleySearch,
 };
 use r4d_loss::bands::ReferenceVideo;
 use r4d_loss::{ssim::ms_ssim, Video, VideoLoss};
@@ -331,18 +332,28 @@ fn init_setup<'a>(
         names: space.names(),
         bounds: space.bounds(),
     };
-    let init = Box::new(LatinHypercubeInit {
-        candidates: cfg.init.candidates,
-        seed: cfg.init.seed,
-        top_k: cfg.init.top_k,
-        parallel: true,
-        max_concurrent: Some(obj.init_concurrency()),
-        include: if cfg.init.include_start {
-            vec![space.values(parts)]
-        } else {
-            Vec::new()
-        },
-    });
+    let include = if cfg.init.include_start {
+        vec![space.values(parts)]
+    } else {
+        Vec::new()
+    };
+    let init: Box<dyn Initializer + Send> = match cfg.init.sampler {
+        InitSampler::LatinHypercube => Box::new(LatinHypercubeInit {
+            candidates: cfg.init.candidates,
+            seed: cfg.init.seed,
+            top_k: cfg.init.top_k,
+            parallel: true,
+            max_concurrent: Some(obj.init_concurrency()),
+            include,
+        }),
+        InitSampler::Grid => Box::new(LogGridInit {
+            candidates: cfg.init.candidates,
+            top_k: cfg.init.top_k,
+            parallel: true,
+            max_concurrent: Some(obj.init_concurrency()),
+            include,
+        }),
+    };
     Ok((space, obj, search, init))
 }
 
