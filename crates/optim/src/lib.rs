@@ -52,6 +52,7 @@ use serde::{Deserialize, Serialize};
 pub mod compute;
 mod descent;
 mod error;
+pub mod evaluator;
 mod heap;
 mod init;
 mod lhs;
@@ -66,6 +67,7 @@ pub mod video;
 
 pub use compute::{Compute, Precision, ReferenceCompute};
 pub use error::FitError;
+pub use evaluator::{Evaluator, FnEvaluator, Graded};
 pub use heap::{HeapProbe, HeapSpan};
 pub use init::{
     evaluate_candidate, Candidate, Evaluate, InitOutcome, Initializer, LatinHypercubeInit,

@@ -129,8 +129,8 @@ pub struct GradientSampling {
     pub rounds: Vec<SamplingRound>,
 }
 
-/// A point's loss and log-unit gradient, `None` where its simulation failed (a wall).
-pub type Graded = Option<(f64, Vec<f64>)>;
+use crate::evaluator::Evaluator;
+pub use crate::evaluator::Graded;
 
 impl GradientSampling {
     /// A search from `theta` (parameters, not logs) with `loss` there, within `bounds`
@@ -179,15 +179,11 @@ impl GradientSampling {
         self.clamp(self.x.iter().zip(d).map(|(a, b)| a + t * b).collect())
     }
 
-    /// One iteration: `grads` evaluates loss and log-unit gradient at a batch of log points,
-    /// `losses` the loss alone (`f64::INFINITY` where a simulation failed). `None` once the
+    /// One iteration: `eval` gives losses and log-unit gradients at batches of log points
+    /// ([`Evaluator::values_and_grads`]) and the line search's losses
+    /// ([`Evaluator::values`]; `f64::INFINITY` where a simulation failed). `None` once the
     /// search has ended.
-    pub fn round(
-        &mut self,
-        cfg: &SamplingConfig,
-        grads: &mut dyn FnMut(&[Vec<f64>]) -> Vec<Graded>,
-        losses: &mut dyn FnMut(&[Vec<f64>]) -> Vec<f64>,
-    ) -> Option<SamplingRound> {
+    pub fn round(&mut self, cfg: &SamplingConfig, eval: &dyn Evaluator) -> Option<SamplingRound> {
         if self.done || self.iters >= cfg.iters {
             self.done = true;
             return None;
@@ -202,7 +198,7 @@ impl GradientSampling {
             let u = unit_direction(n, cfg.seed, self.iters as u64, s as u64);
             batch.push(self.along(&u, self.radius));
         }
-        let results = grads(&batch);
+        let results = eval.values_and_grads(&batch);
         let mut it = results.into_iter();
         if own {
             match it.next().flatten() {
@@ -229,14 +225,14 @@ impl GradientSampling {
             let mut t = cfg.step;
             while t >= self.radius / 2.0 {
                 let pts = [self.along(&d, t), self.along(&d, t / 2.0)];
-                let v = losses(&pts);
+                let v = eval.values(&pts);
                 evals += 2;
                 let k = if v[1] < v[0] { 1 } else { 0 };
                 if v[k] < self.loss {
                     let (mut best_t, mut best_v) = ([t, t / 2.0][k], v[k]);
                     if k == 0 && t == cfg.step {
                         for _ in 0..6 {
-                            let v2 = losses(&[self.along(&d, 2.0 * best_t)]);
+                            let v2 = eval.values(&[self.along(&d, 2.0 * best_t)]);
                             evals += 1;
                             if v2[0] < best_v {
                                 best_t *= 2.0;
@@ -366,11 +362,9 @@ mod tests {
     fn run(cfg: &SamplingConfig, start: &[f64]) -> GradientSampling {
         let v0 = trench(&start.iter().map(|v| v.ln()).collect::<Vec<_>>()).0;
         let mut s = GradientSampling::new(start, v0, &[(1e-3, 1e3), (1e-3, 1e3)], cfg).unwrap();
-        let mut grads =
-            |pts: &[Vec<f64>]| -> Vec<Graded> { pts.iter().map(|p| Some(trench(p))).collect() };
-        let mut losses =
-            |pts: &[Vec<f64>]| -> Vec<f64> { pts.iter().map(|p| trench(p).0).collect() };
-        while s.round(cfg, &mut grads, &mut losses).is_some() {}
+        let eval =
+            crate::FnEvaluator::with_grad(|p: &[f64]| trench(p).0, |p: &[f64]| Some(trench(p)));
+        while s.round(cfg, &eval).is_some() {}
         s
     }
 

@@ -42,6 +42,7 @@
 //! evaluations of one batch are independent (the caller may run them in parallel). The state
 //! ([`ValleySearch`]) is serialisable: a fit checkpoints it after every round.
 
+use crate::evaluator::Evaluator;
 use serde::{Deserialize, Serialize};
 
 /// Settings of the valley search (`[valley]` in a fit config). Every key is optional.
@@ -170,9 +171,6 @@ pub struct ValleySearch {
     /// The rounds so far.
     pub rounds: Vec<ValleyRound>,
 }
-
-/// A batch of points (`log(theta)`) to their losses (non-finite or failed: `+inf`).
-pub type BatchLoss<'a> = dyn FnMut(&[Vec<f64>]) -> Vec<f64> + 'a;
 
 impl ValleySearch {
     /// A search from `theta` (positive, inside `bounds`) whose loss is `loss` when known.
@@ -381,7 +379,7 @@ impl ValleySearch {
         &mut self,
         cfg: &ValleyConfig,
         budget: usize,
-        eval: &mut BatchLoss<'_>,
+        eval: &dyn Evaluator,
     ) -> Option<ValleyRound> {
         let n = self.x.len();
         if self.done || budget < self.probe_count(cfg.pairs) + 2 {
@@ -585,13 +583,13 @@ fn sharp_set(c: &[f64], gap: f64) -> Vec<usize> {
 }
 
 /// Evaluations within a budget.
-struct Counter<'e, 'a> {
-    eval: &'e mut BatchLoss<'a>,
+struct Counter<'e> {
+    eval: &'e dyn Evaluator,
     spent: usize,
     budget: usize,
 }
 
-impl Counter<'_, '_> {
+impl Counter<'_> {
     fn left(&self) -> usize {
         self.budget.saturating_sub(self.spent)
     }
@@ -599,7 +597,7 @@ impl Counter<'_, '_> {
     /// Evaluates `pts` (all of them: the caller checks [`Counter::left`]).
     fn batch(&mut self, pts: &[Vec<f64>]) -> Vec<f64> {
         self.spent += pts.len();
-        let mut out = (self.eval)(pts);
+        let mut out = self.eval.values(pts);
         out.resize(pts.len(), f64::INFINITY);
         out.iter_mut()
             .for_each(|v| *v = if v.is_finite() { *v } else { f64::INFINITY });
@@ -616,7 +614,7 @@ fn recentre(
     p: Vec<f64>,
     sharp: &[Vec<f64>],
     cfg: &ValleyConfig,
-    ev: &mut Counter<'_, '_>,
+    ev: &mut Counter<'_>,
     search: &ValleySearch,
 ) -> (f64, Vec<f64>) {
     if ev.left() == 0 {
@@ -661,7 +659,7 @@ fn line_search(
     u: &[f64],
     delta: f64,
     best: &mut (f64, Vec<f64>),
-    ev: &mut Counter<'_, '_>,
+    ev: &mut Counter<'_>,
     search: &ValleySearch,
 ) {
     let along = |from: &[f64], t: f64| {
@@ -739,13 +737,17 @@ mod tests {
         0.05 * (a - 0.5).powi(2) + 3.0 * (y - 0.3 * a).abs()
     }
 
-    fn search_on(f: &dyn Fn(&[f64]) -> f64, x0: &[f64], cfg: &ValleyConfig) -> ValleySearch {
+    fn search_on(
+        f: &(dyn Fn(&[f64]) -> f64 + Sync),
+        x0: &[f64],
+        cfg: &ValleyConfig,
+    ) -> ValleySearch {
         let bounds: Vec<(f64, f64)> = x0.iter().map(|_| ((-3f64).exp(), 3f64.exp())).collect();
         let theta: Vec<f64> = x0.iter().map(|v| v.exp()).collect();
         let mut s = ValleySearch::new(&theta, None, &bounds, cfg).unwrap();
-        let mut eval = |pts: &[Vec<f64>]| pts.iter().map(|p| f(p)).collect::<Vec<f64>>();
+        let eval = crate::FnEvaluator::new(f);
         while s.evals < cfg.evals {
-            if s.round(cfg, cfg.evals - s.evals, &mut eval).is_none() {
+            if s.round(cfg, cfg.evals - s.evals, &eval).is_none() {
                 break;
             }
         }

@@ -4,10 +4,11 @@
 use super::config::{FitConfig, InitSampler, OptimizerKind};
 use super::problem::{Evaluation, Objective, VideoProblem};
 use crate::descent::{self, keep_best, Rate, Stepper};
+use crate::evaluator::{Evaluator, Graded};
 use crate::record::{mix_json, Fingerprint, FlatProbe, Terms};
 pub use crate::record::{FitState, IterRecord, StartResult};
 use crate::restarts::{e_nu_from_k_g, k_g_from_e_nu, Restart, ShearRestarts};
-use crate::sampling::{Graded, SamplingConfig, SamplingRound};
+use crate::sampling::{SamplingConfig, SamplingRound};
 use crate::space::{part_summary, Granularity, ParamSpace};
 use crate::valley::ValleyRound;
 use crate::FitError;
@@ -132,6 +133,53 @@ fn loss_and_log_grad(
     let (ev, g) = obj.value_and_grad(&slots).ok()?;
     let g = space.gather(&g);
     Some((ev.total, g.iter().zip(theta).map(|(a, b)| a * b).collect()))
+}
+
+/// The video objective as the stages' [`Evaluator`]: a point is the logs of the free
+/// parameters of `space`, applied to the `base` slots; a point whose simulation fails is a
+/// wall (`f64::INFINITY`, no gradient).
+struct ObjectiveEval<'a> {
+    obj: &'a Objective<'a>,
+    space: &'a ParamSpace,
+    base: &'a [PartParams],
+}
+
+impl ObjectiveEval<'_> {
+    /// The loss at the parameters `theta` (not logs).
+    fn at_theta(&self, theta: &[f64]) -> f64 {
+        let mut slots = self.base.to_vec();
+        self.space.apply(&mut slots, theta);
+        self.obj.value(&slots).map_or(f64::INFINITY, |e| e.total)
+    }
+}
+
+impl Evaluator for ObjectiveEval<'_> {
+    fn value(&self, x: &[f64]) -> f64 {
+        self.at_theta(&x.iter().map(|v| v.exp()).collect::<Vec<_>>())
+    }
+    fn value_and_grad(&self, x: &[f64]) -> Graded {
+        let theta: Vec<f64> = x.iter().map(|v| v.exp()).collect();
+        loss_and_log_grad(self.obj, self.space, self.base, &theta)
+    }
+}
+
+/// A shear restart's [`Evaluator`]: the logs of the free parameters other than the
+/// restart's E and nu (`others`), which `full` completes into every free parameter.
+struct RestartEval<'a, F: Fn(&[f64]) -> Vec<f64> + Sync> {
+    eval: &'a ObjectiveEval<'a>,
+    full: F,
+    others: &'a [usize],
+}
+
+impl<F: Fn(&[f64]) -> Vec<f64> + Sync> Evaluator for RestartEval<'_, F> {
+    fn value(&self, x: &[f64]) -> f64 {
+        self.eval.at_theta(&(self.full)(x))
+    }
+    fn value_and_grad(&self, x: &[f64]) -> Graded {
+        let e = self.eval;
+        let (loss, g) = loss_and_log_grad(e.obj, e.space, e.base, &(self.full)(x))?;
+        Some((loss, self.others.iter().map(|&i| g[i]).collect()))
+    }
 }
 
 /// The loss terms of an evaluation, summed over its views.
@@ -712,20 +760,14 @@ fn valley_search(
                 .map_err(|e| FitError::Input(format!("the valley search's starting point: {e}")))?
         }
     };
-    let mut eval = |pts: &[Vec<f64>]| -> Vec<f64> {
-        pts.par_iter()
-            .map(|p| {
-                let theta: Vec<f64> = p.iter().map(|v| v.exp()).collect();
-                let mut slots = base_slots.to_vec();
-                space.apply(&mut slots, &theta);
-                // A point whose simulation fails is a wall, not an error of the fit.
-                obj.value(&slots).map_or(f64::INFINITY, |e| e.total)
-            })
-            .collect()
+    let eval = ObjectiveEval {
+        obj,
+        space,
+        base: base_slots,
     };
     while !search.done && search.evals < cfg.valley.evals {
         let budget = cfg.valley.evals - search.evals;
-        let Some(round) = search.round(&cfg.valley, budget, &mut eval) else {
+        let Some(round) = search.round(&cfg.valley, budget, &eval) else {
             break;
         };
         if let Some(l) = search.loss() {
@@ -752,12 +794,6 @@ fn gradient_sampling(
     hooks: &mut dyn FitHooks,
 ) -> Result<(), FitError> {
     let names = space.names();
-    let slots_at = |p: &[f64]| {
-        let theta: Vec<f64> = p.iter().map(|v| v.exp()).collect();
-        let mut slots = base_slots.to_vec();
-        space.apply(&mut slots, &theta);
-        (theta, slots)
-    };
     let mut search = match state.sampling.take() {
         Some(s) => s,
         None => {
@@ -766,17 +802,12 @@ fn gradient_sampling(
                 .map_err(|e| FitError::Input(format!("gradient sampling's starting point: {e}")))?
         }
     };
-    let mut grads = |pts: &[Vec<f64>]| -> Vec<Graded> {
-        pts.par_iter()
-            .map(|p| loss_and_log_grad(obj, space, base_slots, &slots_at(p).0))
-            .collect()
+    let eval = ObjectiveEval {
+        obj,
+        space,
+        base: base_slots,
     };
-    let mut losses = |pts: &[Vec<f64>]| -> Vec<f64> {
-        pts.par_iter()
-            .map(|p| obj.value(&slots_at(p).1).map_or(f64::INFINITY, |e| e.total))
-            .collect()
-    };
-    while let Some(round) = search.round(&cfg.gradient_sampling, &mut grads, &mut losses) {
+    while let Some(round) = search.round(&cfg.gradient_sampling, &eval) {
         keep_best(&mut state.best, search.loss, &search.theta());
         hooks.on_sampling(&round, &names, &search.theta());
         state.sampling = Some(search.clone());
@@ -924,23 +955,17 @@ fn shear_restarts(
             }
         };
         let at = e_nu(k);
-        let mut grads = |pts: &[Vec<f64>]| -> Vec<Graded> {
-            pts.par_iter()
-                .map(|p| {
-                    let (loss, g) = loss_and_log_grad(obj, space, base_slots, &full(at, p))?;
-                    Some((loss, others.iter().map(|&i| g[i]).collect()))
-                })
-                .collect()
+        let whole = ObjectiveEval {
+            obj,
+            space,
+            base: base_slots,
         };
-        let mut losses = |pts: &[Vec<f64>]| -> Vec<f64> {
-            pts.par_iter()
-                .map(|p| {
-                    obj.value(&slots_of(&full(at, p)))
-                        .map_or(f64::INFINITY, |e| e.total)
-                })
-                .collect()
+        let eval = RestartEval {
+            eval: &whole,
+            full: |p: &[f64]| full(at, p),
+            others: &others,
         };
-        while let Some(round) = gs.round(&inner, &mut grads, &mut losses) {
+        while let Some(round) = gs.round(&inner, &eval) {
             hooks.on_sampling(&round, &sub_names, &gs.theta());
             st.current = Some((k, gs.clone()));
             state.restarts = Some(st.clone());
