@@ -651,6 +651,15 @@ pub fn run(a: FitArgs) -> Result<()> {
             s.iters_done
         );
     }
+    eprintln!(
+        "fit: {}{}",
+        cfg.describe_plan(),
+        if cfg.stages.is_some() {
+            " (stages from the fit settings)"
+        } else {
+            ""
+        }
+    );
     let mut hooks = RunHooks::new(&out, &cfg, resume.as_ref())?;
     let outcome = run_fit(&problem, &cfg, resume, &mut hooks).map_err(|e| match e {
         e @ resonance4d::video_fit::FitError::Resume(_) => anyhow::Error::new(e).context(format!(

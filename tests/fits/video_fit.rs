@@ -314,6 +314,37 @@ fn gradient_sampling_descends_records_its_rounds_and_resumes_exactly() {
     assert!(e.to_string().contains("fingerprint"), "{e}");
 }
 
+/// `stages` decides what runs: with the initialisation and the valley search configured but
+/// unlisted, neither runs, and gradient sampling runs straight after the descent; a listed
+/// stage that cannot run is refused before any simulation.
+#[test]
+fn the_stage_list_decides_what_runs() {
+    use resonance4d::video_fit::StageKind;
+    let truth = [jelly(2e4, 800.0)];
+    let mut p = small_problem(&truth, 4);
+    p.config.parts = vec![jelly(5e4, 600.0)];
+    let mut cfg = fit_config(1);
+    cfg.init.enabled = true;
+    cfg.init.candidates = 2;
+    cfg.valley.evals = 40;
+    cfg.gradient_sampling.iters = 2;
+    cfg.stages = Some(vec![StageKind::Descent, StageKind::GradientSampling]);
+    let mut all = Collect::default();
+    let out = run_fit(&p, &cfg, None, &mut all).unwrap();
+    assert!(out.init.is_none(), "the initialisation is not listed");
+    assert!(out.valley.is_none(), "the valley search is not listed");
+    assert_eq!(out.sampling.expect("listed").rounds.len(), 2);
+    assert_eq!(all.losses.len(), 1, "one descent iteration");
+    let mut off = cfg.clone();
+    off.stages = Some(vec![StageKind::Descent, StageKind::ShearRestarts]);
+    let e = run_fit(&p, &off, None, &mut NoHooks).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("'shear_restarts' is listed but cannot run"),
+        "{e}"
+    );
+}
+
 /// Restarts along constant bulk modulus (`[shear_restarts]`): each restart keeps the
 /// starting point's bulk modulus at a shear modulus `factor^k` times its own, the sequence
 /// follows the profile, the fit returns the lowest point seen, a fit killed inside a

@@ -19,6 +19,8 @@
 //! multi_start = 1         # short fits from the best K candidates (1: off)
 //! multi_start_iters = 5   # iterations of each
 //! free = ["E", "density"] # free parameters of every part (default: by material)
+//! # stages = ["init", "descent", "valley"]  # what runs, in order (default: what the tables
+//! #                       # below turn on); a listed stage must be able to run
 //!
 //! [valley]                # the valley search after the iterations (r4d_optim::valley)
 //! evals = 0               # loss evaluations it may spend (0: off)
@@ -144,10 +146,67 @@ pub struct PartFit {
     pub bounds: BTreeMap<String, [f64; 2]>,
 }
 
+/// A stage of the video fit (`stages = [...]`); each stage's settings are in its own table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StageKind {
+    /// The simulation-driven initialisation (`[init]`).
+    Init,
+    /// Short fits from the best candidates (`multi_start`, `multi_start_iters`).
+    MultiStart,
+    /// The gradient iterations (`iters`, `optimizer`, `lr`, ...).
+    Descent,
+    /// The valley search (`[valley]`).
+    Valley,
+    /// Restarts along constant bulk modulus (`[shear_restarts]`).
+    ShearRestarts,
+    /// Gradient sampling (`[gradient_sampling]`).
+    GradientSampling,
+}
+
+impl StageKind {
+    /// Every stage, in the order the fit runs them when `stages` is not given.
+    pub const ALL: [StageKind; 6] = [
+        StageKind::Init,
+        StageKind::MultiStart,
+        StageKind::Descent,
+        StageKind::Valley,
+        StageKind::ShearRestarts,
+        StageKind::GradientSampling,
+    ];
+
+    /// The name in `stages` (`init`, `multi_start`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            StageKind::Init => "init",
+            StageKind::MultiStart => "multi_start",
+            StageKind::Descent => "descent",
+            StageKind::Valley => "valley",
+            StageKind::ShearRestarts => "shear_restarts",
+            StageKind::GradientSampling => "gradient_sampling",
+        }
+    }
+
+    /// Whether it refines the point the descent reached (runs after it, in any order).
+    pub fn after_descent(self) -> bool {
+        matches!(
+            self,
+            StageKind::Valley | StageKind::ShearRestarts | StageKind::GradientSampling
+        )
+    }
+}
+
 /// Settings of a video fit.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct FitConfig {
+    /// The stages that run, in order: `init`, `multi_start`, `descent` (in that order when
+    /// listed), then any of `valley`, `shear_restarts`, `gradient_sampling` in the order
+    /// listed. Unlisted stages do not run; a listed one must be able to (its budget above
+    /// zero, `[init] enabled`). Without it ([`FitConfig::plan`]), every stage whose settings
+    /// turn it on, in the order above. Not part of the checkpoint's fingerprint while unset.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stages: Option<Vec<StageKind>>,
     /// AdamW iterations.
     pub iters: usize,
     /// Learning rate (log units per step).
@@ -231,6 +290,7 @@ pub struct FitConfig {
 impl Default for FitConfig {
     fn default() -> Self {
         FitConfig {
+            stages: None,
             iters: 40,
             lr: 0.1,
             lr_schedule: LrSchedule::Cosine,
@@ -370,6 +430,117 @@ pub fn check_iters(n: usize) -> Result<(), String> {
 }
 
 impl FitConfig {
+    /// The stages this fit runs, in order: `stages` when given, else every stage whose
+    /// settings turn it on (`[init] enabled`, `multi_start > 1`, the descent always,
+    /// `[valley] evals`, `[shear_restarts] points`, `[gradient_sampling] iters` above zero) in
+    /// the order of [`StageKind::ALL`].
+    pub fn plan(&self) -> Vec<StageKind> {
+        if let Some(s) = &self.stages {
+            return s.clone();
+        }
+        StageKind::ALL
+            .into_iter()
+            .filter(|&k| match k {
+                StageKind::Init => self.init.enabled,
+                StageKind::MultiStart => self.multi_start > 1,
+                StageKind::Descent => true,
+                StageKind::Valley => !self.valley.is_off(),
+                StageKind::ShearRestarts => !self.shear_restarts.is_off(),
+                StageKind::GradientSampling => !self.gradient_sampling.is_off(),
+            })
+            .collect()
+    }
+
+    /// The plan in words, one stage after the other with its budget
+    /// (`init (32 candidates x 16 frames) -> descent (40 iterations, adam)`).
+    pub fn describe_plan(&self) -> String {
+        self.plan()
+            .iter()
+            .map(|&k| {
+                let budget = match k {
+                    StageKind::Init => format!(
+                        "{} candidates x {} frames",
+                        self.init.candidates, self.init.frames
+                    ),
+                    StageKind::MultiStart => format!(
+                        "{} starts x {} iterations",
+                        self.multi_start, self.multi_start_iters
+                    ),
+                    StageKind::Descent => format!(
+                        "{} iterations, {}",
+                        self.iters,
+                        match self.optimizer {
+                            OptimizerKind::Adam => "adam",
+                            OptimizerKind::TrustBfgs => "trust_bfgs",
+                        }
+                    ),
+                    StageKind::Valley => format!("{} evaluations", self.valley.evals),
+                    StageKind::ShearRestarts => format!("{} points", self.shear_restarts.points),
+                    StageKind::GradientSampling => {
+                        format!("{} iterations", self.gradient_sampling.iters)
+                    }
+                };
+                format!("{} ({budget})", k.name())
+            })
+            .collect::<Vec<_>>()
+            .join(" -> ")
+    }
+
+    /// Checks an explicit `stages` list: no stage twice, `init`, `multi_start`, `descent` in
+    /// that order and before the refining stages, and every listed stage able to run.
+    fn check_stages(&self) -> Result<(), FitError> {
+        let Some(list) = &self.stages else {
+            return Ok(());
+        };
+        let bad = |m: String| Err(FitError::Input(format!("stages: {m}")));
+        if list.is_empty() {
+            return bad("empty: list at least one stage (or leave `stages` out)".into());
+        }
+        for (i, k) in list.iter().enumerate() {
+            if list[..i].contains(k) {
+                return bad(format!("'{}' is listed twice", k.name()));
+            }
+        }
+        let rank = |k: StageKind| match k {
+            StageKind::Init => 0,
+            StageKind::MultiStart => 1,
+            StageKind::Descent => 2,
+            _ => 3,
+        };
+        for w in list.windows(2) {
+            if rank(w[0]) > rank(w[1]) || (rank(w[0]) == rank(w[1]) && rank(w[0]) < 3) {
+                return bad(format!(
+                    "'{}' cannot run after '{}' (init, multi_start and descent come in that \
+                     order, before valley, shear_restarts and gradient_sampling)",
+                    w[1].name(),
+                    w[0].name()
+                ));
+            }
+        }
+        for &k in list {
+            let off = match k {
+                StageKind::Init => (!self.init.enabled).then_some("[init] enabled = false"),
+                StageKind::MultiStart => {
+                    (self.multi_start < 2).then_some("multi_start < 2 (it needs 2 or more starts)")
+                }
+                StageKind::Descent => (self.iters == 0).then_some("iters = 0"),
+                StageKind::Valley => self.valley.is_off().then_some("[valley] evals = 0"),
+                StageKind::ShearRestarts => self
+                    .shear_restarts
+                    .is_off()
+                    .then_some("[shear_restarts] points = 0"),
+                StageKind::GradientSampling => self
+                    .gradient_sampling
+                    .is_off()
+                    .then_some("[gradient_sampling] iters = 0"),
+            };
+            if let Some(why) = off {
+                return bad(format!("'{}' is listed but cannot run: {why}", k.name()));
+            }
+        }
+        Ok(())
+    }
+
     /// Reads a TOML file (decoded by `r4d_mpm::strict`: an unknown key at any depth names its
     /// path and the closest known key) and validates it.
     pub fn load(path: &Path) -> Result<FitConfig, FitError> {
@@ -398,12 +569,14 @@ impl FitConfig {
         if self.checkpoint_every == 0 {
             return bad("checkpoint_every must be at least 1".into());
         }
-        if self.init.enabled && self.init.candidates == 0 {
+        self.check_stages()?;
+        let runs = |k: StageKind| self.plan().contains(&k);
+        if runs(StageKind::Init) && self.init.candidates == 0 {
             return bad("init.candidates must be at least 1".into());
         }
         check_candidates(self.init.candidates).map_err(|m| FitError::Input(format!("init.{m}")))?;
         let evals = (self.init.candidates as u64).saturating_mul(self.init.frames as u64);
-        if self.init.enabled && evals > MAX_INIT_FRAME_EVALS {
+        if runs(StageKind::Init) && evals > MAX_INIT_FRAME_EVALS {
             return bad(format!(
                 "init.candidates x init.frames = {} x {} = {evals} simulated frames, more than \
                  the {MAX_INIT_FRAME_EVALS} an initialisation may simulate (MAX_INIT_FRAME_EVALS)",
@@ -435,8 +608,8 @@ impl FitConfig {
         if !self.shear_restarts.is_off() && self.granularity == Granularity::Particle {
             return bad("shear_restarts.points > 0: part and object fits only".into());
         }
-        if self.multi_start > 1 {
-            if !self.init.enabled {
+        if runs(StageKind::MultiStart) {
+            if !runs(StageKind::Init) {
                 return bad("multi_start > 1 needs the initialisation (init.enabled)".into());
             }
             if self.granularity == Granularity::Particle {
@@ -710,6 +883,63 @@ mod tests {
     /// `[valley]`: parsed from TOML, refused naming its key, unknown keys refused, and
     /// off unless `evals > 0` (then not part of the serialised settings, so a fit's
     /// fingerprint does not change with it).
+    #[test]
+    fn stage_lists_parse_order_and_refuse_what_cannot_run() {
+        let parse = |t: &str| toml::from_str::<FitConfig>(t);
+        // Without a list: the stages the settings turn on, in the fixed order.
+        let mut c = FitConfig::default();
+        assert_eq!(c.plan(), [StageKind::Init, StageKind::Descent]);
+        c.valley.evals = 100;
+        c.gradient_sampling.iters = 3;
+        c.multi_start = 2;
+        assert_eq!(
+            c.plan(),
+            [
+                StageKind::Init,
+                StageKind::MultiStart,
+                StageKind::Descent,
+                StageKind::Valley,
+                StageKind::GradientSampling
+            ]
+        );
+        // A list: refining stages in any order after the descent.
+        let c = parse(
+            "stages = [\"init\", \"descent\", \"gradient_sampling\", \"valley\"]\n\
+             [valley]\nevals = 100\n[gradient_sampling]\niters = 3\n",
+        )
+        .unwrap();
+        c.validate().unwrap();
+        assert_eq!(c.plan()[2], StageKind::GradientSampling);
+        let refused = |t: &str, want: &str| {
+            let e = parse(t).unwrap().validate().unwrap_err().to_string();
+            assert!(e.contains(want), "{t}: {e}");
+        };
+        refused(
+            "stages = [\"descent\", \"valley\"]\n",
+            "'valley' is listed but cannot run: [valley] evals = 0",
+        );
+        refused(
+            "stages = [\"descent\", \"init\"]\n",
+            "'init' cannot run after 'descent'",
+        );
+        refused(
+            "stages = [\"descent\", \"descent\"]\n",
+            "'descent' is listed twice",
+        );
+        refused("stages = []\n", "stages: empty");
+        refused("iters = 0\nstages = [\"descent\"]\n", "iters = 0");
+        refused(
+            "stages = [\"multi_start\", \"descent\"]\nmulti_start = 2\n",
+            "needs the initialisation",
+        );
+        refused("stages = [\"init\", \"multi_start\"]\n", "multi_start < 2");
+        assert!(parse("stages = [\"anneal\"]\n").is_err());
+        // Unset, it is not serialised: a default config's fingerprint is unchanged.
+        assert!(!toml::to_string(&FitConfig::default())
+            .unwrap()
+            .contains("stages"));
+    }
+
     #[test]
     fn init_sampler_parses_and_stays_out_of_the_default_fingerprint() {
         let parse = |t: &str| toml::from_str::<FitConfig>(t);

@@ -1,7 +1,7 @@
 //! The fit loop: simulation-driven initialisation, then AdamW on `xi = log(theta)` with bound
 //! and gradient clipping; a record per iteration and a resumable checkpoint.
 
-use super::config::{FitConfig, InitSampler, OptimizerKind};
+use super::config::{FitConfig, InitSampler, OptimizerKind, StageKind};
 use super::problem::{Evaluation, Objective, VideoProblem};
 use crate::descent::{self, keep_best, Rate, Stepper};
 use crate::evaluator::{Evaluator, Graded};
@@ -565,7 +565,9 @@ pub fn run_fit_with_loss(
     let space = ParamSpace::new(cfg.granularity, &free, &slot_parts, |p, k| {
         cfg.bounds(&problem.config.parts, p, k)
     });
-    if !cfg.shear_restarts.is_off() {
+    let plan = cfg.plan();
+    let runs = |k: StageKind| plan.contains(&k);
+    if runs(StageKind::ShearRestarts) {
         // Refused before any simulation runs.
         restart_entries(&space, cfg)?;
     }
@@ -583,7 +585,7 @@ pub fn run_fit_with_loss(
     };
     // Starting point: the config's parts, replaced by the initialisation's best candidate.
     let mut base_parts = problem.config.parts.clone();
-    if cfg.init.enabled {
+    if runs(StageKind::Init) {
         let ispace = init_space(cfg, &problem.config.parts)?;
         let outcome = match state.init.take() {
             Some(o) => {
@@ -613,7 +615,7 @@ pub fn run_fit_with_loss(
         slot_parts.iter().map(|&p| base_parts[p as usize]).collect();
     // Multi-start: a short fit from each of the best candidates; the main fit continues from
     // the lowest loss any of them reached (recomputed identically on resume).
-    if let (true, Some(outcome)) = (cfg.multi_start > 1, state.init.clone()) {
+    if let (true, Some(outcome)) = (runs(StageKind::MultiStart), state.init.clone()) {
         let ispace = init_space(cfg, &problem.config.parts)?;
         let k = cfg.multi_start.min(outcome.ranking.len());
         while state.starts.len() < k && state.iters_done == 0 {
@@ -683,7 +685,14 @@ pub fn run_fit_with_loss(
         _ => new_stepper(cfg, &space, space.values(&base_slots))?,
     };
     let peak = || fit_span.as_ref().map_or(0, |s| s.peak());
-    for iter in state.iters_done..cfg.iters {
+    // Without the descent no iteration runs (the refining stages start from the best point
+    // so far, else the starting point).
+    let iters = if runs(StageKind::Descent) {
+        cfg.iters
+    } else {
+        0
+    };
+    for iter in state.iters_done..iters {
         let start = Instant::now();
         let st = iterate(&obj, &space, &base_slots, &mut opt, cfg, (iter, cfg.iters))?;
         let (ev, theta, gtheta) = (&st.ev, &st.theta, &st.gtheta);
@@ -701,21 +710,28 @@ pub fn run_fit_with_loss(
         rec.probes = st.probes;
         hooks.on_iter(&rec);
         state.iters_done = iter + 1;
-        if state.iters_done % cfg.checkpoint_every == 0 || state.iters_done == cfg.iters {
+        if state.iters_done % cfg.checkpoint_every == 0 || state.iters_done == iters {
             save(&opt, &mut state);
             hooks.on_checkpoint(&state);
             state.optimizer = None;
             state.trust = None;
         }
     }
-    if !cfg.valley.is_off() {
-        valley_search(&obj, &space, &base_slots, &opt, cfg, &mut state, hooks)?;
-    }
-    if !cfg.shear_restarts.is_off() {
-        shear_restarts(&obj, &space, &base_slots, &opt, cfg, &mut state, hooks)?;
-    }
-    if !cfg.gradient_sampling.is_off() {
-        gradient_sampling(&obj, &space, &base_slots, &opt, cfg, &mut state, hooks)?;
+    // The refining stages in the plan's order; a finished stage's state is in the
+    // checkpoint, so a resumed fit passes it without evaluating and continues inside the
+    // stage it stopped in.
+    for &k in plan.iter().filter(|k| k.after_descent()) {
+        let (obj, space, slots) = (&obj, &space, &base_slots);
+        match k {
+            StageKind::Valley => valley_search(obj, space, slots, &opt, cfg, &mut state, hooks)?,
+            StageKind::ShearRestarts => {
+                shear_restarts(obj, space, slots, &opt, cfg, &mut state, hooks)?
+            }
+            StageKind::GradientSampling => {
+                gradient_sampling(obj, space, slots, &opt, cfg, &mut state, hooks)?
+            }
+            StageKind::Init | StageKind::MultiStart | StageKind::Descent => {}
+        }
     }
     let theta = match &state.best {
         Some((_, t)) => t.clone(),

@@ -20,7 +20,7 @@ pub use crate::restarts::{Restart, RestartsConfig, ShearRestarts};
 pub use crate::sampling::{GradientSampling, SamplingConfig, SamplingRound};
 pub use crate::space::{Granularity, ParamSpace};
 pub use crate::valley::{ValleyConfig, ValleyRound, ValleySearch};
-pub use config::{FitConfig, InitConfig, InitSampler, OptimizerKind};
+pub use config::{FitConfig, InitConfig, InitSampler, OptimizerKind, StageKind};
 pub use fit::{
     fingerprint, run_fit, run_fit_with_loss, FitHooks, FitOutcome, FitState, IterRecord,
     StartResult,
