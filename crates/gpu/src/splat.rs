@@ -107,6 +107,25 @@ impl<E: GpuEngine> Gpu<E> {
         GpuBuf::zeros_with_capacity(&self.engine, label, len, len.max(1))
     }
 
+    /// One thread per simulated particle of `link` running `kernel` (`link_deform` or its
+    /// VJP) over the link's constants and indices and four buffers, two read, two written.
+    fn link_pass(
+        &self,
+        kernel: &'static r4d_shaders::Kernel,
+        link: &LinkBufs<Self>,
+        bufs: [&E::Raw; 4],
+    ) -> Result<(), E::Error> {
+        let n = link.consts.simulated;
+        if n == 0 {
+            return Ok(());
+        }
+        let mut r = Recording::new();
+        let mut bind = vec![r.uniform(&link.consts), r.buf(&link.simulated.raw)];
+        bind.extend(bufs.map(|b| r.buf(b)));
+        r.dispatch(kernel, n, &bind);
+        self.engine.execute(r)
+    }
+
     fn zeros_labelled<T: Pod>(
         &self,
         label: &'static str,
@@ -367,21 +386,11 @@ impl<E: GpuEngine> SplatKernels for Gpu<E> {
         means: &mut GpuBuf<E, [f32; 3]>,
         f: &mut GpuBuf<E, [[f32; 3]; 3]>,
     ) -> Result<(), E::Error> {
-        let n = link.consts.simulated;
-        if n == 0 {
-            return Ok(());
-        }
-        let mut r = Recording::new();
-        let bind = [
-            r.uniform(&link.consts),
-            r.buf(&link.simulated.raw),
-            r.buf(&x.raw),
-            r.buf(&f_sim.raw),
-            r.buf(&means.raw),
-            r.buf(&f.raw),
-        ];
-        r.dispatch(&k::LINK_DEFORM, n, &bind);
-        self.engine.execute(r)
+        self.link_pass(
+            &k::LINK_DEFORM,
+            link,
+            [&x.raw, &f_sim.raw, &means.raw, &f.raw],
+        )
     }
 
     fn deform_vjp(
@@ -392,21 +401,8 @@ impl<E: GpuEngine> SplatKernels for Gpu<E> {
         dx: &mut GpuBuf<E, [f32; 3]>,
         df_sim: &mut GpuBuf<E, [f32; 9]>,
     ) -> Result<(), E::Error> {
-        let n = link.consts.simulated;
-        if n == 0 {
-            return Ok(());
-        }
-        let mut r = Recording::new();
-        let bind = [
-            r.uniform(&link.consts),
-            r.buf(&link.simulated.raw),
-            r.buf(&d_means.raw),
-            r.buf(&d_f.raw),
-            r.buf(&dx.raw),
-            r.buf(&df_sim.raw),
-        ];
-        r.dispatch(&k::LINK_DEFORM_VJP, n, &bind);
-        self.engine.execute(r)
+        let bufs = [&d_means.raw, &d_f.raw, &dx.raw, &df_sim.raw];
+        self.link_pass(&k::LINK_DEFORM_VJP, link, bufs)
     }
 
     fn project_vjp(

@@ -458,41 +458,31 @@ impl LogGridInit {
     }
 }
 
-impl Initializer for LogGridInit {
-    fn candidates(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
-        self.sample(space)
-    }
+/// [`Initializer`] for a sampler with `sample`, `top_k`, `parallel` and `max_concurrent`.
+macro_rules! sampler_initializer {
+    ($t:ty) => {
+        impl Initializer for $t {
+            fn candidates(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
+                self.sample(space)
+            }
 
-    fn top_k(&self) -> usize {
-        self.top_k
-    }
+            fn top_k(&self) -> usize {
+                self.top_k
+            }
 
-    fn parallel(&self) -> bool {
-        self.parallel
-    }
+            fn parallel(&self) -> bool {
+                self.parallel
+            }
 
-    fn max_concurrent(&self) -> usize {
-        self.max_concurrent.unwrap_or(usize::MAX)
-    }
+            fn max_concurrent(&self) -> usize {
+                self.max_concurrent.unwrap_or(usize::MAX)
+            }
+        }
+    };
 }
 
-impl Initializer for LatinHypercubeInit {
-    fn candidates(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
-        self.sample(space)
-    }
-
-    fn top_k(&self) -> usize {
-        self.top_k
-    }
-
-    fn parallel(&self) -> bool {
-        self.parallel
-    }
-
-    fn max_concurrent(&self) -> usize {
-        self.max_concurrent.unwrap_or(usize::MAX)
-    }
-}
+sampler_initializer!(LatinHypercubeInit);
+sampler_initializer!(LogGridInit);
 
 #[cfg(test)]
 mod tests {

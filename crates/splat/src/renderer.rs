@@ -148,9 +148,7 @@ pub trait Renderer {
     /// renderer without device buffers refuses.
     fn link_scene(&mut self, scene: &mut SceneHandle, link: &SimLink) -> Result<()> {
         let _ = (scene, link);
-        Err(Error::Mismatch(
-            "this renderer keeps no scene on a device to link".into(),
-        ))
+        Err(no_device_scene())
     }
 
     /// [`Renderer::prepare_frame`] of a linked scene ([`Renderer::link_scene`]) with its
@@ -166,9 +164,7 @@ pub trait Renderer {
         settings: &RenderSettings,
     ) -> Result<PreparedFrame> {
         let _ = (scene, x, f_sim, cam, settings);
-        Err(Error::Mismatch(
-            "this renderer keeps no scene on a device to link".into(),
-        ))
+        Err(no_device_scene())
     }
 
     /// The gradient of the rows VJPs added to a frame prepared by
@@ -183,10 +179,14 @@ pub trait Renderer {
         f_sim: &AnyBuf,
     ) -> Result<(AnyBuf, AnyBuf)> {
         let _ = (frame, scene, x, f_sim);
-        Err(Error::Mismatch(
-            "this renderer keeps no scene on a device to link".into(),
-        ))
+        Err(no_device_scene())
     }
+}
+
+/// What the [`Renderer`] trait's linked-frame methods answer for a renderer without device
+/// buffers.
+fn no_device_scene() -> Error {
+    Error::Mismatch("this renderer keeps no scene on a device to link".into())
 }
 
 /// [`Renderer`] over any kernel backend.

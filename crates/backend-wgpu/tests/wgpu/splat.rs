@@ -29,63 +29,7 @@ const SCENES: [&str; 5] = [
 
 // ---- fixtures -------------------------------------------------------------------------------
 
-/// A `.npy` array as f64 (little-endian f4/f8/i4, C order).
-struct Array {
-    data: Vec<f64>,
-}
-
-fn read_npy(path: &Path) -> Array {
-    let b = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    assert_eq!(&b[..6], b"\x93NUMPY", "{}", path.display());
-    let (hlen, start) = if b[6] == 1 {
-        (u16::from_le_bytes([b[8], b[9]]) as usize, 10)
-    } else {
-        (u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize, 12)
-    };
-    let header = std::str::from_utf8(&b[start..start + hlen]).unwrap();
-    assert!(header.contains("'fortran_order': False"), "{header}");
-    let descr = header
-        .split("'descr': '")
-        .nth(1)
-        .unwrap()
-        .split('\'')
-        .next()
-        .unwrap();
-    let shape: Vec<usize> = header
-        .split("'shape': (")
-        .nth(1)
-        .unwrap()
-        .split(')')
-        .next()
-        .unwrap()
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse().unwrap())
-        .collect();
-    let n: usize = shape.iter().product();
-    let body = &b[start + hlen..];
-    let data: Vec<f64> = match descr {
-        "<f4" => body
-            .chunks_exact(4)
-            .take(n)
-            .map(|c| f32::from_le_bytes(c.try_into().unwrap()) as f64)
-            .collect(),
-        "<f8" => body
-            .chunks_exact(8)
-            .take(n)
-            .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
-            .collect(),
-        "<i4" => body
-            .chunks_exact(4)
-            .take(n)
-            .map(|c| i32::from_le_bytes(c.try_into().unwrap()) as f64)
-            .collect(),
-        d => panic!("unsupported dtype {d}"),
-    };
-    assert_eq!(data.len(), n);
-    Array { data }
-}
+use r4d_testkit::read_npy;
 
 struct Case {
     dir: PathBuf,
