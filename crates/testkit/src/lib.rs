@@ -3,9 +3,10 @@
 //! The repository's reference fixtures (`tests/fixtures`, copied from data other projects
 //! made: gsplat renders, pytorch-msssim and numpy goldens, PhysGaussian trajectories), a
 //! reader for their `.npz` / `.npy` arrays, and the small MPM scenes the physics tests build
-//! ([`scenes`]). A test that reads a fixture panics with the path when it is missing.
+//! ([`scenes`]), gsplat's golden render cases ([`splat_cases`]). A test that reads a fixture panics with the path when it is missing.
 
 pub mod scenes;
+pub mod splat_cases;
 
 use std::collections::HashMap;
 use std::io::Read;

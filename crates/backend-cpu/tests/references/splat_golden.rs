@@ -7,60 +7,9 @@
 use r4d_backend_cpu::CpuBackend;
 use r4d_splat::project::CamParams;
 use r4d_splat::reference::{self, ReferenceSplat, Scene};
-use r4d_splat::{
-    load_cameras, Deformation, GaussianGrads, Gaussians, RenderSettings, Renderer, SplatRenderer,
-};
-use r4d_testkit::{fixture, read_npy, Array};
-use std::path::PathBuf;
-
-const SCENES: [&str; 5] = [
-    "sh0_basic",
-    "sh3_shell_bg",
-    "aniso_near_bg",
-    "antialiased_sh2_white",
-    "deformed_sh3",
-];
-
-struct Case {
-    dir: PathBuf,
-    scene: Gaussians,
-    deform: Option<Deformation>,
-    cams: r4d_splat::CameraSet,
-}
-
-fn load(name: &str) -> Case {
-    let dir = fixture(&format!("splat/{name}"));
-    let scene = r4d_splat::ply::read_gaussians(&dir.join("scene.ply")).unwrap();
-    let cams = load_cameras(&dir.join("cameras.json")).unwrap();
-    let deform = dir.join("deformed_means.npy").exists().then(|| {
-        let m = read_npy(&dir.join("deformed_means.npy"));
-        let f = read_npy(&dir.join("deformation_F.npy"));
-        Deformation {
-            means: m
-                .data
-                .chunks(3)
-                .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
-                .collect(),
-            f: f.data
-                .chunks(9)
-                .map(|c| [0, 1, 2].map(|r| [0, 1, 2].map(|k| c[3 * r + k] as f32)))
-                .collect(),
-        }
-    });
-    Case {
-        dir,
-        scene,
-        deform,
-        cams,
-    }
-}
-
-fn settings(c: &Case) -> RenderSettings {
-    RenderSettings {
-        background: c.cams.background.unwrap_or([0.0; 3]),
-        mode: c.cams.mode.unwrap_or_default(),
-    }
-}
+use r4d_splat::{GaussianGrads, Renderer, SplatRenderer};
+use r4d_testkit::splat_cases::{load, settings, Case, SCENES};
+use r4d_testkit::{read_npy, Array};
 
 /// The README's acceptance rule; returns (mean abs error, fraction within 1e-3, max).
 fn image_rule(what: &str, got: &[f32], want: &Array, mask: Option<&[bool]>) -> (f64, f64, f64) {

@@ -13,66 +13,12 @@ use r4d_backend_wgpu::WgpuContext;
 use r4d_splat::kernels::{Backend, SceneBufs, TileBufs};
 use r4d_splat::project::Projected;
 use r4d_splat::{
-    load_cameras, Camera, CameraConsts, CameraSet, Deformation, GaussianGrads, Gaussians,
-    RenderSettings, Renderer, SplatKernels, SplatRenderer,
+    Camera, CameraConsts, Deformation, GaussianGrads, Gaussians, RenderSettings, Renderer,
+    SplatKernels, SplatRenderer,
 };
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-
-const SCENES: [&str; 5] = [
-    "sh0_basic",
-    "sh3_shell_bg",
-    "aniso_near_bg",
-    "antialiased_sh2_white",
-    "deformed_sh3",
-];
-
-// ---- fixtures -------------------------------------------------------------------------------
-
 use r4d_testkit::read_npy;
-
-struct Case {
-    dir: PathBuf,
-    scene: Gaussians,
-    deform: Option<Deformation>,
-    cams: CameraSet,
-}
-
-fn load(name: &str) -> Case {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../tests/fixtures/splat")
-        .join(name);
-    let scene = r4d_splat::ply::read_gaussians(&dir.join("scene.ply")).unwrap();
-    let cams = load_cameras(&dir.join("cameras.json")).unwrap();
-    let deform = dir.join("deformed_means.npy").exists().then(|| {
-        let m = read_npy(&dir.join("deformed_means.npy"));
-        let f = read_npy(&dir.join("deformation_F.npy"));
-        Deformation {
-            means: m
-                .data
-                .chunks(3)
-                .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
-                .collect(),
-            f: f.data
-                .chunks(9)
-                .map(|c| [0, 1, 2].map(|r| [0, 1, 2].map(|k| c[3 * r + k] as f32)))
-                .collect(),
-        }
-    });
-    Case {
-        dir,
-        scene,
-        deform,
-        cams,
-    }
-}
-
-fn settings(c: &Case) -> RenderSettings {
-    RenderSettings {
-        background: c.cams.background.unwrap_or([0.0; 3]),
-        mode: c.cams.mode.unwrap_or_default(),
-    }
-}
+use r4d_testkit::splat_cases::{load, settings, SCENES};
+use std::sync::Arc;
 
 fn gpu(test: &str) -> Option<Arc<WgpuContext>> {
     gpu_or_skip(test).map(Arc::new)
