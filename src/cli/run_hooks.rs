@@ -7,7 +7,7 @@ use r4d_mpm::PartParams;
 use r4d_optim::ParamKind;
 use r4d_optim::{Candidate, InitOutcome};
 use resonance4d::video_fit::report::write_json;
-use resonance4d::video_fit::{FitConfig, FitHooks, FitState, IterRecord};
+use resonance4d::video_fit::{FitConfig, FitEvent, FitHooks, FitState, IterRecord};
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::{Path, PathBuf};
 
@@ -77,7 +77,36 @@ impl FitHooks for RunHooks {
         Some(std::sync::Arc::new(resonance4d::alloc::CountingProbe))
     }
 
-    fn on_candidate(&mut self, c: &Candidate) {
+    fn on_event(&mut self, e: &FitEvent<'_>) {
+        match *e {
+            FitEvent::Candidate(c) => self.candidate(c),
+            FitEvent::Init { outcome, names } => self.init(outcome, names),
+            FitEvent::Start(r) => self.start(r),
+            FitEvent::Iter(r) => self.iter(r),
+            FitEvent::Valley {
+                round,
+                names,
+                theta,
+            } => self.valley(round, names, theta),
+            FitEvent::Sampling {
+                round,
+                names,
+                theta,
+            } => self.sampling(round, names, theta),
+            FitEvent::Restart { restart, names } => self.restart(restart, names),
+            _ => {}
+        }
+    }
+
+    fn on_checkpoint(&mut self, s: &FitState) {
+        let r = super::checkpoint::write(&self.dir.join("checkpoint.json"), s);
+        self.keep(r);
+    }
+}
+
+/// What each event prints and writes.
+impl RunHooks {
+    fn candidate(&mut self, c: &Candidate) {
         self.init_bar.inc(1);
         match (c.score, &c.error) {
             (Some(s), _) => self
@@ -90,7 +119,7 @@ impl FitHooks for RunHooks {
         }
     }
 
-    fn on_init(&mut self, o: &InitOutcome, names: &[String]) {
+    fn init(&mut self, o: &InitOutcome, names: &[String]) {
         self.init_bar.finish_and_clear();
         let mut lines = vec![format!(
             "initialisation: {} candidates, {} failed; top {}:",
@@ -116,7 +145,7 @@ impl FitHooks for RunHooks {
         self.keep(r);
     }
 
-    fn on_iter(&mut self, r: &IterRecord) {
+    fn iter(&mut self, r: &IterRecord) {
         self.bar.inc(1);
         self.bar
             .set_message(format!("loss {:.4e} |g| {:.2e}", r.loss.total, r.grad_norm));
@@ -131,7 +160,7 @@ impl FitHooks for RunHooks {
         self.log.push(r.clone());
     }
 
-    fn on_start(&mut self, r: &resonance4d::video_fit::StartResult) {
+    fn start(&mut self, r: &resonance4d::video_fit::StartResult) {
         if r.loss == f64::MAX {
             eprintln!(
                 "multi-start: candidate #{} (MS-SSIM {:.4}) failed: {}",
@@ -153,12 +182,7 @@ impl FitHooks for RunHooks {
         );
     }
 
-    fn on_valley(
-        &mut self,
-        r: &resonance4d::video_fit::ValleyRound,
-        names: &[String],
-        theta: &[f64],
-    ) {
+    fn valley(&mut self, r: &resonance4d::video_fit::ValleyRound, names: &[String], theta: &[f64]) {
         // Each sharp direction by its components above 0.3 (`+0.83 yield_stress -0.55 softening`).
         let sharp: Vec<String> = r
             .sharp
@@ -189,7 +213,7 @@ impl FitHooks for RunHooks {
         );
     }
 
-    fn on_sampling(
+    fn sampling(
         &mut self,
         r: &resonance4d::video_fit::SamplingRound,
         names: &[String],
@@ -209,7 +233,7 @@ impl FitHooks for RunHooks {
         );
     }
 
-    fn on_restart(&mut self, r: &resonance4d::video_fit::Restart, names: &[String]) {
+    fn restart(&mut self, r: &resonance4d::video_fit::Restart, names: &[String]) {
         let vals = named_values(names, &r.theta);
         eprintln!(
             "shear restart {:+}: E {:.4e}, nu {:.4} -> loss {:.5e}; {}",
@@ -219,11 +243,6 @@ impl FitHooks for RunHooks {
             r.loss,
             vals.join(" ")
         );
-    }
-
-    fn on_checkpoint(&mut self, s: &FitState) {
-        let r = super::checkpoint::write(&self.dir.join("checkpoint.json"), s);
-        self.keep(r);
     }
 }
 

@@ -118,7 +118,13 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
         "--config",
         cfg.to_str().unwrap(),
     ];
-    ok(&r4d(&args));
+    let o = r4d(&args);
+    ok(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("fit: init (3 candidates x 3 frames) -> descent (1 iterations, adam)"),
+        "the plan is printed: {err}"
+    );
     let params = json(&run.join("params.json"));
     assert_eq!(params["parts"].as_array().unwrap().len(), 2);
     assert_eq!(json(&run.join("checkpoint.json"))["iters_done"], 1);

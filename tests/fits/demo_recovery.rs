@@ -6,7 +6,7 @@
 
 use r4d_optim::ParamKind;
 use resonance4d::demo::{DemoScene, SceneSpec, Size};
-use resonance4d::video_fit::fit::{run_fit, FitHooks, FitOutcome, IterRecord, NoHooks};
+use resonance4d::video_fit::fit::{run_fit, FitEvent, FitHooks, FitOutcome, IterRecord, NoHooks};
 use resonance4d::video_fit::params::get;
 use resonance4d::video_fit::{FitConfig, VideoProblem};
 
@@ -146,8 +146,10 @@ fn plasticine_recovers_yield_stress_softening_and_density() {
 #[derive(Default)]
 struct Probes(Vec<IterRecord>);
 impl FitHooks for Probes {
-    fn on_iter(&mut self, r: &IterRecord) {
-        self.0.push(r.clone());
+    fn on_event(&mut self, e: &FitEvent<'_>) {
+        if let FitEvent::Iter(r) = e {
+            self.0.push((*r).clone());
+        }
     }
 }
 

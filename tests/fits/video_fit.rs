@@ -150,8 +150,10 @@ struct Collect {
     states: Vec<FitState>,
 }
 impl FitHooks for Collect {
-    fn on_iter(&mut self, r: &resonance4d::video_fit::IterRecord) {
-        self.losses.push(r.loss.total);
+    fn on_event(&mut self, e: &resonance4d::video_fit::FitEvent<'_>) {
+        if let resonance4d::video_fit::FitEvent::Iter(r) = e {
+            self.losses.push(r.loss.total);
+        }
     }
     fn on_checkpoint(&mut self, s: &FitState) {
         self.states.push(s.clone());

@@ -716,8 +716,10 @@ pub fn run_init(
 ) -> Result<(BenchScene, InitBenchReport), FitError> {
     struct Progress<'a>(&'a mut dyn FnMut(&r4d_optim::Candidate));
     impl r4d_optim::video::FitHooks for Progress<'_> {
-        fn on_candidate(&mut self, c: &r4d_optim::Candidate) {
-            (self.0)(c)
+        fn on_event(&mut self, e: &r4d_optim::video::FitEvent<'_>) {
+            if let r4d_optim::video::FitEvent::Candidate(c) = e {
+                (self.0)(c)
+            }
         }
     }
     if candidates == 0 {

@@ -77,15 +77,12 @@ fn iterate(
         let total = ev.total;
         Ok((ev, total, g))
     })?;
-    let probes = flat_probes(
+    let eval = ObjectiveEval {
         obj,
         space,
-        base_slots,
-        &it.theta,
-        &it.gtheta,
-        it.loss,
-        cfg.flat_probe,
-    )?;
+        base: base_slots,
+    };
+    let probes = flat_probes(&eval, space, &it.theta, &it.gtheta, it.loss, cfg.flat_probe);
     for (i, p) in &probes {
         if p.to != p.from {
             opt.set_theta(*i, p.to);
@@ -212,18 +209,18 @@ fn branch_kind(k: ParamKind) -> bool {
 
 /// The flat-direction probes of one iteration (see [`FitConfig::flat_probe`]): for every
 /// part-level branch parameter with an exactly-zero gradient, `points` log-spaced values
-/// across its bounds (evaluated in parallel); returns the probes and the best values.
+/// across its bounds (evaluated in parallel through `eval`); returns the probes and the best
+/// values.
 fn flat_probes(
-    obj: &Objective,
+    eval: &ObjectiveEval,
     space: &ParamSpace,
-    base_slots: &[PartParams],
     theta: &[f64],
     gtheta: &[f64],
     loss: f64,
     points: usize,
-) -> Result<Vec<(usize, FlatProbe)>, FitError> {
+) -> Vec<(usize, FlatProbe)> {
     if points < 2 || space.granularity == Granularity::Particle {
-        return Ok(Vec::new());
+        return Vec::new();
     }
     let flat: Vec<usize> = (0..theta.len())
         .filter(|&i| gtheta[i] == 0.0 && branch_kind(space.entries[i].kind))
@@ -231,7 +228,7 @@ fn flat_probes(
     // Only when something else moves the loss (a zero gradient everywhere is a minimum or a
     // scene without motion, not a flat direction).
     if flat.is_empty() || flat.len() == theta.len() {
-        return Ok(Vec::new());
+        return Vec::new();
     }
     let names = space.names();
     let mut out = Vec::new();
@@ -240,23 +237,21 @@ fn flat_probes(
         let values: Vec<f64> = (0..points)
             .map(|j| lo * (hi / lo).powf(j as f64 / (points - 1) as f64))
             .collect();
-        let losses: Vec<Result<f64, FitError>> = values
+        // At the parameters themselves (not through their logs: the same points as the
+        // iteration's, bit for bit).
+        let losses: Vec<f64> = values
             .par_iter()
             .map(|&v| {
                 let mut t = theta.to_vec();
                 t[i] = v;
-                let mut slots = base_slots.to_vec();
-                space.apply(&mut slots, &t);
-                Ok(obj.value(&slots)?.total)
+                eval.at_theta(&t)
             })
             .collect();
         let mut best = (loss, theta[i]);
+        // A probed point that fails (e.g. an unstable run) is a wall, never the best.
         for (v, l) in values.iter().zip(losses) {
-            // A probed point that fails (e.g. an unstable run) is skipped, not fatal.
-            if let Ok(l) = l {
-                if l < best.0 {
-                    best = (l, *v);
-                }
+            if l < best.0 {
+                best = (l, *v);
             }
         }
         out.push((
@@ -270,29 +265,61 @@ fn flat_probes(
             },
         ));
     }
-    Ok(out)
+    out
 }
 
-/// Callbacks of [`run_fit`]: progress, logs and checkpoints.
-pub trait FitHooks {
+/// What a fit reports as it goes, one variant per stage's unit of progress
+/// ([`FitHooks::on_event`]).
+#[derive(Clone, Copy, Debug)]
+#[non_exhaustive]
+pub enum FitEvent<'a> {
     /// An initialisation candidate was evaluated.
-    fn on_candidate(&mut self, _c: &Candidate) {}
-    /// The initialisation finished.
-    fn on_init(&mut self, _o: &InitOutcome, _names: &[String]) {}
-    /// An iteration finished.
-    fn on_iter(&mut self, _r: &IterRecord) {}
+    Candidate(&'a Candidate),
+    /// The initialisation finished (`names`: the searched parameters).
+    Init {
+        /// The ranked candidates.
+        outcome: &'a InitOutcome,
+        /// The searched parameters, the order of each candidate's `theta`.
+        names: &'a [String],
+    },
+    /// A start of a multi-start finished.
+    Start(&'a StartResult),
+    /// An iteration of the descent finished.
+    Iter(&'a IterRecord),
+    /// A round of the valley search finished.
+    Valley {
+        /// The round.
+        round: &'a ValleyRound,
+        /// The free parameters.
+        names: &'a [String],
+        /// The accepted point after it.
+        theta: &'a [f64],
+    },
+    /// An iteration of gradient sampling finished (inside a shear restart too: then `names`
+    /// are the parameters it re-fits).
+    Sampling {
+        /// The iteration.
+        round: &'a SamplingRound,
+        /// The parameters it moves.
+        names: &'a [String],
+        /// The point after it.
+        theta: &'a [f64],
+    },
+    /// A restart along constant bulk modulus finished.
+    Restart {
+        /// The restart.
+        restart: &'a Restart,
+        /// The free parameters, the order of [`Restart::theta`].
+        names: &'a [String],
+    },
+}
+
+/// Callbacks of [`run_fit`]: progress ([`FitEvent`]), checkpoints and heap measurement.
+pub trait FitHooks {
+    /// A stage reported progress.
+    fn on_event(&mut self, _e: &FitEvent<'_>) {}
     /// A checkpoint to persist.
     fn on_checkpoint(&mut self, _s: &FitState) {}
-    /// A start of a multi-start finished.
-    fn on_start(&mut self, _r: &StartResult) {}
-    /// A round of the valley search finished (`names`: the free parameters; `theta`: the
-    /// accepted point after it).
-    fn on_valley(&mut self, _r: &ValleyRound, _names: &[String], _theta: &[f64]) {}
-    /// An iteration of gradient sampling finished (`theta`: the point after it).
-    fn on_sampling(&mut self, _r: &SamplingRound, _names: &[String], _theta: &[f64]) {}
-    /// A restart along constant bulk modulus finished (`names`: the free parameters, the
-    /// order of [`Restart::theta`]).
-    fn on_restart(&mut self, _r: &Restart, _names: &[String]) {}
     /// Measures heap peaks (the stage profile, [`IterRecord::peak_host_bytes`]); `None`:
     /// they are reported as 0.
     fn heap(&self) -> Option<std::sync::Arc<dyn crate::HeapProbe>> {
@@ -437,17 +464,20 @@ pub fn initialize(
         // Forward the candidates to the hooks on this thread as they finish.
         loop {
             match rx.recv_timeout(std::time::Duration::from_millis(50)) {
-                Ok(c) => hooks.on_candidate(&c),
+                Ok(c) => hooks.on_event(&FitEvent::Candidate(&c)),
                 Err(_) if h.is_finished() => break,
                 Err(_) => {}
             }
         }
         while let Ok(c) = rx.try_recv() {
-            hooks.on_candidate(&c);
+            hooks.on_event(&FitEvent::Candidate(&c));
         }
         h.join().expect("initialisation thread")
     })?;
-    hooks.on_init(&outcome, &search.names);
+    hooks.on_event(&FitEvent::Init {
+        outcome: &outcome,
+        names: &search.names,
+    });
     Ok((space, outcome))
 }
 
@@ -484,7 +514,7 @@ pub fn initialize_shard(
         .map(|(index, theta)| evaluate_candidate(index, theta, &evaluate))
         .collect();
     for c in &candidates {
-        hooks.on_candidate(c);
+        hooks.on_event(&FitEvent::Candidate(c));
     }
     Ok((search, total, candidates))
 }
@@ -652,7 +682,7 @@ pub fn run_fit_with_loss(
                 theta,
                 failed,
             };
-            hooks.on_start(&r);
+            hooks.on_event(&FitEvent::Start(&r));
             state.starts.push(r);
             hooks.on_checkpoint(&state);
         }
@@ -708,7 +738,7 @@ pub fn run_fit_with_loss(
             (start.elapsed().as_secs_f64(), peak()),
         );
         rec.probes = st.probes;
-        hooks.on_iter(&rec);
+        hooks.on_event(&FitEvent::Iter(&rec));
         state.iters_done = iter + 1;
         if state.iters_done % cfg.checkpoint_every == 0 || state.iters_done == iters {
             save(&opt, &mut state);
@@ -789,7 +819,11 @@ fn valley_search(
         if let Some(l) = search.loss() {
             keep_best(&mut state.best, l, &search.theta());
         }
-        hooks.on_valley(&round, &names, &search.theta());
+        hooks.on_event(&FitEvent::Valley {
+            round: &round,
+            names: &names,
+            theta: &search.theta(),
+        });
         state.valley = Some(search.clone());
         checkpoint_stage(opt, state, hooks);
     }
@@ -825,7 +859,11 @@ fn gradient_sampling(
     };
     while let Some(round) = search.round(&cfg.gradient_sampling, &eval) {
         keep_best(&mut state.best, search.loss, &search.theta());
-        hooks.on_sampling(&round, &names, &search.theta());
+        hooks.on_event(&FitEvent::Sampling {
+            round: &round,
+            names: &names,
+            theta: &search.theta(),
+        });
         state.sampling = Some(search.clone());
         checkpoint_stage(opt, state, hooks);
     }
@@ -959,7 +997,10 @@ fn shear_restarts(
                         theta,
                         inner: None,
                     };
-                    hooks.on_restart(&r, &names);
+                    hooks.on_event(&FitEvent::Restart {
+                        restart: &r,
+                        names: &names,
+                    });
                     st.done.push(r);
                     continue;
                 }
@@ -982,7 +1023,11 @@ fn shear_restarts(
             others: &others,
         };
         while let Some(round) = gs.round(&inner, &eval) {
-            hooks.on_sampling(&round, &sub_names, &gs.theta());
+            hooks.on_event(&FitEvent::Sampling {
+                round: &round,
+                names: &sub_names,
+                theta: &gs.theta(),
+            });
             st.current = Some((k, gs.clone()));
             state.restarts = Some(st.clone());
             checkpoint_stage(opt, state, hooks);
@@ -995,7 +1040,10 @@ fn shear_restarts(
             theta: full(at, &gs.x),
             inner: Some(gs),
         };
-        hooks.on_restart(&r, &names);
+        hooks.on_event(&FitEvent::Restart {
+            restart: &r,
+            names: &names,
+        });
         keep_best(&mut state.best, r.loss, &r.theta);
         st.done.push(r);
         st.current = None;
