@@ -56,7 +56,7 @@ fn small(scene: DemoScene) -> (SceneSpec, VideoProblem, FitConfig) {
     let mut cfg = spec.fit_config(&Default::default());
     // The metal's five free parameters (hardening among them) need the scene's 64 candidates:
     // from 24 the fit settled in a local minimum at nu -44%, hardening -44%
-    // (docs/fitting.md).
+    // (docs/fitting-measurements.md).
     // The paste and the fluid keep their 16: from 12 the best candidate started the paste at
     // E -45%, yield stress -56%, viscosity +104%, and 16 iterations ended at -11%, -24%, +56%.
     if !matches!(

@@ -101,14 +101,14 @@ num_dt = {n}
     fit.init.candidates = 64;
     fit.multi_start = 4;
     // Full size: 16 iterations per start (8 left the fit at loss 1.028 with yield stress
-    // -6.7%, softening -13%; with 16 it ends at 1.004 with -4.3% and -5.7%: docs/fitting.md).
+    // -6.7%, softening -13%; with 16 it ends at 1.004 with -4.3% and -5.7%: docs/fitting-measurements.md).
     fit.multi_start_iters = match size {
         Size::Full => 16,
         Size::Small => 8,
     };
     // Full size: the valley search after the iterations (150 loss evaluations, about 2.5
     // minutes) takes the end point from loss 1.0040 to 0.9944 (yield stress -4.3% -> -3.4%,
-    // softening -5.7% -> -4.9%; E stays at +50-53%: docs/fitting.md).
+    // softening -5.7% -> -4.9%; E stays at +50-53%: docs/fitting-measurements.md).
     if size == Size::Full {
         fit.valley.evals = 150;
         // Then restarts along constant bulk modulus (shear modulus x 0.8^k, the other
@@ -116,7 +116,7 @@ num_dt = {n}
         // valley search's end point (E +53%, loss 0.9944) the profile goes 0.9910, 0.9799,
         // 0.9998 at k = 1, 2, 3 and the fit ends at k = 2 (E +5.9%, yield stress -0.7%,
         // softening -1.8%); with 6 inner iterations k = 2 won by 0.0018 only
-        // (docs/fitting.md). Three restarts fit the 15-minute budget (818 s in all).
+        // (docs/fitting-measurements.md). Three restarts fit the 15-minute budget (818 s in all).
         fit.shear_restarts = RestartsConfig {
             points: 3,
             factor: 0.8,
@@ -145,7 +145,7 @@ num_dt = {n}
         bounds,
         // E and nu: plastic flow caps the shear stress, so the video pins the bulk modulus
         // better than the shear modulus and the fits end along a valley of roughly constant
-        // bulk modulus (docs/fitting.md).
+        // bulk modulus (docs/fitting-measurements.md).
         pairs: vec![
             (0, ParamKind::YoungsModulus, ParamKind::PoissonRatio),
             (0, ParamKind::YoungsModulus, ParamKind::YieldStress),

@@ -195,7 +195,7 @@ impl ParamKind {
     /// yield stress grows by `2 mu xi` per unit plastic strain; linearised, PhysGaussian's
     /// explicit update multiplies a perturbation of the yield stress by `-xi` at every
     /// substep in which a particle keeps yielding, so above 1 the gradient grows
-    /// geometrically: measured 2e147 after 3 200 substeps at xi = 1.41, `docs/fitting.md`),
+    /// geometrically: measured 2e147 after 3 200 substeps at xi = 1.41, `docs/fitting-measurements.md`),
     /// plasticine's softening
     /// [1, 1e6] Pa per unit plastic strain (the yield stress range: from negligible to
     /// softening completely within a unit of strain).

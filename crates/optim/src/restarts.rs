@@ -7,7 +7,7 @@
 //! modulus `K = E / (3 (1 - 2 nu))`, where a lower shear modulus `G = E / (2 (1 + nu))` and a
 //! re-fitted yield stress and softening explain the video almost as well, and the trench the
 //! other parameters must find at the right `G` is too narrow for a walk along the valley to
-//! enter (`docs/fitting.md`, the full-size plasticine). This stage profiles the valley
+//! enter (`docs/fitting-measurements.md`, the full-size plasticine). This stage profiles the valley
 //! instead: from the lowest point so far it restarts at `G * factor^k` with `K` kept, `E` and
 //! `nu` fixed there, and runs gradient sampling ([`crate::sampling`]) over every other free
 //! parameter for `inner_iters` iterations; the profile is the loss each restart ends at.

@@ -13,7 +13,7 @@
 //! radius) accepts the first lower loss; where none is found the radius halves, and the
 //! search ends when it falls below 1/64 of its start or the iterations are spent.
 //!
-//! Measured on the full-size plasticine (`docs/fitting.md`, 2026-11-26): with `E` and `nu`
+//! Measured on the full-size plasticine (`docs/fitting-measurements.md`, 2026-11-26): with `E` and `nu`
 //! fixed at the truth and the yield stress, softening and density started at the demo's end
 //! point, ten iterations reached loss 0.9731 (yield stress -0.6%, softening -1.7%) where the
 //! valley search stayed at 0.9879, Nelder-Mead reached 0.9850 and V-fitting line searches

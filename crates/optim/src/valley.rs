@@ -8,7 +8,7 @@
 //! parameters alone climbs the V's wall, a gradient step is not told where the wall is (the
 //! kink), and a joint quadratic model does not describe a V: every local method stalls at the
 //! first point where the valley bends (measured on the full-size plasticine demo,
-//! `docs/fitting.md`). The valley search instead minimises the *profile*
+//! `docs/fitting-measurements.md`). The valley search instead minimises the *profile*
 //!
 //! ```text
 //! P(x_T) = min over x_S of f(x_T, x_S)
@@ -65,7 +65,7 @@ pub struct ValleyConfig {
     /// Probe the pairs too (`2 n (n - 1)` more evaluations per round, 40 for five
     /// parameters), so that a valley along a diagonal of two parameters is found (its sharp
     /// direction is across the diagonal). Off by default: on the full-size plasticine
-    /// (`docs/fitting.md`) it ended highest of the variants: loss 0.9968 after two rounds
+    /// (`docs/fitting-measurements.md`) it ended highest of the variants: loss 0.9968 after two rounds
     /// of 135 evaluations in all (then nothing lower), against 0.9944 after 150 without.
     pub pairs: bool,
     /// Re-centre along the diagonals `(u +- v) / sqrt 2` of every pair of sharp directions
@@ -75,7 +75,7 @@ pub struct ValleyConfig {
     /// one of them enters. Off by default: on the full-size plasticine it reached the lowest
     /// loss (0.9875 after 300 evaluations, against 0.9944 after 150 without) with the yield
     /// stress and softening closest, but a round costs about twice as many evaluations and
-    /// `E` stayed far off (+40%; `docs/fitting.md`).
+    /// `E` stayed far off (+40%; `docs/fitting-measurements.md`).
     pub diagonals: bool,
 }
 

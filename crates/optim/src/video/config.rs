@@ -252,7 +252,7 @@ pub struct FitConfig {
     /// return mapping it acts through, e.g. a yield stress so high that nothing yields), the
     /// loss is evaluated at this many log-spaced values across the parameter's bounds, the
     /// others fixed, and the parameter jumps to the best one when that lowers the loss
-    /// (its Adam moments restart). 0: off. Default 6 (see `docs/fitting.md`).
+    /// (its Adam moments restart). 0: off. Default 6 (see `docs/fitting-measurements.md`).
     pub flat_probe: usize,
     /// Multi-start: the best this-many initialisation candidates each get a short fit of
     /// `multi_start_iters` iterations (extra to `iters`); the fit continues from the lowest
@@ -267,7 +267,7 @@ pub struct FitConfig {
     /// The valley search after the iterations ([`crate::valley`]): a derivative-free walk
     /// along the shallow parameters with the sharp ones re-centred at every point, for
     /// losses whose minimum lies along a curved valley between V-shaped walls (the full-size
-    /// plasticine demo, `docs/fitting.md`). Off unless `valley.evals > 0`; part and object
+    /// plasticine demo, `docs/fitting-measurements.md`). Off unless `valley.evals > 0`; part and object
     /// fits only. Not part of the checkpoint's fingerprint while off.
     #[serde(skip_serializing_if = "ValleyConfig::is_off")]
     pub valley: ValleyConfig,
