@@ -347,6 +347,33 @@ fn the_stage_list_decides_what_runs() {
     );
 }
 
+/// The fit's evaluation budget (`evals`): the descent stops once it is spent, the checkpoint
+/// keeps what was spent, and a resumed fit with a larger budget ends where an uninterrupted
+/// fit with that budget ends; an unreadable wall-clock budget is refused by its key.
+#[test]
+fn an_evaluation_budget_stops_the_fit_and_a_larger_one_extends_it() {
+    let truth = [jelly(2e4, 800.0)];
+    let mut p = small_problem(&truth, 4);
+    p.config.parts = vec![jelly(5e4, 600.0)];
+    let mut cfg = fit_config(10);
+    cfg.evals = Some(3);
+    let mut first = Collect::default();
+    run_fit(&p, &cfg, None, &mut first).unwrap();
+    assert_eq!(first.losses.len(), 3, "three evaluations, three iterations");
+    let last = first.states.last().expect("a checkpoint").clone();
+    assert_eq!((last.iters_done, last.evals_done), (3, 3));
+    cfg.evals = Some(5);
+    let mut rest = Collect::default();
+    let resumed = run_fit(&p, &cfg, Some(last), &mut rest).unwrap();
+    assert_eq!(rest.losses.len(), 2, "the two evaluations left");
+    let whole = run_fit(&p, &cfg, None, &mut NoHooks).unwrap();
+    assert_eq!(resumed.best_loss, whole.best_loss);
+    assert_eq!(resumed.parts, whole.parts);
+    cfg.budget = Some("soon".into());
+    let e = run_fit(&p, &cfg, None, &mut NoHooks).unwrap_err();
+    assert!(e.to_string().contains("budget = 'soon'"), "{e}");
+}
+
 /// Restarts along constant bulk modulus (`[shear_restarts]`): each restart keeps the
 /// starting point's bulk modulus at a shear modulus `factor^k` times its own, the sequence
 /// follows the profile, the fit returns the lowest point seen, a fit killed inside a

@@ -83,9 +83,24 @@ pub struct FitState {
     /// Restarts along constant bulk modulus (`shear_restarts.points > 0`), once begun.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub restarts: Option<ShearRestarts>,
+    /// Wall-clock seconds the fit has spent in all its sittings, kept while a `budget` is
+    /// set (`crate::video::budget`).
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub elapsed_s: f64,
+    /// Evaluations the fit has run in all its sittings, kept while `evals` is set.
+    #[serde(default, skip_serializing_if = "is_zero_usize")]
+    pub evals_done: usize,
     /// Checksum of the rest of the content (set by [`FitState::to_json`]).
     #[serde(default)]
     pub checksum: String,
+}
+
+fn is_zero_f64(v: &f64) -> bool {
+    *v == 0.0
+}
+
+fn is_zero_usize(v: &usize) -> bool {
+    *v == 0
 }
 
 impl FitState {
@@ -104,6 +119,8 @@ impl FitState {
             valley: None,
             sampling: None,
             restarts: None,
+            elapsed_s: 0.0,
+            evals_done: 0,
             checksum: String::new(),
         }
     }

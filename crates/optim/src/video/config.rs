@@ -21,6 +21,8 @@
 //! free = ["E", "density"] # free parameters of every part (default: by material)
 //! # stages = ["init", "descent", "valley"]  # what runs, in order (default: what the tables
 //! #                       # below turn on); a listed stage must be able to run
+//! # budget = "15m"        # wall-clock budget of the whole fit (default: none)
+//! # evals = 200           # evaluation budget of the whole fit (default: none)
 //!
 //! [valley]                # the valley search after the iterations (r4d_optim::valley)
 //! evals = 0               # loss evaluations it may spend (0: off)
@@ -207,6 +209,16 @@ pub struct FitConfig {
     /// turn it on, in the order above. Not part of the checkpoint's fingerprint while unset.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stages: Option<Vec<StageKind>>,
+    /// A wall-clock budget for the whole fit (`"15m"`, `"1h30m"`, `"900s"`): once spent, no
+    /// new iteration or round starts and the fit ends with the lowest point so far
+    /// ([`crate::video::budget`]). Counted over every sitting of a resumed fit; not part of
+    /// the fingerprint (a larger budget extends a finished fit).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub budget: Option<String>,
+    /// An evaluation budget for the whole fit (simulations run, the initialisation's
+    /// candidates included), like `budget`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub evals: Option<usize>,
     /// AdamW iterations.
     pub iters: usize,
     /// Learning rate (log units per step).
@@ -291,6 +303,8 @@ impl Default for FitConfig {
     fn default() -> Self {
         FitConfig {
             stages: None,
+            budget: None,
+            evals: None,
             iters: 40,
             lr: 0.1,
             lr_schedule: LrSchedule::Cosine,
@@ -484,6 +498,12 @@ impl FitConfig {
             })
             .collect::<Vec<_>>()
             .join(" -> ")
+            + &match (&self.budget, self.evals) {
+                (Some(b), Some(n)) => format!("; budget {b} or {n} evaluations"),
+                (Some(b), None) => format!("; budget {b}"),
+                (None, Some(n)) => format!("; budget {n} evaluations"),
+                (None, None) => String::new(),
+            }
     }
 
     /// Checks an explicit `stages` list: no stage twice, `init`, `multi_start`, `descent` in
@@ -570,6 +590,13 @@ impl FitConfig {
             return bad("checkpoint_every must be at least 1".into());
         }
         self.check_stages()?;
+        if let Some(b) = &self.budget {
+            super::budget::parse_duration(b)
+                .map_err(|e| FitError::Input(format!("budget = {e}")))?;
+        }
+        if self.evals == Some(0) {
+            return bad("evals = 0: the fit's evaluation budget must be at least 1".into());
+        }
         let runs = |k: StageKind| self.plan().contains(&k);
         if runs(StageKind::Init) && self.init.candidates == 0 {
             return bad("init.candidates must be at least 1".into());

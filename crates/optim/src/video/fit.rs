@@ -1,6 +1,7 @@
 //! The fit loop: simulation-driven initialisation, then AdamW on `xi = log(theta)` with bound
 //! and gradient clipping; a record per iteration and a resumable checkpoint.
 
+use super::budget::Budget;
 use super::config::{FitConfig, InitSampler, OptimizerKind, StageKind};
 use super::problem::{Evaluation, Objective, VideoProblem};
 use crate::descent::{self, keep_best, Rate, Stepper};
@@ -110,8 +111,14 @@ fn save(opt: &Stepper, state: &mut FitState) {
 /// Persists the state after a round of a stage that follows the iterations (the valley
 /// search, the restarts, gradient sampling): the optimiser goes into the checkpoint for it
 /// and out again, as after an iteration.
-fn checkpoint_stage(opt: &Stepper, state: &mut FitState, hooks: &mut dyn FitHooks) {
+fn checkpoint_stage(
+    opt: &Stepper,
+    state: &mut FitState,
+    hooks: &mut dyn FitHooks,
+    (budget, evals): (&Budget, usize),
+) {
     save(opt, state);
+    budget.stamp(state, evals);
     hooks.on_checkpoint(state);
     state.optimizer = None;
     state.trust = None;
@@ -557,6 +564,8 @@ pub fn fingerprint(problem: &VideoProblem, cfg: &FitConfig) -> String {
     f.word(problem.fps.to_bits());
     let mut settings = cfg.clone();
     settings.iters = 0;
+    settings.budget = None;
+    settings.evals = None;
     mix_json(&mut f, &settings);
     f.finish()
 }
@@ -613,6 +622,7 @@ pub fn run_fit_with_loss(
         }
         None => FitState::new(names.clone(), print),
     };
+    let mut budget = Budget::new(&cfg.budget, cfg.evals, &state)?;
     // Starting point: the config's parts, replaced by the initialisation's best candidate.
     let mut base_parts = problem.config.parts.clone();
     if runs(StageKind::Init) {
@@ -632,12 +642,14 @@ pub fn run_fit_with_loss(
             }
             None => {
                 let (_, o) = initialize(problem, cfg, hooks)?;
+                budget.add_evals(o.candidates.len());
                 o
             }
         };
         ispace.apply(&mut base_parts, &outcome.best);
         state.init = Some(outcome);
         if state.optimizer.is_none() && state.trust.is_none() {
+            budget.stamp(&mut state, obj.evaluations());
             hooks.on_checkpoint(&state);
         }
     }
@@ -649,6 +661,9 @@ pub fn run_fit_with_loss(
         let ispace = init_space(cfg, &problem.config.parts)?;
         let k = cfg.multi_start.min(outcome.ranking.len());
         while state.starts.len() < k && state.iters_done == 0 {
+            if budget.spent(obj.evaluations()) {
+                break;
+            }
             let c = &outcome.candidates[outcome.ranking[state.starts.len()]];
             let mut parts = problem.config.parts.clone();
             ispace.apply(&mut parts, &c.theta);
@@ -657,6 +672,9 @@ pub fn run_fit_with_loss(
             let mut best: Option<(f64, Vec<f64>)> = None;
             let mut failed = None;
             for it in 0..cfg.multi_start_iters {
+                if budget.spent(obj.evaluations()) {
+                    break;
+                }
                 // A start whose simulation diverges ends there; the others go on.
                 match iterate(
                     &obj,
@@ -684,6 +702,7 @@ pub fn run_fit_with_loss(
             };
             hooks.on_event(&FitEvent::Start(&r));
             state.starts.push(r);
+            budget.stamp(&mut state, obj.evaluations());
             hooks.on_checkpoint(&state);
         }
         if let Some(b) = state
@@ -723,6 +742,17 @@ pub fn run_fit_with_loss(
         0
     };
     for iter in state.iters_done..iters {
+        if budget.spent(obj.evaluations()) {
+            // The iterations since the last checkpoint are kept.
+            if state.iters_done % cfg.checkpoint_every != 0 {
+                save(&opt, &mut state);
+                budget.stamp(&mut state, obj.evaluations());
+                hooks.on_checkpoint(&state);
+                state.optimizer = None;
+                state.trust = None;
+            }
+            break;
+        }
         let start = Instant::now();
         let st = iterate(&obj, &space, &base_slots, &mut opt, cfg, (iter, cfg.iters))?;
         let (ev, theta, gtheta) = (&st.ev, &st.theta, &st.gtheta);
@@ -742,6 +772,7 @@ pub fn run_fit_with_loss(
         state.iters_done = iter + 1;
         if state.iters_done % cfg.checkpoint_every == 0 || state.iters_done == iters {
             save(&opt, &mut state);
+            budget.stamp(&mut state, obj.evaluations());
             hooks.on_checkpoint(&state);
             state.optimizer = None;
             state.trust = None;
@@ -750,16 +781,19 @@ pub fn run_fit_with_loss(
     // The refining stages in the plan's order; a finished stage's state is in the
     // checkpoint, so a resumed fit passes it without evaluating and continues inside the
     // stage it stopped in.
+    let ctx = StageCtx {
+        obj: &obj,
+        space: &space,
+        base: &base_slots,
+        opt: &opt,
+        cfg,
+        budget: &budget,
+    };
     for &k in plan.iter().filter(|k| k.after_descent()) {
-        let (obj, space, slots) = (&obj, &space, &base_slots);
         match k {
-            StageKind::Valley => valley_search(obj, space, slots, &opt, cfg, &mut state, hooks)?,
-            StageKind::ShearRestarts => {
-                shear_restarts(obj, space, slots, &opt, cfg, &mut state, hooks)?
-            }
-            StageKind::GradientSampling => {
-                gradient_sampling(obj, space, slots, &opt, cfg, &mut state, hooks)?
-            }
+            StageKind::Valley => valley_search(&ctx, &mut state, hooks)?,
+            StageKind::ShearRestarts => shear_restarts(&ctx, &mut state, hooks)?,
+            StageKind::GradientSampling => gradient_sampling(&ctx, &mut state, hooks)?,
             StageKind::Init | StageKind::MultiStart | StageKind::Descent => {}
         }
     }
@@ -782,18 +816,36 @@ pub fn run_fit_with_loss(
     })
 }
 
+/// What a refining stage works with: the objective over the free parameters (applied to
+/// the `base` slots), the optimiser's point, the settings and the fit's budget. A stage
+/// reads the best point so far from the [`FitState`], keeps its own state there, and
+/// reports through [`FitEvent`].
+#[derive(Clone, Copy)]
+struct StageCtx<'a> {
+    obj: &'a Objective<'a>,
+    space: &'a ParamSpace,
+    base: &'a [PartParams],
+    opt: &'a Stepper,
+    cfg: &'a FitConfig,
+    budget: &'a Budget,
+}
+
 /// The valley search ([`crate::valley`]) from the lowest loss the iterations reached (the
 /// optimiser's point without iterations), checkpointed after every round; a resumed fit
 /// continues the search in the checkpoint. Its points are evaluated in parallel, loss only.
 fn valley_search(
-    obj: &Objective,
-    space: &ParamSpace,
-    base_slots: &[PartParams],
-    opt: &Stepper,
-    cfg: &FitConfig,
+    ctx: &StageCtx,
     state: &mut FitState,
     hooks: &mut dyn FitHooks,
 ) -> Result<(), FitError> {
+    let StageCtx {
+        obj,
+        space,
+        base: base_slots,
+        opt,
+        cfg,
+        budget,
+    } = *ctx;
     let names = space.names();
     let mut search = match state.valley.take() {
         Some(s) => s,
@@ -811,9 +863,9 @@ fn valley_search(
         space,
         base: base_slots,
     };
-    while !search.done && search.evals < cfg.valley.evals {
-        let budget = cfg.valley.evals - search.evals;
-        let Some(round) = search.round(&cfg.valley, budget, &eval) else {
+    while !search.done && search.evals < cfg.valley.evals && !budget.spent(obj.evaluations()) {
+        let left = cfg.valley.evals - search.evals;
+        let Some(round) = search.round(&cfg.valley, left, &eval) else {
             break;
         };
         if let Some(l) = search.loss() {
@@ -825,7 +877,7 @@ fn valley_search(
             theta: &search.theta(),
         });
         state.valley = Some(search.clone());
-        checkpoint_stage(opt, state, hooks);
+        checkpoint_stage(opt, state, hooks, (budget, obj.evaluations()));
     }
     state.valley = Some(search);
     Ok(())
@@ -835,14 +887,18 @@ fn valley_search(
 /// iterations' and the valley search's), checkpointed after every iteration; a resumed fit
 /// continues it. The sampled gradients and the line search's points run in parallel.
 fn gradient_sampling(
-    obj: &Objective,
-    space: &ParamSpace,
-    base_slots: &[PartParams],
-    opt: &Stepper,
-    cfg: &FitConfig,
+    ctx: &StageCtx,
     state: &mut FitState,
     hooks: &mut dyn FitHooks,
 ) -> Result<(), FitError> {
+    let StageCtx {
+        obj,
+        space,
+        base: base_slots,
+        opt,
+        cfg,
+        budget,
+    } = *ctx;
     let names = space.names();
     let mut search = match state.sampling.take() {
         Some(s) => s,
@@ -857,7 +913,10 @@ fn gradient_sampling(
         space,
         base: base_slots,
     };
-    while let Some(round) = search.round(&cfg.gradient_sampling, &eval) {
+    while !budget.spent(obj.evaluations()) {
+        let Some(round) = search.round(&cfg.gradient_sampling, &eval) else {
+            break;
+        };
         keep_best(&mut state.best, search.loss, &search.theta());
         hooks.on_event(&FitEvent::Sampling {
             round: &round,
@@ -865,7 +924,7 @@ fn gradient_sampling(
             theta: &search.theta(),
         });
         state.sampling = Some(search.clone());
-        checkpoint_stage(opt, state, hooks);
+        checkpoint_stage(opt, state, hooks, (budget, obj.evaluations()));
     }
     state.sampling = Some(search);
     Ok(())
@@ -927,14 +986,18 @@ fn restart_entries(
 /// at each, `E` and `nu` of `shear_restarts.part` fixed, gradient sampling over the other
 /// free parameters; checkpointed after every inner iteration, resumed where it stopped.
 fn shear_restarts(
-    obj: &Objective,
-    space: &ParamSpace,
-    base_slots: &[PartParams],
-    opt: &Stepper,
-    cfg: &FitConfig,
+    ctx: &StageCtx,
     state: &mut FitState,
     hooks: &mut dyn FitHooks,
 ) -> Result<(), FitError> {
+    let StageCtx {
+        obj,
+        space,
+        base: base_slots,
+        opt,
+        cfg,
+        budget,
+    } = *ctx;
     let rc = &cfg.shear_restarts;
     let names = space.names();
     let (ie, inu, others) = restart_entries(space, cfg)?;
@@ -1022,7 +1085,10 @@ fn shear_restarts(
             full: |p: &[f64]| full(at, p),
             others: &others,
         };
-        while let Some(round) = gs.round(&inner, &eval) {
+        while !budget.spent(obj.evaluations()) {
+            let Some(round) = gs.round(&inner, &eval) else {
+                break;
+            };
             hooks.on_event(&FitEvent::Sampling {
                 round: &round,
                 names: &sub_names,
@@ -1030,7 +1096,7 @@ fn shear_restarts(
             });
             st.current = Some((k, gs.clone()));
             state.restarts = Some(st.clone());
-            checkpoint_stage(opt, state, hooks);
+            checkpoint_stage(opt, state, hooks, (budget, obj.evaluations()));
         }
         let r = Restart {
             k,
@@ -1048,7 +1114,7 @@ fn shear_restarts(
         st.done.push(r);
         st.current = None;
         state.restarts = Some(st.clone());
-        checkpoint_stage(opt, state, hooks);
+        checkpoint_stage(opt, state, hooks, (budget, obj.evaluations()));
     }
     state.restarts = Some(st);
     Ok(())

@@ -12,6 +12,7 @@
 //! `Simulation<B>` over that backend's kernels, positions and F read back once per frame;
 //! the loss runs on the host, band by band.
 
+pub mod budget;
 pub mod config;
 pub mod fit;
 pub mod problem;

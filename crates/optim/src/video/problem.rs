@@ -272,6 +272,8 @@ pub struct Objective<'a> {
     /// back to the host and uploads its deformation (the same numbers up to the rounding of
     /// the link's transform; for comparing the bytes moved).
     pub device_frames: bool,
+    /// Evaluations run so far ([`Objective::evaluations`]).
+    evals: std::sync::atomic::AtomicUsize,
     profile: Mutex<StageProfile>,
     /// Measures the heap peaks of [`Objective::profile`] (`None`: peaks are 0). The caller
     /// supplies it (the `r4d` binary: its counting allocator); the objective never touches a
@@ -410,6 +412,7 @@ impl<'a> Objective<'a> {
             compute: problem.compute.clone(),
             frame_cache_bytes: None,
             device_frames: true,
+            evals: std::sync::atomic::AtomicUsize::new(0),
             profile: Mutex::new(StageProfile::default()),
             heap: None,
         };
@@ -544,11 +547,19 @@ impl<'a> Objective<'a> {
         Ok((r.0, r.1.expect("gradient requested")))
     }
 
+    /// Simulations this objective has run (every value, value and gradient, score and
+    /// render, failed ones included): what a fit's evaluation budget counts.
+    pub fn evaluations(&self) -> usize {
+        self.evals.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
     /// Runs on the objective's backend ([`Objective::compute`]).
     fn dispatch(&self, slots: &[PartParams], mode: Mode) -> Result<RunOut, FitError> {
         for (i, p) in slots.iter().enumerate() {
             p.validate(&format!("parameters of slot {i}"))?;
         }
+        self.evals
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.compute.reset_device_peak();
         let before = self.compute.device_memory();
         let r = self.run_on(slots, mode);
