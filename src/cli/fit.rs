@@ -669,6 +669,19 @@ pub fn run(a: FitArgs) -> Result<()> {
         e => e.into(),
     })?;
     hooks.finish()?;
+    if outcome.budget_spent {
+        eprintln!(
+            "note: the fit's budget is spent ({}): it ended with the lowest point so far; \
+             raise it and --resume {} to go on",
+            match (&cfg.budget, cfg.evals) {
+                (Some(b), Some(n)) => format!("budget = \"{b}\", evals = {n}"),
+                (Some(b), None) => format!("budget = \"{b}\""),
+                (None, Some(n)) => format!("evals = {n}"),
+                (None, None) => String::new(),
+            },
+            out.display()
+        );
+    }
     let files = write_results(&out, &problem, &cfg, &outcome, &hooks.log, a.row, &lpips)?;
     if physflow_units {
         add_physflow_units(&files.params, &outcome.parts)?;

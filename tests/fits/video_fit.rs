@@ -358,7 +358,8 @@ fn an_evaluation_budget_stops_the_fit_and_a_larger_one_extends_it() {
     let mut cfg = fit_config(10);
     cfg.evals = Some(3);
     let mut first = Collect::default();
-    run_fit(&p, &cfg, None, &mut first).unwrap();
+    let out = run_fit(&p, &cfg, None, &mut first).unwrap();
+    assert!(out.budget_spent, "the budget ended it");
     assert_eq!(first.losses.len(), 3, "three evaluations, three iterations");
     let last = first.states.last().expect("a checkpoint").clone();
     assert_eq!((last.iters_done, last.evals_done), (3, 3));
@@ -367,6 +368,7 @@ fn an_evaluation_budget_stops_the_fit_and_a_larger_one_extends_it() {
     let resumed = run_fit(&p, &cfg, Some(last), &mut rest).unwrap();
     assert_eq!(rest.losses.len(), 2, "the two evaluations left");
     let whole = run_fit(&p, &cfg, None, &mut NoHooks).unwrap();
+    assert!(whole.budget_spent && resumed.budget_spent);
     assert_eq!(resumed.best_loss, whole.best_loss);
     assert_eq!(resumed.parts, whole.parts);
     cfg.budget = Some("soon".into());

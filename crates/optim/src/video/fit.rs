@@ -359,6 +359,9 @@ pub struct FitOutcome {
     pub sampling: Option<GradientSampling>,
     /// The restarts along constant bulk modulus, when they ran (`shear_restarts.points > 0`).
     pub restarts: Option<ShearRestarts>,
+    /// Whether the fit's budget (`budget`, `evals`) was spent when it ended: a stage may have
+    /// stopped early (resume with a larger budget to go on).
+    pub budget_spent: bool,
 }
 
 /// MS-SSIM of rendered videos against the problem's references (mean over views), with the
@@ -812,6 +815,7 @@ pub fn run_fit_with_loss(
         valley: state.valley,
         sampling: state.sampling,
         restarts: state.restarts,
+        budget_spent: budget.spent(obj.evaluations()),
         space,
     })
 }
