@@ -834,6 +834,17 @@ struct StageCtx<'a> {
     budget: &'a Budget,
 }
 
+impl<'a> StageCtx<'a> {
+    /// The objective as the stages' [`Evaluator`].
+    fn eval(&self) -> ObjectiveEval<'a> {
+        ObjectiveEval {
+            obj: self.obj,
+            space: self.space,
+            base: self.base,
+        }
+    }
+}
+
 /// The valley search ([`crate::valley`]) from the lowest loss the iterations reached (the
 /// optimiser's point without iterations), checkpointed after every round; a resumed fit
 /// continues the search in the checkpoint. Its points are evaluated in parallel, loss only.
@@ -845,7 +856,7 @@ fn valley_search(
     let StageCtx {
         obj,
         space,
-        base: base_slots,
+        base: _,
         opt,
         cfg,
         budget,
@@ -862,11 +873,7 @@ fn valley_search(
                 .map_err(|e| FitError::Input(format!("the valley search's starting point: {e}")))?
         }
     };
-    let eval = ObjectiveEval {
-        obj,
-        space,
-        base: base_slots,
-    };
+    let eval = ctx.eval();
     while !search.done && search.evals < cfg.valley.evals && !budget.spent(obj.evaluations()) {
         let left = cfg.valley.evals - search.evals;
         let Some(round) = search.round(&cfg.valley, left, &eval) else {
@@ -912,11 +919,7 @@ fn gradient_sampling(
                 .map_err(|e| FitError::Input(format!("gradient sampling's starting point: {e}")))?
         }
     };
-    let eval = ObjectiveEval {
-        obj,
-        space,
-        base: base_slots,
-    };
+    let eval = ctx.eval();
     while !budget.spent(obj.evaluations()) {
         let Some(round) = search.round(&cfg.gradient_sampling, &eval) else {
             break;
@@ -1079,11 +1082,7 @@ fn shear_restarts(
             }
         };
         let at = e_nu(k);
-        let whole = ObjectiveEval {
-            obj,
-            space,
-            base: base_slots,
-        };
+        let whole = ctx.eval();
         let eval = RestartEval {
             eval: &whole,
             full: |p: &[f64]| full(at, p),
