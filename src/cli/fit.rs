@@ -651,15 +651,26 @@ pub fn run(a: FitArgs) -> Result<()> {
             s.iters_done
         );
     }
+    // The automatic strategy's plan, printed before anything runs (run_fit resolves the
+    // same plan from the same inputs).
+    let resolved = r4d_optim::video::strategy::resolve(&cfg, &problem.config.parts)?;
     eprintln!(
         "fit: {}{}",
-        cfg.describe_plan(),
-        if cfg.stages.is_some() {
+        resolved.config.describe_plan(),
+        if !resolved.decisions.is_empty() {
+            " (strategy = \"auto\"):"
+        } else if cfg.stages.is_some() {
             " (stages from the fit settings)"
         } else {
             ""
         }
     );
+    if !resolved.decisions.is_empty() {
+        eprintln!(
+            "{}",
+            r4d_optim::video::strategy::describe(&resolved.decisions)
+        );
+    }
     let mut hooks = RunHooks::new(&out, &cfg, resume.as_ref())?;
     let outcome = run_fit(&problem, &cfg, resume, &mut hooks).map_err(|e| match e {
         e @ resonance4d::video_fit::FitError::Resume(_) => anyhow::Error::new(e).context(format!(
@@ -683,6 +694,18 @@ pub fn run(a: FitArgs) -> Result<()> {
         );
     }
     let files = write_results(&out, &problem, &cfg, &outcome, &hooks.log, a.row, &lpips)?;
+    write_json(
+        &out.join("summary.json"),
+        &serde_json::json!({
+            "strategy": if cfg.strategy.is_fixed() { "fixed" } else { "auto" },
+            "plan": resolved.config.plan().iter().map(|k| k.name()).collect::<Vec<_>>(),
+            "plan_text": resolved.config.describe_plan(),
+            "decisions": outcome.decisions,
+            "best_loss": outcome.best_loss,
+            "evaluations": outcome.evaluations,
+            "budget_spent": outcome.budget_spent,
+        }),
+    )?;
     if physflow_units {
         add_physflow_units(&files.params, &outcome.parts)?;
     }

@@ -1,6 +1,7 @@
 //! Command-line interface: argument parsing and backend selection at runtime.
 
 mod ablate;
+mod bench_recovery;
 mod bench_scale;
 mod checkpoint;
 mod dataset;
@@ -53,6 +54,9 @@ enum Command {
     Segment(segment::SegmentArgs),
     /// One full fit iteration at the paper's scale: per-stage time and peak memory.
     BenchScale(bench_scale::BenchScaleArgs),
+    /// The recovery benchmark: random scenes of every material class fitted with the
+    /// default settings; the fraction of the determined parameters recovered, per class.
+    BenchRecovery(bench_recovery::BenchRecoveryArgs),
     /// Dataset folders (PhysFlow's release, PhysDreamer, PAC-NeRF): `dataset inspect DIR`.
     Dataset(dataset::DatasetArgs),
     /// The paper's evaluation of a fit's run folder: videos at 30 fps (MS-SSIM, PSNR, LPIPS),
@@ -117,6 +121,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Simulate(a) => simulate::run(a),
         Command::Demo(a) => demo::run(a),
         Command::BenchScale(a) => bench_scale::run_cmd(a),
+        Command::BenchRecovery(a) => bench_recovery::run(a),
         Command::Fit(a) => fit::run(a),
         Command::FitTrajectory(a) => fit_trajectory::run(a),
         Command::Render(a) => render::run(a),

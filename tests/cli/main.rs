@@ -7,6 +7,7 @@
 mod common;
 
 mod cli;
+mod cli_bench_recovery;
 mod cli_bench_scale;
 mod cli_fit;
 mod cli_metrics;

@@ -71,6 +71,7 @@ pub fn spec(size: Size) -> SceneSpec {
     fit.init.frames = frames;
     SceneSpec {
         scene: super::DemoScene::Fluid,
+        name: super::DemoScene::Fluid.name().into(),
         description: format!(
             "a viscous drop landing and spreading, {frames} frames at {}x{} from two views; fitting the bulk modulus (E) and the viscosity",
             res.0, res.1

@@ -116,6 +116,7 @@ start_time = 0.1
     fit.init.frames = frames;
     SceneSpec {
         scene: super::DemoScene::Foam,
+        name: super::DemoScene::Foam.name().into(),
         description: format!(
             "a foam block pressed and released, {frames} frames at {}x{} from two views; fitting E, nu, yield stress, plastic viscosity and density",
             res.0, res.1

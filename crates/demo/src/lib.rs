@@ -26,6 +26,8 @@ pub mod paste;
 pub mod plant;
 pub mod plasticine;
 pub mod profiles;
+pub mod random;
+pub mod recovery;
 pub mod sand;
 pub mod stage;
 
@@ -130,8 +132,11 @@ pub enum Size {
 /// One demo scene: simulation, truth, cameras and what is fitted.
 #[derive(Clone, Debug)]
 pub struct SceneSpec {
-    /// Which scene.
+    /// Which scene (a random scene of the recovery benchmark: the built-in scene of its
+    /// material's look).
     pub scene: DemoScene,
+    /// The scene's name in the views' names and the progress output.
+    pub name: String,
     /// One line for the progress output.
     pub description: String,
     /// Simulation settings; `parts` hold the true parameters.
@@ -183,7 +188,7 @@ impl SceneSpec {
             .cameras
             .iter()
             .map(|cam| View {
-                name: format!("{} reference ({})", self.scene.name(), cam.name),
+                name: format!("{} reference ({})", self.name, cam.name),
                 camera: cam.clone(),
                 video: r4d_loss::Video::zeros(frames, cam.height as usize, cam.width as usize)
                     .into(),

@@ -110,6 +110,7 @@ start_time = 0.2
     fit.init.frames = frames;
     SceneSpec {
         scene: super::DemoScene::Metal,
+        name: super::DemoScene::Metal.name().into(),
         description: format!(
             "a metal cantilever bent past yield by two pushes and released, {frames} frames at {}x{} from two views; fitting E, nu, yield stress, hardening and density",
             res.0, res.1

@@ -78,6 +78,7 @@ pub fn spec(size: Size) -> SceneSpec {
     fit.init.frames = frames;
     SceneSpec {
         scene: super::DemoScene::Paste,
+        name: super::DemoScene::Paste.name().into(),
         description: format!(
             "a column of paste slumping under its own weight, {frames} frames at {}x{} from two views; fitting E, yield stress and plastic viscosity",
             res.0, res.1

@@ -90,6 +90,7 @@ num_dt = 30
     fit.init.frames = frames;
     SceneSpec {
         scene: super::DemoScene::Plant,
+        name: super::DemoScene::Plant.name().into(),
         description: format!(
             "a two-part plant (stiff stem, soft heavy head), {frames} frames at {}x{}; fitting E and density of both parts",
             res.0, res.1

@@ -127,6 +127,7 @@ num_dt = {n}
     fit.init.frames = frames;
     SceneSpec {
         scene: super::DemoScene::Plasticine,
+        name: super::DemoScene::Plasticine.name().into(),
         description: format!(
             "a plasticine blob thrown onto the floor, {frames} frames at {}x{} from two views; fitting E, nu, yield stress, softening and density",
             res.0, res.1

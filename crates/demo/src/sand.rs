@@ -74,6 +74,7 @@ pub fn spec(size: Size) -> SceneSpec {
     fit.init.frames = frames;
     SceneSpec {
         scene: super::DemoScene::Sand,
+        name: super::DemoScene::Sand.name().into(),
         description: format!(
             "a sand column slumping into a pile, {frames} frames at {}x{} from two views; fitting E, nu, friction angle and density",
             res.0, res.1

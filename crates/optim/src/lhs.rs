@@ -9,16 +9,18 @@
 /// SplitMix64: a 64-bit state advanced by the golden-ratio increment, output through a
 /// variant of the MurmurHash3 finaliser. Period 2^64; every seed (0 included) is valid.
 #[derive(Clone, Debug)]
-pub(crate) struct SplitMix64 {
+pub struct SplitMix64 {
     state: u64,
 }
 
 impl SplitMix64 {
-    pub(crate) fn new(seed: u64) -> Self {
+    /// A generator seeded with `seed`.
+    pub fn new(seed: u64) -> Self {
         SplitMix64 { state: seed }
     }
 
-    pub(crate) fn next_u64(&mut self) -> u64 {
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
         self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.state;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -27,13 +29,13 @@ impl SplitMix64 {
     }
 
     /// Uniform in `[0, 1)`: the top 53 bits scaled by 2^-53.
-    pub(crate) fn next_f64(&mut self) -> f64 {
+    pub fn next_f64(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
 
     /// Uniform integer in `[0, n)` without modulo bias (rejection of the incomplete top
     /// block). `n` must be positive.
-    pub(crate) fn below(&mut self, n: u64) -> u64 {
+    pub fn below(&mut self, n: u64) -> u64 {
         debug_assert!(n > 0);
         // u64::MAX - zone = 2^64 mod n, so [0, zone] holds a whole number of blocks of n.
         let zone = u64::MAX - (u64::MAX - n + 1) % n;

@@ -73,7 +73,7 @@ pub use init::{
     evaluate_candidate, Candidate, Evaluate, InitOutcome, Initializer, LatinHypercubeInit,
     LogGridInit, SearchSpace,
 };
-pub use lhs::{latin_hypercube, log_space};
+pub use lhs::{latin_hypercube, log_space, SplitMix64};
 pub use restarts::{Restart, RestartsConfig, ShearRestarts};
 pub use sampling::{GradientSampling, SamplingConfig};
 pub use trust_bfgs::{TrustRegion, TrustRegionBfgs};

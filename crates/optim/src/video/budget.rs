@@ -79,7 +79,9 @@ impl Budget {
         self.extra_evals += n;
     }
 
-    fn evals(&self, fit_evals: usize) -> usize {
+    /// Evaluations spent over every sitting: the fit's `fit_evals` of this sitting, the
+    /// other objectives' and the earlier sittings'.
+    pub(crate) fn evals(&self, fit_evals: usize) -> usize {
         self.before_evals + self.extra_evals + fit_evals
     }
 

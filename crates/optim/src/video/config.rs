@@ -202,6 +202,11 @@ impl StageKind {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct FitConfig {
+    /// `fixed` (default): the stages and settings as written; `auto`: decided from the
+    /// problem ([`crate::video::strategy`]; `stages` must then be absent). Not part of the
+    /// checkpoint's fingerprint while `fixed`.
+    #[serde(skip_serializing_if = "super::strategy::Strategy::is_fixed")]
+    pub strategy: super::strategy::Strategy,
     /// The stages that run, in order: `init`, `multi_start`, `descent` (in that order when
     /// listed), then any of `valley`, `shear_restarts`, `gradient_sampling` in the order
     /// listed. Unlisted stages do not run; a listed one must be able to (its budget above
@@ -302,6 +307,7 @@ pub struct FitConfig {
 impl Default for FitConfig {
     fn default() -> Self {
         FitConfig {
+            strategy: Default::default(),
             stages: None,
             budget: None,
             evals: None,
@@ -588,6 +594,11 @@ impl FitConfig {
         }
         if self.checkpoint_every == 0 {
             return bad("checkpoint_every must be at least 1".into());
+        }
+        if !self.strategy.is_fixed() && self.stages.is_some() {
+            return bad(
+                "strategy = \"auto\" with stages = [...]: the automatic strategy decides the stages; remove `stages` or set strategy = \"fixed\"".into(),
+            );
         }
         self.check_stages()?;
         if let Some(b) = &self.budget {

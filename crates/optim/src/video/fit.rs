@@ -362,6 +362,11 @@ pub struct FitOutcome {
     /// Whether the fit's budget (`budget`, `evals`) was spent when it ended: a stage may have
     /// stopped early (resume with a larger budget to go on).
     pub budget_spent: bool,
+    /// Simulations run over every sitting of the fit (the initialisation's candidates
+    /// included; earlier sittings counted when the fit had an evaluation budget).
+    pub evaluations: usize,
+    /// The automatic strategy's decisions (`strategy = "auto"`; empty otherwise).
+    pub decisions: Vec<super::strategy::Decision>,
 }
 
 /// MS-SSIM of rendered videos against the problem's references (mean over views), with the
@@ -595,6 +600,8 @@ pub fn run_fit_with_loss(
     hooks: &mut dyn FitHooks,
 ) -> Result<FitOutcome, FitError> {
     cfg.validate()?;
+    let resolved = super::strategy::resolve(cfg, &problem.config.parts)?;
+    let cfg = &resolved.config;
     let fit_span = hooks.heap().map(|h| h.start());
     let per_particle = cfg.granularity == Granularity::Particle;
     let mut obj = Objective::with_loss(problem, cfg.frames, loss, per_particle)?;
@@ -816,6 +823,8 @@ pub fn run_fit_with_loss(
         sampling: state.sampling,
         restarts: state.restarts,
         budget_spent: budget.spent(obj.evaluations()),
+        evaluations: budget.evals(obj.evaluations()),
+        decisions: resolved.decisions,
         space,
     })
 }

@@ -16,6 +16,7 @@ pub mod budget;
 pub mod config;
 pub mod fit;
 pub mod problem;
+pub mod strategy;
 
 pub use crate::restarts::{Restart, RestartsConfig, ShearRestarts};
 pub use crate::sampling::{GradientSampling, SamplingConfig, SamplingRound};
