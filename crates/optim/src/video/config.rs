@@ -102,6 +102,16 @@ pub struct InitConfig {
     /// part of the checkpoint's fingerprint while the default.
     #[serde(skip_serializing_if = "InitSampler::is_default")]
     pub sampler: InitSampler,
+    /// Rounds of candidates: each round after the first samples `candidates` more (a
+    /// Latin hypercube) inside the box of the best ones so far
+    /// ([`crate::video::fit::narrowed`]). Default 1. Not part of the checkpoint's
+    /// fingerprint while 1.
+    #[serde(skip_serializing_if = "is_one")]
+    pub rounds: usize,
+}
+
+fn is_one(n: &usize) -> bool {
+    *n == 1
 }
 
 /// How the initialisation samples its candidates (`[init] sampler`).
@@ -132,6 +142,7 @@ impl Default for InitConfig {
             top_k: 4,
             include_start: false,
             sampler: InitSampler::LatinHypercube,
+            rounds: 1,
         }
     }
 }
@@ -430,6 +441,9 @@ pub const MAX_INIT_FRAME_EVALS: u64 = 1_000_000;
 /// The most iterations a fit may ask for (`iters`, `r4d demo --iters`).
 pub const MAX_ITERS: usize = 1_000_000;
 
+/// The most rounds of initialisation candidates (`[init] rounds`).
+pub const MAX_INIT_ROUNDS: usize = 16;
+
 /// Checks a candidate count against [`MAX_INIT_CANDIDATES`]; the message starts with
 /// `candidates = N` (callers prefix the key or flag).
 pub fn check_candidates(n: usize) -> Result<(), String> {
@@ -478,6 +492,10 @@ impl FitConfig {
             .iter()
             .map(|&k| {
                 let budget = match k {
+                    StageKind::Init if self.init.rounds > 1 => format!(
+                        "{} rounds x {} candidates x {} frames",
+                        self.init.rounds, self.init.candidates, self.init.frames
+                    ),
                     StageKind::Init => format!(
                         "{} candidates x {} frames",
                         self.init.candidates, self.init.frames
@@ -487,8 +505,12 @@ impl FitConfig {
                         self.multi_start, self.multi_start_iters
                     ),
                     StageKind::Descent => format!(
-                        "{} iterations, {}",
-                        self.iters,
+                        "{}, {}",
+                        if self.iters == MAX_ITERS {
+                            "until the budget".to_string()
+                        } else {
+                            format!("{} iterations", self.iters)
+                        },
                         match self.optimizer {
                             OptimizerKind::Adam => "adam",
                             OptimizerKind::TrustBfgs => "trust_bfgs",
@@ -609,16 +631,25 @@ impl FitConfig {
             return bad("evals = 0: the fit's evaluation budget must be at least 1".into());
         }
         let runs = |k: StageKind| self.plan().contains(&k);
+        if !(1..=MAX_INIT_ROUNDS).contains(&self.init.rounds) {
+            return bad(format!(
+                "init.rounds = {}: must be in 1..={MAX_INIT_ROUNDS} (MAX_INIT_ROUNDS)",
+                self.init.rounds
+            ));
+        }
         if runs(StageKind::Init) && self.init.candidates == 0 {
             return bad("init.candidates must be at least 1".into());
         }
         check_candidates(self.init.candidates).map_err(|m| FitError::Input(format!("init.{m}")))?;
-        let evals = (self.init.candidates as u64).saturating_mul(self.init.frames as u64);
+        let evals = (self.init.candidates as u64)
+            .saturating_mul(self.init.frames as u64)
+            .saturating_mul(self.init.rounds as u64);
         if runs(StageKind::Init) && evals > MAX_INIT_FRAME_EVALS {
             return bad(format!(
-                "init.candidates x init.frames = {} x {} = {evals} simulated frames, more than \
-                 the {MAX_INIT_FRAME_EVALS} an initialisation may simulate (MAX_INIT_FRAME_EVALS)",
-                self.init.candidates, self.init.frames
+                "init.candidates x init.frames x init.rounds = {} x {} x {} = {evals} simulated \
+                 frames, more than the {MAX_INIT_FRAME_EVALS} an initialisation may simulate \
+                 (MAX_INIT_FRAME_EVALS)",
+                self.init.candidates, self.init.frames, self.init.rounds
             ));
         }
         check_iters(self.iters).map_err(FitError::Input)?;

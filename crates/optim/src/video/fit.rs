@@ -460,7 +460,10 @@ fn score_candidate(
 }
 
 /// Simulation-driven initialisation: Latin hypercube candidates in log10 space, each
-/// simulated for `init.frames` frames and scored by MS-SSIM against the reference.
+/// simulated for `init.frames` frames and scored by MS-SSIM against the reference. With
+/// `[init] rounds = R > 1`, each further round samples as many Latin hypercube candidates
+/// again inside the box of the best ones so far ([`narrowed`]); the outcome ranks every
+/// round's candidates together (indices continue across rounds).
 pub fn initialize(
     problem: &VideoProblem,
     cfg: &FitConfig,
@@ -468,12 +471,51 @@ pub fn initialize(
 ) -> Result<(ParamSpace, InitOutcome), FitError> {
     let (space, obj, search, init) = init_setup(problem, cfg)?;
     let evaluate = |_i: usize, theta: &[f64]| score_candidate(problem, &obj, &space, theta);
+    let mut outcome = init_round(&*init, &search, &evaluate, 0, hooks)?;
+    for round in 1..cfg.init.rounds.max(1) {
+        let inner = narrowed(&search, &outcome, cfg.init.candidates);
+        let next = LatinHypercubeInit {
+            candidates: cfg.init.candidates,
+            seed: cfg.init.seed.wrapping_add(round as u64),
+            top_k: cfg.init.top_k,
+            parallel: true,
+            max_concurrent: Some(obj.init_concurrency()),
+            include: Vec::new(),
+        };
+        let offset = outcome.candidates.len();
+        let more = init_round(&next, &inner, &evaluate, offset, hooks)?;
+        let mut all = std::mem::take(&mut outcome.candidates);
+        all.extend(more.candidates.into_iter().map(|mut c| {
+            c.index += offset;
+            c
+        }));
+        outcome = InitOutcome::from_candidates(all, cfg.init.top_k)
+            .map_err(|e| FitError::Input(format!("initialisation: {e}")))?;
+    }
+    hooks.on_event(&FitEvent::Init {
+        outcome: &outcome,
+        names: &search.names,
+    });
+    Ok((space, outcome))
+}
+
+/// One round of the initialisation: `init`'s candidates over `search`, evaluated by
+/// `evaluate`, each reported to `hooks` as it finishes with its index moved by `offset`.
+fn init_round(
+    init: &dyn Initializer,
+    search: &SearchSpace,
+    evaluate: &(dyn Fn(usize, &[f64]) -> Result<f64, String> + Sync),
+    offset: usize,
+    hooks: &mut dyn FitHooks,
+) -> Result<InitOutcome, FitError> {
     let (tx, rx) = std::sync::mpsc::channel::<Candidate>();
     let tx = std::sync::Mutex::new(tx);
-    let outcome = std::thread::scope(|s| {
+    std::thread::scope(|s| {
         let h = s.spawn(|| {
-            init.initialize_with(&search, &evaluate, &|c: &Candidate| {
-                let _ = tx.lock().map(|t| t.send(c.clone()));
+            init.initialize_with(search, evaluate, &|c: &Candidate| {
+                let mut c = c.clone();
+                c.index += offset;
+                let _ = tx.lock().map(|t| t.send(c));
             })
         });
         // Forward the candidates to the hooks on this thread as they finish.
@@ -488,12 +530,44 @@ pub fn initialize(
             hooks.on_event(&FitEvent::Candidate(&c));
         }
         h.join().expect("initialisation thread")
-    })?;
-    hooks.on_event(&FitEvent::Init {
-        outcome: &outcome,
-        names: &search.names,
-    });
-    Ok((space, outcome))
+    })
+    .map_err(FitError::from)
+}
+
+/// The box of a further initialisation round: per parameter (in log10 space) the range of
+/// the best `max(3, candidates / 8)` candidates so far, widened on each side by a quarter of
+/// that range or a twentieth of the whole bounds, whichever is larger, and kept inside the
+/// bounds.
+pub fn narrowed(search: &SearchSpace, outcome: &InitOutcome, candidates: usize) -> SearchSpace {
+    let elites: Vec<&Vec<f64>> = outcome
+        .ranking
+        .iter()
+        .take((candidates / 8).max(3))
+        .map(|&i| &outcome.candidates[i].theta)
+        .collect();
+    let bounds = search
+        .bounds
+        .iter()
+        .enumerate()
+        .map(|(d, &(lo, hi))| {
+            let (l0, h0) = (lo.log10(), hi.log10());
+            let (mut a, mut b) = (f64::INFINITY, f64::NEG_INFINITY);
+            for t in &elites {
+                let v = t[d].log10();
+                a = a.min(v);
+                b = b.max(v);
+            }
+            if !(a.is_finite() && b.is_finite()) {
+                return (lo, hi);
+            }
+            let m = (0.25 * (b - a)).max(0.05 * (h0 - l0));
+            (10f64.powf((a - m).max(l0)), 10f64.powf((b + m).min(h0)))
+        })
+        .collect();
+    SearchSpace {
+        names: search.names.clone(),
+        bounds,
+    }
 }
 
 /// One shard of the initialisation (for a cluster): the candidates whose index is
@@ -511,6 +585,14 @@ pub fn initialize_shard(
     if of == 0 || shard >= of {
         return Err(FitError::Input(format!(
             "shard {shard} of {of}: need 0 <= I < N"
+        )));
+    }
+    if cfg.init.rounds > 1 {
+        return Err(FitError::Input(format!(
+            "[init] rounds = {}: a further round samples around the best candidates of the \
+             earlier ones, so the initialisation cannot be split into shards; use rounds = 1 \
+             with --shard",
+            cfg.init.rounds
         )));
     }
     let (space, obj, search, init) = init_setup(problem, cfg)?;
@@ -1130,4 +1212,46 @@ fn shear_restarts(
     }
     state.restarts = Some(st);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A further round's box holds the best candidates, widened, and stays in the bounds.
+    #[test]
+    fn a_further_round_samples_around_the_best_candidates() {
+        let search = SearchSpace::new(
+            vec!["E".into(), "density".into()],
+            vec![(1e3, 1e7), (1e2, 1e4)],
+        )
+        .unwrap();
+        let cand = |index: usize, e: f64, rho: f64, score: f64| Candidate {
+            index,
+            theta: vec![e, rho],
+            score: Some(score),
+            error: None,
+        };
+        let outcome = InitOutcome::from_candidates(
+            vec![
+                cand(0, 1e5, 1e3, 0.9),
+                cand(1, 2e5, 2e3, 0.8),
+                cand(2, 1e6, 1.5e2, 0.7),
+                cand(3, 1e3, 1e4, 0.1),
+            ],
+            4,
+        )
+        .unwrap();
+        let b = narrowed(&search, &outcome, 16).bounds;
+        // The best three: E in [1e5, 1e6] (1 decade, margin 0.25), density in [150, 2000].
+        assert!((b[0].0 - 10f64.powf(4.75)).abs() / b[0].0 < 1e-9, "{b:?}");
+        assert!((b[0].1 - 10f64.powf(6.25)).abs() / b[0].1 < 1e-9, "{b:?}");
+        assert!(b[1].0 >= 1e2 && b[1].0 < 150.0 && b[1].1 > 2e3 && b[1].1 < 1e4, "{b:?}");
+        // A single elite point: the box is a twentieth of the bounds on each side.
+        let one = InitOutcome::from_candidates(vec![cand(0, 1e7, 1e2, 1.0)], 1).unwrap();
+        let b = narrowed(&search, &one, 8).bounds;
+        assert_eq!(b[0].1, 1e7);
+        assert!((b[0].0 - 10f64.powf(6.8)).abs() / b[0].0 < 1e-9, "{b:?}");
+        assert_eq!(b[1].0, 1e2);
+    }
 }

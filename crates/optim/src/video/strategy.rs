@@ -7,8 +7,9 @@
 //! `strategy = "fixed"` the config runs as written.
 //!
 //! What the automatic strategy decides, for `n` free parameters:
-//! * **initialisation**: `12 n` Latin hypercube candidates (32 to 96): the box of the
-//!   default bounds spans decades per parameter, and the best of few candidates often lies
+//! * **initialisation**: three rounds of `8 n` Latin hypercube candidates (24 to 64), the
+//!   second and third inside the box of the best so far (`[init] rounds`): the default
+//!   bounds span decades per parameter, and the best of one round of candidates often lies
 //!   in another basin;
 //! * **multi-start**: with two or more parameters, short fits (8 iterations) from the 4 best
 //!   candidates, the fit continuing from the lowest: candidates ranked by MS-SSIM over the
@@ -112,11 +113,15 @@ pub fn resolve(cfg: &FitConfig, parts: &[PartParams]) -> Result<Resolved, FitErr
     let budget = cfg.budget.is_some() || cfg.evals.is_some();
     let per_slot = cfg.granularity != crate::video::Granularity::Particle;
     c.init.enabled = true;
-    c.init.candidates = (12 * n).clamp(32, 96);
+    c.init.candidates = (8 * n).clamp(24, 64);
+    c.init.rounds = 3;
     say(
-        "init.candidates",
-        c.init.candidates.to_string(),
-        format!("{n} free parameter(s): 12 candidates each (32 to 96)"),
+        "init",
+        format!("3 rounds x {} candidates", c.init.candidates),
+        format!(
+            "{n} free parameter(s): 8 candidates each (24 to 64) per round; the second and \
+             third rounds sample the box of the best so far"
+        ),
     );
     if n >= 2 && per_slot {
         c.multi_start = 4;
@@ -233,7 +238,7 @@ mod tests {
             ..Default::default()
         };
         let r = resolve(&auto, &[part(Material::Jelly)]).unwrap();
-        assert_eq!(r.config.init.candidates, 36);
+        assert_eq!((r.config.init.candidates, r.config.init.rounds), (24, 3));
         assert_eq!((r.config.multi_start, r.config.multi_start_iters), (4, 8));
         assert_eq!(r.config.optimizer, OptimizerKind::TrustBfgs);
         assert_eq!(r.config.iters, 60);
@@ -245,7 +250,7 @@ mod tests {
         };
         let r = resolve(&budgeted, &[part(Material::Foam), part(Material::Jelly)]).unwrap();
         // Foam: E, nu, yield stress, plastic viscosity, density; jelly: E, nu, density.
-        assert_eq!(r.config.init.candidates, 96);
+        assert_eq!(r.config.init.candidates, 64);
         assert_eq!(r.config.iters, MAX_ITERS);
         let probe = r
             .decisions
