@@ -390,3 +390,156 @@ pub fn verdicts(profiles: &mut [Profile], pairs: &[Profile2d]) -> Vec<Verdict> {
     }
     out
 }
+
+/// Kinds measured in pascals (or pascal-seconds): scaling every one of them and the density
+/// by the same factor scales every stress and every inertial force alike.
+fn stress_like(k: ParamKind) -> bool {
+    matches!(
+        k,
+        ParamKind::YoungsModulus
+            | ParamKind::YieldStress
+            | ParamKind::PlasticViscosity
+            | ParamKind::Softening
+    )
+}
+
+/// The loss profile along the *stress-density scale*: every free stress-like parameter (`E`,
+/// yield stress, plastic viscosity, softening) and the density of every part whose density
+/// is free, scaled together by each factor of `offsets`. Under gravity alone (and
+/// prescribed velocities) the motion is exactly unchanged along it, so no pair profile sees
+/// the invariance when three or more of these parameters are free; a force given in
+/// newtons breaks it. Named `scale`; `None` when no part has its density and a stress-like
+/// parameter free.
+pub fn scale_profile(
+    problem: &VideoProblem,
+    cfg: &FitConfig,
+    truth: &[PartParams],
+    offsets: &[f64],
+) -> Result<Option<Profile>, FitError> {
+    let free = cfg.free_kinds(truth)?;
+    let members: Vec<(usize, ParamKind)> = free
+        .iter()
+        .enumerate()
+        .filter(|(_, kinds)| {
+            kinds.contains(&ParamKind::Density) && kinds.iter().any(|&k| stress_like(k))
+        })
+        .flat_map(|(part, kinds)| {
+            kinds
+                .iter()
+                .filter(|&&k| stress_like(k) || k == ParamKind::Density)
+                .map(move |&k| (part, k))
+        })
+        .collect();
+    if members.is_empty() {
+        return Ok(None);
+    }
+    let obj = Objective::new(problem, cfg.frames, &cfg.loss, false)?;
+    let factors = factors(offsets);
+    let sets = factors
+        .iter()
+        .map(|&f| {
+            let changes: Vec<(usize, ParamKind, f64)> =
+                members.iter().map(|&(p, k)| (p, k, f)).collect();
+            scaled(truth, &changes)
+        })
+        .collect();
+    let l = losses(&obj, sets)?;
+    let one = factors.iter().position(|&f| f == 1.0).expect("truth point");
+    let lo = if one > 0 { l[one - 1] - l[one] } else { 0.0 };
+    let hi = l.get(one + 1).map_or(0.0, |v| v - l[one]);
+    Ok(Some(Profile {
+        name: "scale".into(),
+        rise_10pct: rise_10pct(&factors, &l),
+        min_at_truth: l.iter().all(|&v| v >= l[one]) && lo > 0.0 && hi > 0.0,
+        factors,
+        losses: l,
+        relative_sensitivity: 0.0,
+        identifiable: false,
+    }))
+}
+
+/// Applies the stress-density scale profile to the verdicts of `profiles` (see
+/// [`verdicts`]): when a 10% move along the scale raises the loss by less than
+/// [`MIN_RELATIVE_SENSITIVITY`] of the largest conditional rise, the free stress-like
+/// parameters and densities are not determined one by one (only their ratios are), and
+/// their verdicts say so. Returns whether it downgraded any.
+pub fn apply_scale(verdicts: &mut [Verdict], profiles: &mut [Profile], scale: &Profile) -> bool {
+    let max_rise = profiles.iter().map(|p| p.rise_10pct).fold(0.0f64, f64::max);
+    let rel = if max_rise > 0.0 {
+        scale.rise_10pct / max_rise
+    } else {
+        0.0
+    };
+    if rel >= MIN_RELATIVE_SENSITIVITY {
+        return false;
+    }
+    let member = |name: &str| {
+        name.split_once('.').is_some_and(|(_, k)| {
+            ParamKind::parse(k).is_ok_and(|k| stress_like(k) || k == ParamKind::Density)
+        })
+    };
+    let mut any = false;
+    for v in verdicts
+        .iter_mut()
+        .filter(|v| member(&v.name) && v.identifiable)
+    {
+        v.identifiable = false;
+        v.reason = format!(
+            "scaling every stress-like parameter and the density together by 10% raises the loss by only {:.2}% of the most sensitive parameter's rise: only their ratios are determined",
+            100.0 * rel
+        );
+        any = true;
+    }
+    for p in profiles.iter_mut().filter(|p| member(&p.name)) {
+        p.identifiable = false;
+    }
+    any
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn profile(name: &str, rise: f64) -> Profile {
+        Profile {
+            name: name.into(),
+            factors: vec![0.9, 1.0, 1.1],
+            losses: vec![1.0 + rise, 1.0, 1.0 + rise],
+            rise_10pct: rise,
+            min_at_truth: true,
+            relative_sensitivity: 0.0,
+            identifiable: false,
+        }
+    }
+
+    /// A flat stress-density scale takes the stress-like parameters and the density out of
+    /// the determined ones and leaves the dimensionless ones; a steep one changes nothing.
+    #[test]
+    fn a_flat_stress_density_scale_leaves_only_ratios_determined() {
+        let mut ps = vec![
+            profile("part0.E", 1.0),
+            profile("part0.nu", 0.5),
+            profile("part0.yield_stress", 0.8),
+            profile("part0.density", 0.9),
+        ];
+        let mut v = verdicts(&mut ps, &[]);
+        assert!(v.iter().all(|v| v.identifiable), "{v:?}");
+        assert!(!apply_scale(&mut v, &mut ps, &profile("scale", 0.2)));
+        assert!(apply_scale(&mut v, &mut ps, &profile("scale", 0.01)));
+        let ok: Vec<(&str, bool)> = v
+            .iter()
+            .map(|v| (v.name.as_str(), v.identifiable))
+            .collect();
+        assert_eq!(
+            &ok[..4],
+            &[
+                ("part0.E", false),
+                ("part0.nu", true),
+                ("part0.yield_stress", false),
+                ("part0.density", false)
+            ]
+        );
+        assert!(v[0].reason.contains("ratios"), "{}", v[0].reason);
+        assert!(!ps[0].identifiable && ps[1].identifiable);
+    }
+}

@@ -4,7 +4,8 @@
 //!
 //! For one scene ([`run_scene`]): the reference videos are rendered from the truth; the loss
 //! profiles around the truth (1-D at +-5% and +-15%, 2-D at +-10% for every pair of free
-//! parameters of a part, [`crate::profiles`]) give the verdicts; the fit runs with
+//! parameters of a part, and along the stress-density scale at +-10%, [`crate::profiles`])
+//! give the verdicts; the fit runs with
 //! [`FitConfig::default`] (or the settings given, [`BenchSettings::fit`]; the default free
 //! parameters and bounds of the material) and the budget; a determined parameter is *recovered* when it ends within [`TOLERANCE`] of the
 //! truth (the friction angle: [`FRICTION_TOLERANCE_DEG`] degrees). A scene whose fit fails
@@ -175,15 +176,25 @@ pub fn run_scene(
     let t1 = Instant::now();
     let profiled =
         profiles::profiles(&problem, &cfg, &truth, &spec.profile_offsets).and_then(|p1| {
-            profiles::profiles_2d(&problem, &cfg, &truth, &spec.pairs, &spec.profile2d_offsets)
-                .map(|p2| (p1, p2))
+            let p2 = profiles::profiles_2d(
+                &problem,
+                &cfg,
+                &truth,
+                &spec.pairs,
+                &spec.profile2d_offsets,
+            )?;
+            let scale = profiles::scale_profile(&problem, &cfg, &truth, &spec.profile2d_offsets)?;
+            Ok((p1, p2, scale))
         });
-    let (mut p1, p2) = match profiled {
+    let (mut p1, p2, scale) = match profiled {
         Ok(p) => p,
         Err(e) if e.is_divergence() => return fail(result, format!("the profiles: {e}")),
         Err(e) => return Err(e),
     };
-    let verdicts = profiles::verdicts(&mut p1, &p2);
+    let mut verdicts = profiles::verdicts(&mut p1, &p2);
+    if let Some(s) = &scale {
+        profiles::apply_scale(&mut verdicts, &mut p1, s);
+    }
     result.profile_time_s = t1.elapsed().as_secs_f64();
     result.loss_truth = p1.first().and_then(|p| {
         p.factors

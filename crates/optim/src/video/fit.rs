@@ -1246,7 +1246,10 @@ mod tests {
         // The best three: E in [1e5, 1e6] (1 decade, margin 0.25), density in [150, 2000].
         assert!((b[0].0 - 10f64.powf(4.75)).abs() / b[0].0 < 1e-9, "{b:?}");
         assert!((b[0].1 - 10f64.powf(6.25)).abs() / b[0].1 < 1e-9, "{b:?}");
-        assert!(b[1].0 >= 1e2 && b[1].0 < 150.0 && b[1].1 > 2e3 && b[1].1 < 1e4, "{b:?}");
+        assert!(
+            b[1].0 >= 1e2 && b[1].0 < 150.0 && b[1].1 > 2e3 && b[1].1 < 1e4,
+            "{b:?}"
+        );
         // A single elite point: the box is a twentieth of the bounds on each side.
         let one = InitOutcome::from_candidates(vec![cand(0, 1e7, 1e2, 1.0)], 1).unwrap();
         let b = narrowed(&search, &one, 8).bounds;
