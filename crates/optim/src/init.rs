@@ -458,6 +458,92 @@ impl LogGridInit {
     }
 }
 
+/// A Latin hypercube over each parameter's natural scale: log-uniform over the parameters
+/// that span decades (moduli, stresses, viscosities, densities), uniform over those given
+/// `linear` (Poisson's ratio and the friction angle, whose physics is not scale-free: with
+/// bounds `[0.01, 0.49]` a log-uniform Poisson's ratio puts half the candidates below 0.07,
+/// where it barely matters). The same strata and seed as [`LatinHypercubeInit`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct NaturalScaleInit {
+    /// The Latin hypercube's settings (`include` and all).
+    pub lhs: LatinHypercubeInit,
+    /// Per parameter of the space: sampled uniformly (`true`) or log-uniformly.
+    pub linear: Vec<bool>,
+}
+
+impl Default for NaturalScaleInit {
+    fn default() -> Self {
+        NaturalScaleInit {
+            lhs: LatinHypercubeInit::default(),
+            linear: Vec::new(),
+        }
+    }
+}
+
+impl NaturalScaleInit {
+    /// Whether `kind` is sampled uniformly (Poisson's ratio, the friction angle).
+    pub fn is_linear(kind: crate::ParamKind) -> bool {
+        matches!(
+            kind,
+            crate::ParamKind::PoissonRatio | crate::ParamKind::FrictionAngle
+        )
+    }
+
+    /// The candidate parameter vectors, in sample order (see [`LatinHypercubeInit::sample`]).
+    pub fn sample(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
+        space.validate()?;
+        check_include(space, &self.lhs.include)?;
+        if self.linear.len() != space.dims() {
+            return Err(Error::Setting(format!(
+                "{} linear flags for {} parameters",
+                self.linear.len(),
+                space.dims()
+            )));
+        }
+        let mut points: Vec<Vec<f64>> =
+            latin_hypercube(self.lhs.candidates, space.dims(), self.lhs.seed)
+                .into_iter()
+                .map(|u| {
+                    u.iter()
+                        .zip(&space.bounds)
+                        .zip(&self.linear)
+                        .map(|((&u, &(lo, hi)), &lin)| {
+                            if lin {
+                                (lo + u.clamp(0.0, 1.0) * (hi - lo)).clamp(lo, hi)
+                            } else {
+                                log_space(u, lo, hi)
+                            }
+                        })
+                        .collect()
+                })
+                .collect();
+        points.extend(self.lhs.include.iter().cloned());
+        if points.is_empty() {
+            return Err(Error::NoCandidates);
+        }
+        Ok(points)
+    }
+}
+
+impl Initializer for NaturalScaleInit {
+    fn candidates(&self, space: &SearchSpace) -> Result<Vec<Vec<f64>>, Error> {
+        self.sample(space)
+    }
+
+    fn top_k(&self) -> usize {
+        self.lhs.top_k
+    }
+
+    fn parallel(&self) -> bool {
+        self.lhs.parallel
+    }
+
+    fn max_concurrent(&self) -> usize {
+        self.lhs.max_concurrent.unwrap_or(usize::MAX)
+    }
+}
+
 /// [`Initializer`] for a sampler with `sample`, `top_k`, `parallel` and `max_concurrent`.
 macro_rules! sampler_initializer {
     ($t:ty) => {
@@ -625,6 +711,40 @@ mod tests {
         assert_eq!(k.dims(), ParamKind::ALL.len());
         assert_eq!(k.names[1], "nu");
         assert_eq!(k.bounds[1], (0.01, 0.49));
+    }
+
+    /// The natural-scale sampler uses the Latin hypercube's strata: uniform over a linear
+    /// parameter (half the candidates above the midpoint), log-uniform over the others, all
+    /// inside the bounds; a flag count that does not match the space is refused.
+    #[test]
+    fn natural_scale_samples_poisson_ratio_uniformly() {
+        let space = SearchSpace::new(
+            vec!["E".into(), "nu".into()],
+            vec![(1e3, 1e7), (0.01, 0.49)],
+        )
+        .unwrap();
+        let init = NaturalScaleInit {
+            lhs: LatinHypercubeInit {
+                candidates: 40,
+                seed: 3,
+                ..Default::default()
+            },
+            linear: vec![false, true],
+        };
+        let pts = init.sample(&space).unwrap();
+        assert_eq!(pts.len(), 40);
+        assert!(pts
+            .iter()
+            .all(|p| p[0] >= 1e3 && p[0] <= 1e7 && p[1] >= 0.01 && p[1] <= 0.49));
+        assert_eq!(pts.iter().filter(|p| p[1] > 0.25).count(), 20);
+        assert_eq!(pts.iter().filter(|p| p[0] > 1e5).count(), 20);
+        let log = init.lhs.sample(&space).unwrap();
+        assert_eq!(log.iter().filter(|p| p[1] > 0.07).count(), 20);
+        let bad = NaturalScaleInit {
+            linear: vec![true],
+            ..init
+        };
+        assert!(bad.sample(&space).is_err());
     }
 
     #[test]

@@ -71,7 +71,7 @@ pub use evaluator::{Evaluator, FnEvaluator, Graded};
 pub use heap::{HeapProbe, HeapSpan};
 pub use init::{
     evaluate_candidate, Candidate, Evaluate, InitOutcome, Initializer, LatinHypercubeInit,
-    LogGridInit, SearchSpace,
+    LogGridInit, NaturalScaleInit, SearchSpace,
 };
 pub use lhs::{latin_hypercube, log_space, SplitMix64};
 pub use restarts::{Restart, RestartsConfig, ShearRestarts};

@@ -46,7 +46,8 @@
 //! [init]                  # simulation-driven initialisation
 //! enabled = true
 //! candidates = 32         # Latin hypercube samples in log10 space
-//! sampler = "latin_hypercube" # or "grid": a log10 grid of at most `candidates` points
+//! sampler = "latin_hypercube" # or "grid": a log10 grid of at most `candidates` points;
+//!                              # or "natural": nu and the friction angle sampled uniformly
 //! frames = 16             # frames simulated per candidate
 //! seed = 0
 //! top_k = 4
@@ -123,6 +124,9 @@ pub enum InitSampler {
     LatinHypercube,
     /// The centres of a regular log10 grid ([`crate::LogGridInit`]).
     Grid,
+    /// A seeded Latin hypercube, log-uniform over the parameters that span decades and
+    /// uniform over Poisson's ratio and the friction angle ([`crate::NaturalScaleInit`]).
+    Natural,
 }
 
 impl InitSampler {

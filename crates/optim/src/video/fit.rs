@@ -15,8 +15,8 @@ use crate::valley::ValleyRound;
 use crate::FitError;
 use crate::{
     evaluate_candidate, Candidate, GradientSampling, InitOutcome, Initializer, LatinHypercubeInit,
-    LogDomainOptimizer, LogGridInit, ParamKind, SearchSpace, TrustRegion, TrustRegionBfgs,
-    ValleySearch,
+    LogDomainOptimizer, LogGridInit, NaturalScaleInit, ParamKind, SearchSpace, TrustRegion,
+    TrustRegionBfgs, ValleySearch,
 };
 use r4d_loss::bands::ReferenceVideo;
 use r4d_loss::{ssim::ms_ssim, Video, VideoLoss};
@@ -436,6 +436,17 @@ fn init_setup<'a>(
             max_concurrent: Some(obj.init_concurrency()),
             include,
         }),
+        InitSampler::Natural => Box::new(NaturalScaleInit {
+            lhs: LatinHypercubeInit {
+                candidates: cfg.init.candidates,
+                seed: cfg.init.seed,
+                top_k: cfg.init.top_k,
+                parallel: true,
+                max_concurrent: Some(obj.init_concurrency()),
+                include,
+            },
+            linear: natural_scale(&space),
+        }),
         InitSampler::Grid => Box::new(LogGridInit {
             candidates: cfg.init.candidates,
             top_k: cfg.init.top_k,
@@ -472,15 +483,23 @@ pub fn initialize(
     let (space, obj, search, init) = init_setup(problem, cfg)?;
     let evaluate = |_i: usize, theta: &[f64]| score_candidate(problem, &obj, &space, theta);
     let mut outcome = init_round(&*init, &search, &evaluate, 0, hooks)?;
+    // Further rounds sample on the natural scale with the natural sampler, else in log10.
+    let linear = match cfg.init.sampler {
+        InitSampler::Natural => natural_scale(&space),
+        _ => vec![false; search.dims()],
+    };
     for round in 1..cfg.init.rounds.max(1) {
-        let inner = narrowed(&search, &outcome, cfg.init.candidates);
-        let next = LatinHypercubeInit {
-            candidates: cfg.init.candidates,
-            seed: cfg.init.seed.wrapping_add(round as u64),
-            top_k: cfg.init.top_k,
-            parallel: true,
-            max_concurrent: Some(obj.init_concurrency()),
-            include: Vec::new(),
+        let inner = narrowed(&search, &outcome, cfg.init.candidates, &linear);
+        let next = NaturalScaleInit {
+            lhs: LatinHypercubeInit {
+                candidates: cfg.init.candidates,
+                seed: cfg.init.seed.wrapping_add(round as u64),
+                top_k: cfg.init.top_k,
+                parallel: true,
+                max_concurrent: Some(obj.init_concurrency()),
+                include: Vec::new(),
+            },
+            linear: linear.clone(),
         };
         let offset = outcome.candidates.len();
         let more = init_round(&next, &inner, &evaluate, offset, hooks)?;
@@ -534,11 +553,25 @@ fn init_round(
     .map_err(FitError::from)
 }
 
-/// The box of a further initialisation round: per parameter (in log10 space) the range of
-/// the best `max(3, candidates / 8)` candidates so far, widened on each side by a quarter of
-/// that range or a twentieth of the whole bounds, whichever is larger, and kept inside the
-/// bounds.
-pub fn narrowed(search: &SearchSpace, outcome: &InitOutcome, candidates: usize) -> SearchSpace {
+/// Per parameter of `space`: sampled on a linear scale ([`NaturalScaleInit::is_linear`]).
+fn natural_scale(space: &ParamSpace) -> Vec<bool> {
+    space
+        .entries
+        .iter()
+        .map(|e| NaturalScaleInit::is_linear(e.kind))
+        .collect()
+}
+
+/// The box of a further initialisation round: per parameter (in log10 space, or linear where
+/// `linear` says) the range of the best `max(3, candidates / 8)` candidates so far, widened
+/// on each side by a quarter of that range or a twentieth of the whole bounds, whichever is
+/// larger, and kept inside the bounds.
+pub fn narrowed(
+    search: &SearchSpace,
+    outcome: &InitOutcome,
+    candidates: usize,
+    linear: &[bool],
+) -> SearchSpace {
     let elites: Vec<&Vec<f64>> = outcome
         .ranking
         .iter()
@@ -550,10 +583,16 @@ pub fn narrowed(search: &SearchSpace, outcome: &InitOutcome, candidates: usize) 
         .iter()
         .enumerate()
         .map(|(d, &(lo, hi))| {
-            let (l0, h0) = (lo.log10(), hi.log10());
+            let lin = linear.get(d).copied().unwrap_or(false);
+            let (to, from): (fn(f64) -> f64, fn(f64) -> f64) = if lin {
+                (|v| v, |v| v)
+            } else {
+                (f64::log10, |v| 10f64.powf(v))
+            };
+            let (l0, h0) = (to(lo), to(hi));
             let (mut a, mut b) = (f64::INFINITY, f64::NEG_INFINITY);
             for t in &elites {
-                let v = t[d].log10();
+                let v = to(t[d]);
                 a = a.min(v);
                 b = b.max(v);
             }
@@ -561,7 +600,10 @@ pub fn narrowed(search: &SearchSpace, outcome: &InitOutcome, candidates: usize) 
                 return (lo, hi);
             }
             let m = (0.25 * (b - a)).max(0.05 * (h0 - l0));
-            (10f64.powf((a - m).max(l0)), 10f64.powf((b + m).min(h0)))
+            (
+                from((a - m).max(l0)).clamp(lo, hi),
+                from((b + m).min(h0)).clamp(lo, hi),
+            )
         })
         .collect();
     SearchSpace {
@@ -1242,7 +1284,7 @@ mod tests {
             4,
         )
         .unwrap();
-        let b = narrowed(&search, &outcome, 16).bounds;
+        let b = narrowed(&search, &outcome, 16, &[false, false]).bounds;
         // The best three: E in [1e5, 1e6] (1 decade, margin 0.25), density in [150, 2000].
         assert!((b[0].0 - 10f64.powf(4.75)).abs() / b[0].0 < 1e-9, "{b:?}");
         assert!((b[0].1 - 10f64.powf(6.25)).abs() / b[0].1 < 1e-9, "{b:?}");
@@ -1252,7 +1294,7 @@ mod tests {
         );
         // A single elite point: the box is a twentieth of the bounds on each side.
         let one = InitOutcome::from_candidates(vec![cand(0, 1e7, 1e2, 1.0)], 1).unwrap();
-        let b = narrowed(&search, &one, 8).bounds;
+        let b = narrowed(&search, &one, 8, &[false, false]).bounds;
         assert_eq!(b[0].1, 1e7);
         assert!((b[0].0 - 10f64.powf(6.8)).abs() / b[0].0 < 1e-9, "{b:?}");
         assert_eq!(b[1].0, 1e2);

@@ -8,9 +8,10 @@
 //!
 //! What the automatic strategy decides, for `n` free parameters:
 //! * **initialisation**: three rounds of `8 n` Latin hypercube candidates (24 to 64), the
-//!   second and third inside the box of the best so far (`[init] rounds`): the default
-//!   bounds span decades per parameter, and the best of one round of candidates often lies
-//!   in another basin;
+//!   second and third inside the box of the best so far (`[init] rounds`), Poisson's ratio
+//!   and the friction angle sampled uniformly (`sampler = "natural"`): the default bounds
+//!   span decades per parameter, the best of one round of candidates often lies in another
+//!   basin, and a log-uniform Poisson's ratio puts half the candidates below 0.07;
 //! * **multi-start**: with two or more parameters, short fits (8 iterations) from the 4 best
 //!   candidates, the fit continuing from the lowest: candidates ranked by MS-SSIM over the
 //!   first frames are not ranked by the loss they reach;
@@ -115,12 +116,14 @@ pub fn resolve(cfg: &FitConfig, parts: &[PartParams]) -> Result<Resolved, FitErr
     c.init.enabled = true;
     c.init.candidates = (8 * n).clamp(24, 64);
     c.init.rounds = 3;
+    c.init.sampler = super::config::InitSampler::Natural;
     say(
         "init",
         format!("3 rounds x {} candidates", c.init.candidates),
         format!(
             "{n} free parameter(s): 8 candidates each (24 to 64) per round; the second and \
-             third rounds sample the box of the best so far"
+             third rounds sample the box of the best so far; nu and the friction angle \
+             uniformly, the rest log-uniformly"
         ),
     );
     if n >= 2 && per_slot {
