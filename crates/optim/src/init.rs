@@ -463,22 +463,13 @@ impl LogGridInit {
 /// `linear` (Poisson's ratio and the friction angle, whose physics is not scale-free: with
 /// bounds `[0.01, 0.49]` a log-uniform Poisson's ratio puts half the candidates below 0.07,
 /// where it barely matters). The same strata and seed as [`LatinHypercubeInit`].
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct NaturalScaleInit {
     /// The Latin hypercube's settings (`include` and all).
     pub lhs: LatinHypercubeInit,
     /// Per parameter of the space: sampled uniformly (`true`) or log-uniformly.
     pub linear: Vec<bool>,
-}
-
-impl Default for NaturalScaleInit {
-    fn default() -> Self {
-        NaturalScaleInit {
-            lhs: LatinHypercubeInit::default(),
-            linear: Vec::new(),
-        }
-    }
 }
 
 impl NaturalScaleInit {

@@ -523,7 +523,7 @@ pub fn initialize(
 fn init_round(
     init: &dyn Initializer,
     search: &SearchSpace,
-    evaluate: &(dyn Fn(usize, &[f64]) -> Result<f64, String> + Sync),
+    evaluate: &crate::Evaluate<'_>,
     offset: usize,
     hooks: &mut dyn FitHooks,
 ) -> Result<InitOutcome, FitError> {
@@ -584,7 +584,8 @@ pub fn narrowed(
         .enumerate()
         .map(|(d, &(lo, hi))| {
             let lin = linear.get(d).copied().unwrap_or(false);
-            let (to, from): (fn(f64) -> f64, fn(f64) -> f64) = if lin {
+            type Map = fn(f64) -> f64;
+            let (to, from): (Map, Map) = if lin {
                 (|v| v, |v| v)
             } else {
                 (f64::log10, |v| 10f64.powf(v))
