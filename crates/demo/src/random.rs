@@ -1,4 +1,4 @@
-//! Random scenes for the recovery benchmark ([`crate::recovery`], `r4d bench-recovery`): for
+//! Random scenes for the recovery benchmark ([`mod@crate::recovery`], `r4d bench-recovery`): for
 //! a material class and a seed, a scene drawn at random — the shape and size of the body, the
 //! load, one or two cameras and the true parameters — that a fit then sees only through its
 //! rendered videos.
