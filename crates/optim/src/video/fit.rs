@@ -427,24 +427,18 @@ fn init_setup<'a>(
     } else {
         Vec::new()
     };
+    let lhs = |seed: u64, include: Vec<Vec<f64>>| LatinHypercubeInit {
+        candidates: cfg.init.candidates,
+        seed,
+        top_k: cfg.init.top_k,
+        parallel: true,
+        max_concurrent: Some(obj.init_concurrency()),
+        include,
+    };
     let init: Box<dyn Initializer + Send> = match cfg.init.sampler {
-        InitSampler::LatinHypercube => Box::new(LatinHypercubeInit {
-            candidates: cfg.init.candidates,
-            seed: cfg.init.seed,
-            top_k: cfg.init.top_k,
-            parallel: true,
-            max_concurrent: Some(obj.init_concurrency()),
-            include,
-        }),
+        InitSampler::LatinHypercube => Box::new(lhs(cfg.init.seed, include)),
         InitSampler::Natural => Box::new(NaturalScaleInit {
-            lhs: LatinHypercubeInit {
-                candidates: cfg.init.candidates,
-                seed: cfg.init.seed,
-                top_k: cfg.init.top_k,
-                parallel: true,
-                max_concurrent: Some(obj.init_concurrency()),
-                include,
-            },
+            lhs: lhs(cfg.init.seed, include),
             linear: natural_scale(&space),
         }),
         InitSampler::Grid => Box::new(LogGridInit {
