@@ -776,8 +776,8 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
     Ok(())
 }
 
-/// Checks an initialisation candidate of a shard: its MS-SSIM score in [0, 1] (or none: a
-/// failed evaluation), one value per name, each finite and within `bounds` (the shard's
+/// Checks an initialisation candidate of a shard: its score (MS-SSIM in [0, 1], or with
+/// `[init] score = "loss"` a negated loss, at most 0; none: a failed evaluation), one value per name, each finite and within `bounds` (the shard's
 /// search space), else within the bounds the fit settings give the parameter it names
 /// (`part{P}.{kind}` or `object.{kind}`) by default.
 fn check_candidate(
@@ -787,8 +787,14 @@ fn check_candidate(
     cfg: &FitConfig,
 ) -> Result<()> {
     if let Some(s) = c.score {
-        if !(0.0..=1.0).contains(&s) {
-            bail!("score (MS-SSIM) {s} is outside [0, 1]");
+        match cfg.init.score {
+            r4d_optim::video::InitScore::MsSsim if !(0.0..=1.0).contains(&s) => {
+                bail!("score (MS-SSIM) {s} is outside [0, 1]")
+            }
+            r4d_optim::video::InitScore::Loss if !(s.is_finite() && s <= 0.0) => {
+                bail!("score (negated loss) {s} is not a finite number <= 0")
+            }
+            _ => {}
         }
     }
     if c.theta.len() != names.len() {

@@ -109,6 +109,10 @@ impl RunHooks {
     fn candidate(&mut self, c: &Candidate) {
         self.init_bar.inc(1);
         match (c.score, &c.error) {
+            // A negated loss (`[init] score = "loss"`) is printed as the loss.
+            (Some(s), _) if s < 0.0 => self
+                .init_bar
+                .set_message(format!("#{} loss {:.4}", c.index, -s)),
             (Some(s), _) => self
                 .init_bar
                 .set_message(format!("#{} MS-SSIM {s:.4}", c.index)),

@@ -482,6 +482,51 @@ fn fit_from_latin_hypercube_start_recovers_e_over_density() {
     assert!(err < 0.1, "E/density off by {:.1}%", 100.0 * err);
 }
 
+/// The initialisation ranked by the fit's own loss (`[init] score = "loss"`) over three
+/// rounds: every candidate's score is minus the loss at its parameters over the
+/// initialisation's frames (none where the simulation fails), the later rounds' candidates
+/// lie inside the bounds, and the best
+/// candidate is the one with the lowest loss of all rounds.
+#[test]
+fn the_loss_ranked_initialisation_scores_every_round_by_the_loss() {
+    use resonance4d::video_fit::fit::initialize;
+    use resonance4d::video_fit::{InitSampler, InitScore};
+    let truth = [jelly(2e4, 800.0)];
+    let mut p = small_problem(&truth, 4);
+    p.config.parts = vec![jelly(1e5, 1000.0)];
+    let mut cfg = fit_config(0);
+    cfg.init.enabled = true;
+    cfg.init.candidates = 6;
+    cfg.init.frames = 3;
+    cfg.init.rounds = 3;
+    cfg.init.score = InitScore::Loss;
+    cfg.init.sampler = InitSampler::Natural;
+    let (space, out) = initialize(&p, &cfg, &mut NoHooks).unwrap();
+    assert_eq!(out.candidates.len(), 18);
+    let obj = Objective::new(&p, Some(3), &cfg.loss, false).unwrap();
+    let bounds = space.bounds();
+    let mut lowest = f64::INFINITY;
+    for c in &out.candidates {
+        for (v, (lo, hi)) in c.theta.iter().zip(&bounds) {
+            assert!(v >= lo && v <= hi, "{:?} outside {bounds:?}", c.theta);
+        }
+        let mut parts = p.config.parts.clone();
+        space.apply(&mut parts, &c.theta);
+        match (obj.value(&parts), c.score) {
+            (Ok(e), score) => {
+                assert_eq!(score, Some(-e.total), "candidate {}", c.index);
+                lowest = lowest.min(e.total);
+            }
+            // A candidate whose simulation fails (too stiff for the substep) has no score.
+            (Err(_), score) => assert_eq!(score, None, "candidate {}", c.index),
+        }
+    }
+    assert!(lowest.is_finite());
+    let best = &out.candidates[out.ranking[0]];
+    assert_eq!(best.score, Some(-lowest));
+    assert_eq!(best.theta, out.best);
+}
+
 /// Per-particle parameter slots (the paper's ablation): the per-particle gradients of a part
 /// sum to the part's gradient.
 #[test]

@@ -1,16 +1,15 @@
-//! The built-in demos (`r4d demo --scene plant|metal|sand|foam|plasticine|paste|fluid`): procedurally
-//! generated scenes with known parameters, rendered to reference videos and fitted back from
-//! the videos alone.
+//! The built-in demos (`r4d demo --scene plant|metal|sand|foam|plasticine|paste|fluid`): scenes
+//! with known parameters, rendered to reference videos and fitted back from the videos alone.
+//! Each scene is data, `configs/demo/<scene>.toml` (compiled in; [`scene_file`] builds it):
 //!
-//! * `plant` (default): a stiff stem and a soft heavy head (two jelly parts) pushed sideways
-//!   ([`plant`]).
+//! * `plant` (default): a stiff stem and a soft heavy head (two jelly parts) pushed sideways.
 //! * `metal`: a cantilever beam bent past yield by a push at its tip and released; it keeps a
-//!   permanent bend ([`metal`]).
-//! * `sand`: a sand column slumping into a pile on a rough floor ([`sand`]).
-//! * `foam`: a foam block squeezed by a push on its top and released ([`foam`]).
-//! * `plasticine`: a plasticine blob thrown onto the floor ([`plasticine`]).
-//! * `paste`: a column of paste slumping under its own weight ([`paste`]).
-//! * `fluid`: a viscous drop landing and spreading ([`fluid`]).
+//!   permanent bend.
+//! * `sand`: a sand column slumping into a pile on a rough floor.
+//! * `foam`: a foam block squeezed by a push on its top and released.
+//! * `plasticine`: a plasticine blob thrown onto the floor.
+//! * `paste`: a column of paste slumping under its own weight.
+//! * `fluid`: a viscous drop landing and spreading.
 //!
 //! Every scene is a [`SceneSpec`]: the simulation with its true parameters, the cameras, the
 //! free parameters and their bounds, and the parameter pairs whose 2-D loss profile is
@@ -19,22 +18,16 @@
 //! a Latin hypercube over every free parameter, fits with AdamW on the DMS loss, and returns a
 //! [`DemoSummary`]. [`Size::Small`] gives a few-second version of each scene for tests.
 
-pub mod fluid;
-pub mod foam;
-pub mod metal;
-pub mod paste;
-pub mod plant;
-pub mod plasticine;
 pub mod profiles;
 pub mod random;
 pub mod recovery;
-pub mod sand;
+pub mod scene_file;
 pub mod stage;
 
 use profiles::{Profile, Profile2d, Verdict};
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
 use r4d_optim::record::Terms;
-use r4d_optim::space::{get, set};
+use r4d_optim::space::get;
 use r4d_optim::video::fit::{run_fit, FitHooks, FitOutcome};
 use r4d_optim::video::{FitConfig, Objective, VideoProblem, View};
 use r4d_optim::ParamKind;
@@ -103,17 +96,17 @@ impl DemoScene {
             })
     }
 
-    /// The scene at `size`.
+    /// The scene at `size`, built from its file (`configs/demo/<name>.toml`, compiled in;
+    /// the tests build every scene at both sizes, so a built-in file that does not build is
+    /// a bug).
     pub fn spec(self, size: Size) -> SceneSpec {
-        match self {
-            DemoScene::Plant => plant::spec(size),
-            DemoScene::Metal => metal::spec(size),
-            DemoScene::Sand => sand::spec(size),
-            DemoScene::Foam => foam::spec(size),
-            DemoScene::Plasticine => plasticine::spec(size),
-            DemoScene::Paste => paste::spec(size),
-            DemoScene::Fluid => fluid::spec(size),
-        }
+        scene_file::build(self, scene_file::text(self), &self.file(), size)
+            .unwrap_or_else(|e| panic!("the built-in scene file {}: {e}", self.file()))
+    }
+
+    /// The path of the scene's file in the repository (`configs/demo/<name>.toml`).
+    pub fn file(self) -> String {
+        format!("configs/demo/{}.toml", self.name())
     }
 }
 
@@ -515,29 +508,6 @@ pub fn run_demo(
         outcome,
         summary,
     })
-}
-
-/// Sets `k` of `p` to `v` (re-exported for the scene files).
-fn with(mut p: PartParams, k: ParamKind, v: f64) -> PartParams {
-    set(&mut p, k, v);
-    p
-}
-
-/// Bounds `[truth / f, truth * f]` of every kind in `kinds` (friction angle: `truth -+ f`
-/// degrees; Poisson's ratio: `[0.1, 0.45]`).
-fn bounds_around(t: &PartParams, kinds: &[(ParamKind, f64)]) -> BTreeMap<String, [f64; 2]> {
-    kinds
-        .iter()
-        .map(|&(k, f)| {
-            let v = get(t, k);
-            let b = match k {
-                ParamKind::FrictionAngle => [v - f, v + f],
-                ParamKind::PoissonRatio => [0.1, 0.45],
-                _ => [v / f, v * f],
-            };
-            (k.name().to_string(), b)
-        })
-        .collect()
 }
 
 /// One restart along constant bulk modulus in `summary.json`: the power `k` of the shear

@@ -109,6 +109,31 @@ pub struct InitConfig {
     /// fingerprint while 1.
     #[serde(skip_serializing_if = "is_one")]
     pub rounds: usize,
+    /// How candidates are ranked: `ms_ssim` (default, the paper's: MS-SSIM against the
+    /// reference, higher is better) or `loss` (the fit's own loss over the same frames; the
+    /// candidate's score is the negated loss, so higher is still better). Not part of the
+    /// checkpoint's fingerprint while the default.
+    #[serde(skip_serializing_if = "InitScore::is_default")]
+    pub score: InitScore,
+}
+
+/// How the initialisation ranks its candidates (`[init] score`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InitScore {
+    /// MS-SSIM of the candidate's video against the reference (the paper's choice).
+    #[default]
+    MsSsim,
+    /// The fit's loss (negated, so that a higher score is better): candidates are ranked by
+    /// what the iterations then minimise.
+    Loss,
+}
+
+impl InitScore {
+    /// Whether it is the default (MS-SSIM).
+    pub fn is_default(&self) -> bool {
+        *self == InitScore::MsSsim
+    }
 }
 
 fn is_one(n: &usize) -> bool {
@@ -147,6 +172,7 @@ impl Default for InitConfig {
             include_start: false,
             sampler: InitSampler::LatinHypercube,
             rounds: 1,
+            score: InitScore::MsSsim,
         }
     }
 }

@@ -2,7 +2,7 @@
 //! and gradient clipping; a record per iteration and a resumable checkpoint.
 
 use super::budget::Budget;
-use super::config::{FitConfig, InitSampler, OptimizerKind, StageKind};
+use super::config::{FitConfig, InitSampler, InitScore, OptimizerKind, StageKind};
 use super::problem::{Evaluation, Objective, VideoProblem};
 use crate::descent::{self, keep_best, Rate, Stepper};
 use crate::evaluator::{Evaluator, Graded};
@@ -452,16 +452,22 @@ fn init_setup<'a>(
     Ok((space, obj, search, init))
 }
 
-/// MS-SSIM of the candidate `theta` (the initialisation's score).
+/// The initialisation's score of the candidate `theta` (`[init] score`): its MS-SSIM, or
+/// its negated loss.
 fn score_candidate(
     problem: &VideoProblem,
     obj: &Objective,
     space: &ParamSpace,
     theta: &[f64],
+    score: InitScore,
 ) -> Result<f64, String> {
     let mut slots = problem.config.parts.clone();
     space.apply(&mut slots, theta);
-    obj.ms_ssim(&slots).map_err(|e| e.to_string())
+    match score {
+        InitScore::MsSsim => obj.ms_ssim(&slots),
+        InitScore::Loss => obj.value(&slots).map(|e| -e.total),
+    }
+    .map_err(|e| e.to_string())
 }
 
 /// Simulation-driven initialisation: Latin hypercube candidates in log10 space, each
@@ -475,7 +481,8 @@ pub fn initialize(
     hooks: &mut dyn FitHooks,
 ) -> Result<(ParamSpace, InitOutcome), FitError> {
     let (space, obj, search, init) = init_setup(problem, cfg)?;
-    let evaluate = |_i: usize, theta: &[f64]| score_candidate(problem, &obj, &space, theta);
+    let evaluate =
+        |_i: usize, theta: &[f64]| score_candidate(problem, &obj, &space, theta, cfg.init.score);
     let mut outcome = init_round(&*init, &search, &evaluate, 0, hooks)?;
     // Further rounds sample on the natural scale with the natural sampler, else in log10.
     let linear = match cfg.init.sampler {
@@ -642,7 +649,8 @@ pub fn initialize_shard(
         .enumerate()
         .filter(|(i, _)| i % of == shard)
         .collect();
-    let evaluate = |_i: usize, theta: &[f64]| score_candidate(problem, &obj, &space, theta);
+    let evaluate =
+        |_i: usize, theta: &[f64]| score_candidate(problem, &obj, &space, theta, cfg.init.score);
     let candidates: Vec<Candidate> = mine
         .into_par_iter()
         .map(|(index, theta)| evaluate_candidate(index, theta, &evaluate))

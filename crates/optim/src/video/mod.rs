@@ -22,7 +22,7 @@ pub use crate::restarts::{Restart, RestartsConfig, ShearRestarts};
 pub use crate::sampling::{GradientSampling, SamplingConfig, SamplingRound};
 pub use crate::space::{Granularity, ParamSpace};
 pub use crate::valley::{ValleyConfig, ValleyRound, ValleySearch};
-pub use config::{FitConfig, InitConfig, InitSampler, OptimizerKind, StageKind};
+pub use config::{FitConfig, InitConfig, InitSampler, InitScore, OptimizerKind, StageKind};
 pub use fit::{
     fingerprint, run_fit, run_fit_with_loss, FitEvent, FitHooks, FitOutcome, FitState, IterRecord,
     StartResult,
