@@ -94,6 +94,17 @@ impl FitHooks for RunHooks {
                 theta,
             } => self.sampling(round, names, theta),
             FitEvent::Restart { restart, names } => self.restart(restart, names),
+            FitEvent::Stalled {
+                iter,
+                lowest,
+                seed,
+                theta,
+                names,
+            } => eprintln!(
+                "descent: stalled at iteration {iter} (its lowest loss {lowest:.5e} fell by less \
+                 than 1% over the last `stall` iterations): restarting from seed {seed}: {}",
+                named_values(names, theta).join(" ")
+            ),
             _ => {}
         }
     }
@@ -104,18 +115,24 @@ impl FitHooks for RunHooks {
     }
 }
 
+/// An initialisation score as printed: its MS-SSIM, or the loss of a negated-loss score
+/// (`[init] score = "loss"`).
+fn score_text(s: f64) -> String {
+    if s < 0.0 {
+        format!("loss {:.4}", -s)
+    } else {
+        format!("MS-SSIM {s:.4}")
+    }
+}
+
 /// What each event prints and writes.
 impl RunHooks {
     fn candidate(&mut self, c: &Candidate) {
         self.init_bar.inc(1);
         match (c.score, &c.error) {
-            // A negated loss (`[init] score = "loss"`) is printed as the loss.
-            (Some(s), _) if s < 0.0 => self
-                .init_bar
-                .set_message(format!("#{} loss {:.4}", c.index, -s)),
             (Some(s), _) => self
                 .init_bar
-                .set_message(format!("#{} MS-SSIM {s:.4}", c.index)),
+                .set_message(format!("#{} {}", c.index, score_text(s))),
             (None, Some(e)) => self
                 .init_bar
                 .set_message(format!("#{} failed: {e}", c.index)),
@@ -134,9 +151,9 @@ impl RunHooks {
         for c in o.top_candidates() {
             let vals = named_values(names, &c.theta);
             lines.push(format!(
-                "  #{:<3} MS-SSIM {:.4}  {}",
+                "  #{:<3} {}  {}",
                 c.index,
-                c.score.unwrap_or(f64::NAN),
+                score_text(c.score.unwrap_or(f64::NAN)),
                 vals.join(" ")
             ));
         }
@@ -167,17 +184,17 @@ impl RunHooks {
     fn start(&mut self, r: &resonance4d::video_fit::StartResult) {
         if r.loss == f64::MAX {
             eprintln!(
-                "multi-start: candidate #{} (MS-SSIM {:.4}) failed: {}",
+                "multi-start: candidate #{} ({}) failed: {}",
                 r.candidate,
-                r.score.unwrap_or(f64::NAN),
+                score_text(r.score.unwrap_or(f64::NAN)),
                 r.failed.as_deref().unwrap_or("")
             );
             return;
         }
         eprintln!(
-            "multi-start: candidate #{} (MS-SSIM {:.4}) reached loss {:.5e}{}",
+            "multi-start: candidate #{} ({}) reached loss {:.5e}{}",
             r.candidate,
-            r.score.unwrap_or(f64::NAN),
+            score_text(r.score.unwrap_or(f64::NAN)),
             r.loss,
             r.failed
                 .as_deref()

@@ -482,6 +482,85 @@ fn fit_from_latin_hypercube_start_recovers_e_over_density() {
     assert!(err < 0.1, "E/density off by {:.1}%", 100.0 * err);
 }
 
+/// Restarts where the descent stalls (`stall`): each restart begins at the next seed (the
+/// multi-start's second start first), the fit's result is the lowest point of all runs,
+/// and a fit killed after a restart resumes inside the new run to the same end.
+#[test]
+fn a_stalled_descent_restarts_from_the_next_seed_and_resumes_exactly() {
+    use resonance4d::video_fit::{FitEvent, OptimizerKind};
+    #[derive(Default)]
+    struct Stalls {
+        inner: Collect,
+        stalls: Vec<(usize, f64, usize, Vec<f64>)>,
+    }
+    impl FitHooks for Stalls {
+        fn on_event(&mut self, e: &FitEvent<'_>) {
+            self.inner.on_event(e);
+            if let FitEvent::Stalled {
+                iter,
+                lowest,
+                seed,
+                theta,
+                ..
+            } = *e
+            {
+                self.stalls.push((iter, lowest, seed, theta.to_vec()));
+            }
+        }
+        fn on_checkpoint(&mut self, s: &FitState) {
+            self.inner.on_checkpoint(s);
+        }
+    }
+    let truth = [jelly(2e4, 800.0)];
+    let mut p = small_problem(&truth, 4);
+    p.config.parts = vec![jelly(1e5, 1000.0)];
+    let mut cfg = fit_config(9);
+    cfg.optimizer = OptimizerKind::TrustBfgs;
+    cfg.init.enabled = true;
+    cfg.init.candidates = 6;
+    cfg.init.frames = 3;
+    cfg.multi_start = 2;
+    cfg.multi_start_iters = 1;
+    cfg.stall = 2;
+    let mut all = Stalls::default();
+    let full = run_fit(&p, &cfg, None, &mut all).unwrap();
+    assert!(!all.stalls.is_empty(), "losses {:?}", all.inner.losses);
+    let last = all.inner.states.last().unwrap();
+    let run = last.descent.as_ref().unwrap();
+    assert_eq!(
+        run.stalls,
+        all.stalls.iter().map(|s| s.0).collect::<Vec<_>>()
+    );
+    // The first restart begins at the multi-start's other start.
+    let mut starts = last.starts.clone();
+    starts.sort_by(|a, b| a.loss.total_cmp(&b.loss));
+    assert_eq!(all.stalls[0].2, 1);
+    assert_eq!(all.stalls[0].3, starts[1].theta);
+    // The result is the lowest loss of every run and start.
+    let lowest = all
+        .inner
+        .losses
+        .iter()
+        .chain(starts.iter().map(|s| &s.loss))
+        .fold(f64::INFINITY, |a, &b| a.min(b));
+    assert_eq!(full.best_loss, Some(lowest));
+    // Killed at the checkpoint after the first restart, the fit resumes to the same end.
+    let at = all.stalls[0].0 + 1;
+    let ck = all
+        .inner
+        .states
+        .iter()
+        .find(|s| s.iters_done == at)
+        .unwrap()
+        .clone();
+    let ck: FitState = serde_json::from_str(&serde_json::to_string(&ck).unwrap()).unwrap();
+    let mut rest = Collect::default();
+    let resumed = run_fit(&p, &cfg, Some(ck), &mut rest).unwrap();
+    assert_eq!(rest.losses, all.inner.losses[at..]);
+    assert_eq!(resumed.best_loss, full.best_loss);
+    assert_eq!(resumed.parts, full.parts);
+}
+
 /// The initialisation ranked by the fit's own loss (`[init] score = "loss"`) over three
 /// rounds: every candidate's score is minus the loss at its parameters over the
 /// initialisation's frames (none where the simulation fails), the later rounds' candidates

@@ -73,6 +73,9 @@ pub struct FitState {
     /// The short fits of a multi-start (`multi_start > 1`), in candidate-rank order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub starts: Vec<StartResult>,
+    /// The descent's run since its last restart on a stall (`stall > 0`), once begun.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub descent: Option<DescentRun>,
     /// The valley search after the iterations (`valley.evals > 0`), once begun.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub valley: Option<ValleySearch>,
@@ -116,6 +119,7 @@ impl FitState {
             best: None,
             trust: None,
             starts: Vec::new(),
+            descent: None,
             valley: None,
             sampling: None,
             restarts: None,
@@ -255,6 +259,23 @@ pub struct StartResult {
     /// the lowest loss it reached before, and the other starts go on.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub failed: Option<String>,
+}
+
+/// The descent's current run when it restarts where it stalls (`stall` in a fit config):
+/// which seed it started from and the progress since.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DescentRun {
+    /// The seed it started from (0: the best point of the multi-start or the
+    /// initialisation; then the further seeds in order).
+    pub seed: usize,
+    /// The lowest loss of this run so far (`None` before its first iteration).
+    pub lowest: Option<f64>,
+    /// The iteration at which the lowest loss last fell by the required share, or the run
+    /// began.
+    pub since: usize,
+    /// The iterations at which earlier runs stalled, in order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stalls: Vec<usize>,
 }
 
 /// Loss terms (absent terms were not evaluated; the trajectory fit has the total only).

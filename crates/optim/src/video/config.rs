@@ -140,6 +140,14 @@ fn is_one(n: &usize) -> bool {
     *n == 1
 }
 
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
+/// The relative fall of the descent's lowest loss that counts as progress for
+/// [`FitConfig::stall`].
+pub const STALL_DROP: f64 = 0.01;
+
 /// How the initialisation samples its candidates (`[init] sampler`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -319,6 +327,14 @@ pub struct FitConfig {
     pub multi_start: usize,
     /// Iterations of each short fit of a multi-start.
     pub multi_start_iters: usize,
+    /// Restarts of the descent where it stalls: when its lowest loss has not fallen by
+    /// [`STALL_DROP`] (1%) in this many iterations, the descent starts again from the next
+    /// seed — the multi-start's other starts by the loss they reached, then the further
+    /// initialisation candidates by score — and the fit's result is the lowest point of all
+    /// its runs. 0: off (the default). Part and object fits with the initialisation only.
+    /// Not part of the checkpoint's fingerprint while 0.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub stall: usize,
     /// The step: `adam` (AdamW, the paper's) or `trust_bfgs` (a trust-region quasi-Newton
     /// step, `r4d_optim::TrustRegionBfgs`, whose first radius is `lr`).
     pub optimizer: OptimizerKind,
@@ -373,6 +389,7 @@ impl Default for FitConfig {
             flat_probe: 6,
             multi_start: 1,
             multi_start_iters: 5,
+            stall: 0,
             optimizer: OptimizerKind::Adam,
             valley: ValleyConfig::default(),
             gradient_sampling: SamplingConfig::default(),
@@ -535,7 +552,7 @@ impl FitConfig {
                         self.multi_start, self.multi_start_iters
                     ),
                     StageKind::Descent => format!(
-                        "{}, {}",
+                        "{}, {}{}",
                         if self.iters == MAX_ITERS {
                             "until the budget".to_string()
                         } else {
@@ -544,6 +561,14 @@ impl FitConfig {
                         match self.optimizer {
                             OptimizerKind::Adam => "adam",
                             OptimizerKind::TrustBfgs => "trust_bfgs",
+                        },
+                        if self.stall > 0 {
+                            format!(
+                                ", restarted after {} iterations without progress",
+                                self.stall
+                            )
+                        } else {
+                            String::new()
                         }
                     ),
                     StageKind::Valley => format!("{} evaluations", self.valley.evals),
@@ -716,6 +741,18 @@ impl FitConfig {
             }
             if self.multi_start_iters == 0 {
                 return bad("multi_start_iters must be at least 1".into());
+            }
+        }
+        if self.stall > 0 {
+            if !runs(StageKind::Init) || !runs(StageKind::Descent) {
+                return bad(format!(
+                    "stall = {}: restarting a stalled descent needs the initialisation and the \
+                     descent (its seeds are the initialisation's candidates)",
+                    self.stall
+                ));
+            }
+            if self.granularity == Granularity::Particle {
+                return bad(format!("stall = {}: part and object fits only", self.stall));
             }
         }
         if self.init.frames < 2 {

@@ -2,11 +2,11 @@
 //! and gradient clipping; a record per iteration and a resumable checkpoint.
 
 use super::budget::Budget;
-use super::config::{FitConfig, InitSampler, InitScore, OptimizerKind, StageKind};
+use super::config::{FitConfig, InitSampler, InitScore, OptimizerKind, StageKind, STALL_DROP};
 use super::problem::{Evaluation, Objective, VideoProblem};
 use crate::descent::{self, keep_best, Rate, Stepper};
 use crate::evaluator::{Evaluator, Graded};
-use crate::record::{mix_json, Fingerprint, FlatProbe, Terms};
+use crate::record::{mix_json, DescentRun, Fingerprint, FlatProbe, Terms};
 pub use crate::record::{FitState, IterRecord, StartResult};
 use crate::restarts::{e_nu_from_k_g, k_g_from_e_nu, Restart, ShearRestarts};
 use crate::sampling::{SamplingConfig, SamplingRound};
@@ -293,6 +293,20 @@ pub enum FitEvent<'a> {
     Start(&'a StartResult),
     /// An iteration of the descent finished.
     Iter(&'a IterRecord),
+    /// The descent stalled (`stall` iterations without its lowest loss falling by
+    /// [`super::config::STALL_DROP`]) and starts again from another seed.
+    Stalled {
+        /// The iteration after which it restarts.
+        iter: usize,
+        /// The lowest loss of the run that stalled.
+        lowest: f64,
+        /// The seed it restarts from (1: the second-best start, ...).
+        seed: usize,
+        /// The seed's parameters (in the order of `names`).
+        theta: &'a [f64],
+        /// The fit's free parameters.
+        names: &'a [String],
+    },
     /// A round of the valley search finished.
     Valley {
         /// The round.
@@ -894,6 +908,11 @@ pub fn run_fit_with_loss(
         let st = iterate(&obj, &space, &base_slots, &mut opt, cfg, (iter, cfg.iters))?;
         let (ev, theta, gtheta) = (&st.ev, &st.theta, &st.gtheta);
         keep_best(&mut state.best, ev.total, theta);
+        let restart = if cfg.stall > 0 {
+            stall_check(&mut state, iter, ev.total, cfg.stall)
+        } else {
+            None
+        };
         let mut rec = IterRecord::new(
             iter,
             terms_of(ev),
@@ -906,6 +925,24 @@ pub fn run_fit_with_loss(
         );
         rec.probes = st.probes;
         hooks.on_event(&FitEvent::Iter(&rec));
+        if let Some(lowest) = restart {
+            let seeds = stall_seeds(&state, cfg, &problem.config.parts, &space, &slot_parts)?;
+            let run = state.descent.as_mut().expect("a run is recorded");
+            if let Some(theta) = seeds.get(run.seed + 1) {
+                run.seed += 1;
+                run.lowest = None;
+                run.since = iter + 1;
+                run.stalls.push(iter);
+                hooks.on_event(&FitEvent::Stalled {
+                    iter,
+                    lowest,
+                    seed: run.seed,
+                    theta,
+                    names: &names,
+                });
+                opt = new_stepper(cfg, &space, theta.clone())?;
+            }
+        }
         state.iters_done = iter + 1;
         if state.iters_done % cfg.checkpoint_every == 0 || state.iters_done == iters {
             save(&opt, &mut state);
@@ -954,6 +991,60 @@ pub fn run_fit_with_loss(
         decisions: resolved.decisions,
         space,
     })
+}
+
+/// Records the descent's iteration `iter` at loss `loss` in its current run; the run's
+/// lowest loss when the run has stalled (`stall` iterations without falling by
+/// [`STALL_DROP`]).
+fn stall_check(state: &mut FitState, iter: usize, loss: f64, stall: usize) -> Option<f64> {
+    let run = state.descent.get_or_insert(DescentRun {
+        seed: 0,
+        lowest: None,
+        since: iter,
+        stalls: Vec::new(),
+    });
+    match run.lowest {
+        Some(l) if !(loss.is_finite() && loss < l * (1.0 - STALL_DROP)) => {
+            (iter + 1 - run.since >= stall).then_some(l)
+        }
+        _ if loss.is_finite() => {
+            run.lowest = Some(loss);
+            run.since = iter;
+            None
+        }
+        _ => None,
+    }
+}
+
+/// The seeds of the descent's runs, in order: the multi-start's starts by the loss they
+/// reached (failed ones left out), then the initialisation's other candidates by score
+/// (each as the fit's free parameters over `slot_parts`); seed 0 is where the descent began.
+fn stall_seeds(
+    state: &FitState,
+    cfg: &FitConfig,
+    parts: &[PartParams],
+    space: &ParamSpace,
+    slot_parts: &[u32],
+) -> Result<Vec<Vec<f64>>, FitError> {
+    let Some(init) = &state.init else {
+        return Ok(Vec::new());
+    };
+    let mut starts: Vec<&StartResult> = state.starts.iter().filter(|r| r.loss < f64::MAX).collect();
+    starts.sort_by(|a, b| a.loss.total_cmp(&b.loss));
+    let mut seeds: Vec<Vec<f64>> = starts.iter().map(|r| r.theta.clone()).collect();
+    let ispace = init_space(cfg, parts)?;
+    let started: Vec<usize> = state.starts.iter().map(|r| r.candidate).collect();
+    for &i in &init.ranking {
+        let c = &init.candidates[i];
+        if c.score.is_none() || started.contains(&c.index) {
+            continue;
+        }
+        let mut p = parts.to_vec();
+        ispace.apply(&mut p, &c.theta);
+        let slots: Vec<PartParams> = slot_parts.iter().map(|&s| p[s as usize]).collect();
+        seeds.push(space.values(&slots));
+    }
+    Ok(seeds)
 }
 
 /// What a refining stage works with: the objective over the free parameters (applied to

@@ -19,6 +19,10 @@
 //! * **multi-start**: with two or more parameters, short fits (8 iterations) from the 4 best
 //!   candidates, the fit continuing from the lowest: a candidate's loss is not the loss its
 //!   basin reaches;
+//! * **restarts on a stall**: a descent whose lowest loss has not fallen by 1% in `3 n`
+//!   iterations (at least 8) starts again from the next start of the multi-start, then from
+//!   the next candidates (`stall`): measured on random metal cantilevers, a stalled descent
+//!   cycles through rejected trials and model restarts for the rest of the budget;
 //! * **step**: the trust-region BFGS step (curvature-aware), whatever `optimizer` says:
 //!   the loss's valleys along which two parameters trade off (`E` with density, `E` with
 //!   `nu`) are curved and narrow, and AdamW creeps along them;
@@ -151,6 +155,19 @@ pub fn resolve(cfg: &FitConfig, parts: &[PartParams]) -> Result<Resolved, FitErr
             },
         );
     }
+    if per_slot {
+        c.stall = (3 * n).max(8);
+        say(
+            "stall",
+            c.stall.to_string(),
+            format!(
+                "a descent whose lowest loss has not fallen by 1% in {} iterations (3 per \
+                 parameter, at least 8) starts again from the next start or candidate: the \
+                 budget goes to other basins, not to a stalled one",
+                c.stall
+            ),
+        );
+    }
     c.optimizer = OptimizerKind::TrustBfgs;
     say(
         "optimizer",
@@ -249,6 +266,7 @@ mod tests {
         assert_eq!((r.config.init.candidates, r.config.init.rounds), (24, 3));
         assert_eq!(r.config.init.score, super::super::config::InitScore::Loss);
         assert_eq!((r.config.multi_start, r.config.multi_start_iters), (4, 8));
+        assert_eq!(r.config.stall, 8);
         assert_eq!(r.config.optimizer, OptimizerKind::TrustBfgs);
         assert_eq!(r.config.iters, 60);
         assert!(!r.decisions.iter().any(|d| d.setting == "flat_probe"));
