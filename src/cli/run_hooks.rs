@@ -102,7 +102,7 @@ impl FitHooks for RunHooks {
                 names,
             } => eprintln!(
                 "descent: stalled at iteration {iter} (its lowest loss {lowest:.5e} fell by less \
-                 than 1% over the last `stall` iterations): restarting from seed {seed}: {}",
+                 than 0.01% over the last `stall` iterations): restarting from seed {seed}: {}",
                 named_values(names, theta).join(" ")
             ),
             _ => {}

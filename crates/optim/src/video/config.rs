@@ -146,7 +146,7 @@ fn is_zero(n: &usize) -> bool {
 
 /// The relative fall of the descent's lowest loss that counts as progress for
 /// [`FitConfig::stall`].
-pub const STALL_DROP: f64 = 0.01;
+pub const STALL_DROP: f64 = 1e-4;
 
 /// How the initialisation samples its candidates (`[init] sampler`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -328,7 +328,7 @@ pub struct FitConfig {
     /// Iterations of each short fit of a multi-start.
     pub multi_start_iters: usize,
     /// Restarts of the descent where it stalls: when its lowest loss has not fallen by
-    /// [`STALL_DROP`] (1%) in this many iterations, the descent starts again from the next
+    /// [`STALL_DROP`] (0.01%: no new low) in this many iterations, the descent starts again from the next
     /// seed — the multi-start's other starts by the loss they reached, then the further
     /// initialisation candidates by score — and the fit's result is the lowest point of all
     /// its runs. 0: off (the default). Part and object fits with the initialisation only.

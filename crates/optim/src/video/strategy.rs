@@ -19,7 +19,7 @@
 //! * **multi-start**: with two or more parameters, short fits (8 iterations) from the 4 best
 //!   candidates, the fit continuing from the lowest: a candidate's loss is not the loss its
 //!   basin reaches;
-//! * **restarts on a stall**: a descent whose lowest loss has not fallen by 1% in `3 n`
+//! * **restarts on a stall**: a descent whose lowest loss has not fallen (by 0.01%) in `3 n`
 //!   iterations (at least 8) starts again from the next start of the multi-start, then from
 //!   the next candidates (`stall`): measured on random metal cantilevers, a stalled descent
 //!   cycles through rejected trials and model restarts for the rest of the budget;
@@ -161,7 +161,7 @@ pub fn resolve(cfg: &FitConfig, parts: &[PartParams]) -> Result<Resolved, FitErr
             "stall",
             c.stall.to_string(),
             format!(
-                "a descent whose lowest loss has not fallen by 1% in {} iterations (3 per \
+                "a descent whose lowest loss has not fallen (by 0.01%) in {} iterations (3 per \
                  parameter, at least 8) starts again from the next start or candidate: the \
                  budget goes to other basins, not to a stalled one",
                 c.stall
