@@ -144,6 +144,10 @@ fn is_zero(n: &usize) -> bool {
     *n == 0
 }
 
+fn is_zero_f64(v: &f64) -> bool {
+    *v == 0.0
+}
+
 /// The relative fall of the descent's lowest loss that counts as progress for
 /// [`FitConfig::stall`].
 pub const STALL_DROP: f64 = 1e-4;
@@ -330,11 +334,19 @@ pub struct FitConfig {
     /// Restarts of the descent where it stalls: when its lowest loss has not fallen by
     /// [`STALL_DROP`] (0.01%: no new low) in this many iterations, the descent starts again from the next
     /// seed — the multi-start's other starts by the loss they reached, then the further
-    /// initialisation candidates by score — and the fit's result is the lowest point of all
+    /// initialisation candidates by score (see `spread`) — and the fit's result is the lowest point of all
     /// its runs. 0: off (the default). Part and object fits with the initialisation only.
     /// Not part of the checkpoint's fingerprint while 0.
     #[serde(skip_serializing_if = "is_zero")]
     pub stall: usize,
+    /// How far apart the seeds of the multi-start and of the stall restarts are: with
+    /// `spread > 0` each next seed is the best-scored candidate at least `spread` away from
+    /// every seed taken before (the largest difference over the parameters, in units of each
+    /// parameter's log bounds), then the rest by score; 0 (the default): by score only. The
+    /// best candidates of a narrowed round cluster in one basin, and a wrong one then holds
+    /// every start. Not part of the checkpoint's fingerprint while 0.
+    #[serde(skip_serializing_if = "is_zero_f64")]
+    pub spread: f64,
     /// The step: `adam` (AdamW, the paper's) or `trust_bfgs` (a trust-region quasi-Newton
     /// step, `r4d_optim::TrustRegionBfgs`, whose first radius is `lr`).
     pub optimizer: OptimizerKind,
@@ -390,6 +402,7 @@ impl Default for FitConfig {
             multi_start: 1,
             multi_start_iters: 5,
             stall: 0,
+            spread: 0.0,
             optimizer: OptimizerKind::Adam,
             valley: ValleyConfig::default(),
             gradient_sampling: SamplingConfig::default(),
@@ -742,6 +755,12 @@ impl FitConfig {
             if self.multi_start_iters == 0 {
                 return bad("multi_start_iters must be at least 1".into());
             }
+        }
+        if !(self.spread.is_finite() && (0.0..1.0).contains(&self.spread)) {
+            return bad(format!(
+                "spread = {}: must be in [0, 1) (a share of each parameter's log bounds)",
+                self.spread
+            ));
         }
         if self.stall > 0 {
             if !runs(StageKind::Init) || !runs(StageKind::Descent) {

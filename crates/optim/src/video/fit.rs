@@ -811,11 +811,12 @@ pub fn run_fit_with_loss(
     if let (true, Some(outcome)) = (runs(StageKind::MultiStart), state.init.clone()) {
         let ispace = init_space(cfg, &problem.config.parts)?;
         let k = cfg.multi_start.min(outcome.ranking.len());
+        let order = seed_order(&outcome, &ispace.bounds(), cfg.spread);
         while state.starts.len() < k && state.iters_done == 0 {
             if budget.spent(obj.evaluations()) {
                 break;
             }
-            let c = &outcome.candidates[outcome.ranking[state.starts.len()]];
+            let c = &outcome.candidates[order[state.starts.len()]];
             let mut parts = problem.config.parts.clone();
             ispace.apply(&mut parts, &c.theta);
             let slots0: Vec<PartParams> = slot_parts.iter().map(|&p| parts[p as usize]).collect();
@@ -1016,9 +1017,51 @@ fn stall_check(state: &mut FitState, iter: usize, loss: f64, stall: usize) -> Op
     }
 }
 
+/// The scored candidates of `outcome` in the order the multi-start and the stall restarts
+/// take them: by score; with `spread > 0` each next one the best-scored candidate whose
+/// largest difference to every one taken before, over the parameters in units of each
+/// parameter's log `bounds`, is at least `spread`, then the rest by score.
+pub fn seed_order(outcome: &InitOutcome, bounds: &[(f64, f64)], spread: f64) -> Vec<usize> {
+    if spread <= 0.0 {
+        return outcome.ranking.clone();
+    }
+    let unit = |theta: &[f64]| -> Vec<f64> {
+        theta
+            .iter()
+            .zip(bounds)
+            .map(|(v, (lo, hi))| {
+                let w = (hi / lo).ln();
+                if w > 0.0 {
+                    (v / lo).ln() / w
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    };
+    let mut taken: Vec<(usize, Vec<f64>)> = Vec::new();
+    let mut rest = Vec::new();
+    for &i in &outcome.ranking {
+        let u = unit(&outcome.candidates[i].theta);
+        let far = taken.iter().all(|(_, t)| {
+            t.iter()
+                .zip(&u)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+                >= spread
+        });
+        if far {
+            taken.push((i, u));
+        } else {
+            rest.push(i);
+        }
+    }
+    taken.into_iter().map(|(i, _)| i).chain(rest).collect()
+}
+
 /// The seeds of the descent's runs, in order: the multi-start's starts by the loss they
-/// reached (failed ones left out), then the initialisation's other candidates by score
-/// (each as the fit's free parameters over `slot_parts`); seed 0 is where the descent began.
+/// reached (failed ones left out), then the initialisation's other candidates in
+/// [`seed_order`] (each as the fit's free parameters over `slot_parts`); seed 0 is where the descent began.
 fn stall_seeds(
     state: &FitState,
     cfg: &FitConfig,
@@ -1034,7 +1077,7 @@ fn stall_seeds(
     let mut seeds: Vec<Vec<f64>> = starts.iter().map(|r| r.theta.clone()).collect();
     let ispace = init_space(cfg, parts)?;
     let started: Vec<usize> = state.starts.iter().map(|r| r.candidate).collect();
-    for &i in &init.ranking {
+    for i in seed_order(init, &ispace.bounds(), cfg.spread) {
         let c = &init.candidates[i];
         if c.score.is_none() || started.contains(&c.index) {
             continue;
@@ -1353,6 +1396,37 @@ fn shear_restarts(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Spread seeds: by score, skipping candidates within `spread` (max norm in the unit box
+    /// of the log bounds) of a seed taken before, those coming last; 0: by score only.
+    #[test]
+    fn seeds_are_taken_by_score_at_least_spread_apart() {
+        let cand = |index: usize, e: f64, rho: f64, score: f64| Candidate {
+            index,
+            theta: vec![e, rho],
+            score: Some(score),
+            error: None,
+        };
+        // Bounds of 4 and 2 decades: E 1e3..1e7, density 1e2..1e4.
+        let bounds = [(1e3, 1e7), (1e2, 1e4)];
+        let outcome = InitOutcome::from_candidates(
+            vec![
+                cand(0, 1e5, 1e3, 0.9),
+                // 0.1 decade of E from #0 (0.025 of its bounds): the same basin.
+                cand(1, 1.26e5, 1e3, 0.8),
+                // One decade of E from #0 (0.25 of its bounds).
+                cand(2, 1e6, 1e3, 0.7),
+                // 0.4 decade of density from #0 (0.2 of its bounds) and far from #2.
+                cand(3, 1e5, 2.5e3, 0.6),
+                cand(4, 1e3, 1e2, f64::NAN),
+            ],
+            4,
+        )
+        .unwrap();
+        assert_eq!(seed_order(&outcome, &bounds, 0.0), vec![0, 1, 2, 3]);
+        assert_eq!(seed_order(&outcome, &bounds, 0.15), vec![0, 2, 3, 1]);
+        assert_eq!(seed_order(&outcome, &bounds, 0.22), vec![0, 2, 1, 3]);
+    }
 
     /// A further round's box holds the best candidates, widened, and stays in the bounds.
     #[test]

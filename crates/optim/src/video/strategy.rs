@@ -19,6 +19,9 @@
 //! * **multi-start**: with two or more parameters, short fits (8 iterations) from the 4 best
 //!   candidates, the fit continuing from the lowest: a candidate's loss is not the loss its
 //!   basin reaches;
+//! * **spread seeds**: the multi-start's starts and the restarts' seeds are the best
+//!   candidates at least 15% of a parameter's log bounds apart (`spread = 0.15`): the later
+//!   rounds narrow around the best so far, so the best candidates cluster in one basin;
 //! * **restarts on a stall**: a descent whose lowest loss has not fallen (by 0.01%) in `3 n`
 //!   iterations (at least 8) starts again from the next start of the multi-start, then from
 //!   the next candidates (`stall`): measured on random metal cantilevers, a stalled descent
@@ -156,6 +159,14 @@ pub fn resolve(cfg: &FitConfig, parts: &[PartParams]) -> Result<Resolved, FitErr
         );
     }
     if per_slot {
+        c.spread = 0.15;
+        say(
+            "spread",
+            "0.15".into(),
+            "the starts and restarts are the best candidates at least 15% of a parameter's log \
+             bounds apart: the best of the narrowed rounds cluster in one basin"
+                .into(),
+        );
         c.stall = (3 * n).max(8);
         say(
             "stall",
@@ -267,6 +278,7 @@ mod tests {
         assert_eq!(r.config.init.score, super::super::config::InitScore::Loss);
         assert_eq!((r.config.multi_start, r.config.multi_start_iters), (4, 8));
         assert_eq!(r.config.stall, 8);
+        assert_eq!(r.config.spread, 0.15);
         assert_eq!(r.config.optimizer, OptimizerKind::TrustBfgs);
         assert_eq!(r.config.iters, 60);
         assert!(!r.decisions.iter().any(|d| d.setting == "flat_probe"));
