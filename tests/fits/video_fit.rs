@@ -374,6 +374,21 @@ fn an_evaluation_budget_stops_the_fit_and_a_larger_one_extends_it() {
     cfg.budget = Some("soon".into());
     let e = run_fit(&p, &cfg, None, &mut NoHooks).unwrap_err();
     assert!(e.to_string().contains("budget = 'soon'"), "{e}");
+    // With `descent_share`, the descent ends at that share of the budget and the valley
+    // search after it spends the rest.
+    cfg.budget = None;
+    cfg.evals = Some(12);
+    cfg.descent_share = 0.5;
+    cfg.valley.evals = 1000;
+    let mut shared = Collect::default();
+    let out = run_fit(&p, &cfg, None, &mut shared).unwrap();
+    assert_eq!(shared.losses.len(), 6, "the descent's six iterations");
+    let valley = out.valley.expect("the valley search ran");
+    assert!(valley.evals > 0 && valley.evals <= 6, "{}", valley.evals);
+    assert_eq!(out.evaluations, 6 + valley.evals);
+    cfg.descent_share = 1.5;
+    let e = run_fit(&p, &cfg, None, &mut NoHooks).unwrap_err();
+    assert!(e.to_string().contains("descent_share"), "{e}");
 }
 
 /// Restarts along constant bulk modulus (`[shear_restarts]`): each restart keeps the

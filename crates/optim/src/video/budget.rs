@@ -98,6 +98,21 @@ impl Budget {
 
     /// Writes what was spent into the checkpoint (only the parts that are limited: a fit
     /// without a budget writes the same state as before budgets existed).
+    /// Evaluations left under `evals` (`None` without an evaluation budget): a stage whose
+    /// rounds take many evaluations caps a round with it.
+    pub(crate) fn evals_left(&self, fit_evals: usize) -> Option<usize> {
+        self.limit_evals
+            .map(|l| l.saturating_sub(self.evals(fit_evals)))
+    }
+
+    /// Whether `share` (in (0, 1]) of the budget is spent: the descent's end when the
+    /// refining stages after it get the rest (`descent_share`).
+    pub(crate) fn spent_share(&self, fit_evals: usize, share: f64) -> bool {
+        self.limit_evals
+            .is_some_and(|l| self.evals(fit_evals) as f64 >= share * l as f64)
+            || self.limit_s.is_some_and(|l| self.seconds() >= share * l)
+    }
+
     pub(crate) fn stamp(&self, state: &mut FitState, fit_evals: usize) {
         if self.limit_evals.is_some() {
             state.evals_done = self.evals(fit_evals);

@@ -148,6 +148,10 @@ fn is_zero_f64(v: &f64) -> bool {
     *v == 0.0
 }
 
+fn is_one_f64(v: &f64) -> bool {
+    *v == 1.0
+}
+
 /// The relative fall of the descent's lowest loss that counts as progress for
 /// [`FitConfig::stall`].
 pub const STALL_DROP: f64 = 1e-4;
@@ -347,6 +351,12 @@ pub struct FitConfig {
     /// every start. Not part of the checkpoint's fingerprint while 0.
     #[serde(skip_serializing_if = "is_zero_f64")]
     pub spread: f64,
+    /// The share of the fit's budget (`budget`, `evals`) after which the descent ends and
+    /// the refining stages (valley search, shear restarts, gradient sampling) get the rest;
+    /// 1 (the default): the descent may spend all of it. Without a budget: no effect. Not
+    /// part of the checkpoint's fingerprint while 1.
+    #[serde(skip_serializing_if = "is_one_f64")]
+    pub descent_share: f64,
     /// The step: `adam` (AdamW, the paper's) or `trust_bfgs` (a trust-region quasi-Newton
     /// step, `r4d_optim::TrustRegionBfgs`, whose first radius is `lr`).
     pub optimizer: OptimizerKind,
@@ -403,6 +413,7 @@ impl Default for FitConfig {
             multi_start_iters: 5,
             stall: 0,
             spread: 0.0,
+            descent_share: 1.0,
             optimizer: OptimizerKind::Adam,
             valley: ValleyConfig::default(),
             gradient_sampling: SamplingConfig::default(),
@@ -755,6 +766,15 @@ impl FitConfig {
             if self.multi_start_iters == 0 {
                 return bad("multi_start_iters must be at least 1".into());
             }
+        }
+        if !(self.descent_share.is_finite()
+            && self.descent_share > 0.0
+            && self.descent_share <= 1.0)
+        {
+            return bad(format!(
+                "descent_share = {}: must be in (0, 1] (a share of the budget)",
+                self.descent_share
+            ));
         }
         if !(self.spread.is_finite() && (0.0..1.0).contains(&self.spread)) {
             return bad(format!(

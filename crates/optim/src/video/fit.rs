@@ -894,7 +894,9 @@ pub fn run_fit_with_loss(
         0
     };
     for iter in state.iters_done..iters {
-        if budget.spent(obj.evaluations()) {
+        if budget.spent(obj.evaluations())
+            || (cfg.descent_share < 1.0 && budget.spent_share(obj.evaluations(), cfg.descent_share))
+        {
             // The iterations since the last checkpoint are kept.
             if state.iters_done % cfg.checkpoint_every != 0 {
                 save(&opt, &mut state);
@@ -1145,7 +1147,8 @@ fn valley_search(
     };
     let eval = ctx.eval();
     while !search.done && search.evals < cfg.valley.evals && !budget.spent(obj.evaluations()) {
-        let left = cfg.valley.evals - search.evals;
+        let left = (cfg.valley.evals - search.evals)
+            .min(budget.evals_left(obj.evaluations()).unwrap_or(usize::MAX));
         let Some(round) = search.round(&cfg.valley, left, &eval) else {
             break;
         };
