@@ -1400,16 +1400,20 @@ fn shear_restarts(
 mod tests {
     use super::*;
 
-    /// Spread seeds: by score, skipping candidates within `spread` (max norm in the unit box
-    /// of the log bounds) of a seed taken before, those coming last; 0: by score only.
-    #[test]
-    fn seeds_are_taken_by_score_at_least_spread_apart() {
-        let cand = |index: usize, e: f64, rho: f64, score: f64| Candidate {
+    /// A scored candidate with `E` and density.
+    fn cand(index: usize, e: f64, rho: f64, score: f64) -> Candidate {
+        Candidate {
             index,
             theta: vec![e, rho],
             score: Some(score),
             error: None,
-        };
+        }
+    }
+
+    /// Spread seeds: by score, skipping candidates within `spread` (max norm in the unit box
+    /// of the log bounds) of a seed taken before, those coming last; 0: by score only.
+    #[test]
+    fn seeds_are_taken_by_score_at_least_spread_apart() {
         // Bounds of 4 and 2 decades: E 1e3..1e7, density 1e2..1e4.
         let bounds = [(1e3, 1e7), (1e2, 1e4)];
         let outcome = InitOutcome::from_candidates(
@@ -1439,12 +1443,6 @@ mod tests {
             vec![(1e3, 1e7), (1e2, 1e4)],
         )
         .unwrap();
-        let cand = |index: usize, e: f64, rho: f64, score: f64| Candidate {
-            index,
-            theta: vec![e, rho],
-            score: Some(score),
-            error: None,
-        };
         let outcome = InitOutcome::from_candidates(
             vec![
                 cand(0, 1e5, 1e3, 0.9),

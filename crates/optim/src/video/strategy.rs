@@ -277,7 +277,7 @@ mod tests {
         assert_eq!((r.config.init.candidates, r.config.init.rounds), (24, 3));
         assert_eq!(r.config.init.score, super::super::config::InitScore::Loss);
         assert_eq!((r.config.multi_start, r.config.multi_start_iters), (4, 8));
-        assert_eq!(r.config.stall, 8);
+        assert_eq!(r.config.stall, 9);
         assert_eq!(r.config.spread, 0.15);
         assert_eq!(r.config.optimizer, OptimizerKind::TrustBfgs);
         assert_eq!(r.config.iters, 60);
