@@ -36,6 +36,12 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
+/// Most video frames a scene file may ask for.
+pub const MAX_FRAMES: usize = 1000;
+
+/// Longest side of a view a scene file may ask for (pixels).
+pub const MAX_SIDE: u32 = 4096;
+
 /// The text of a built-in scene's file.
 pub fn text(scene: DemoScene) -> &'static str {
     match scene {
@@ -200,6 +206,28 @@ pub fn build(scene: DemoScene, text: &str, file: &str, size: Size) -> Result<Sce
         Size::Full => demo.full,
         Size::Small => demo.small,
     };
+    let which = match size {
+        Size::Full => "[demo.full]",
+        Size::Small => "[demo.small]",
+    };
+    if !(sz.substep_dt.is_finite() && sz.substep_dt > 0.0) {
+        return Err(bad(format!(
+            "{which} substep_dt = {}: must be > 0",
+            sz.substep_dt
+        )));
+    }
+    if sz.frames == 0 || sz.frames > MAX_FRAMES {
+        return Err(bad(format!(
+            "{which} frames = {}: must be 1..={MAX_FRAMES}",
+            sz.frames
+        )));
+    }
+    if sz.resolution.iter().any(|&r| r == 0 || r > MAX_SIDE) {
+        return Err(bad(format!(
+            "{which} resolution = {:?}: each side must be 1..={MAX_SIDE}",
+            sz.resolution
+        )));
+    }
     for (key, _) in [("domain", ()), ("time", ())] {
         if table.contains_key(key) {
             return Err(bad(format!(
@@ -515,6 +543,13 @@ duration = 0.0105
             ),
             ("[[parts]]", "[domain]\nn_grid = 4\n[[parts]]", "[domain]"),
             ("[demo]", "[scene]", "[demo]"),
+            (
+                "resolution = [32, 24]",
+                "resolution = [0, 24]",
+                "resolution",
+            ),
+            ("frames = 2", "frames = 0", "frames"),
+            ("substep_dt = 2e-3", "substep_dt = -1.0", "substep_dt"),
         ];
         for (from, to, needle) in cases {
             let text = MINIMAL.replacen(from, to, 1);
