@@ -57,6 +57,10 @@ struct Variant {
 fn variants(study: Study, base: &FitConfig, free: &[Vec<String>]) -> Vec<Variant> {
     let with = |label, slug, f: &dyn Fn(&mut FitConfig)| {
         let mut cfg = base.clone();
+        if cfg.strategy.is_auto() && cfg.pinned.is_none() {
+            // Written out with every key: the list keeps the automatic strategy deciding.
+            cfg.pinned = Some(Vec::new());
+        }
         f(&mut cfg);
         Variant { label, slug, cfg }
     };
@@ -99,7 +103,12 @@ fn variants(study: Study, base: &FitConfig, free: &[Vec<String>]) -> Vec<Variant
             with("SSIM+FFT", "ssim_fft", &loss(Ablation::SsimFft)),
         ],
         Study::Init => vec![
-            with("config start", "config_start", &|c| c.init.enabled = false),
+            with("config start", "config_start", &|c| {
+                c.init.enabled = false;
+                if c.strategy.is_auto() {
+                    *c = c.clone().pin("init.enabled");
+                }
+            }),
             with("LHS init", "lhs", &|c| c.init.enabled = true),
         ],
         Study::Granularity => vec![
@@ -767,9 +776,9 @@ fn merge_init(out: &Path, recs: &[(Shard, PathBuf, Value)]) -> Result<()> {
         .map(|(k, v)| format!("{k}={v:.4e}"))
         .collect();
     println!(
-        "{total} candidates from {n} shard(s); best #{} MS-SSIM {:.4}: {}\ncontinue with `r4d fit --resume {}`",
+        "{total} candidates from {n} shard(s); best #{} {}: {}\ncontinue with `r4d fit --resume {}`",
         best.index,
-        best.score.unwrap_or(f64::NAN),
+        super::run_hooks::score_text(best.score.unwrap_or(f64::NAN)),
         vals.join(" "),
         out.display()
     );

@@ -453,10 +453,13 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
         Some(p) => FitConfig::load(p)?,
         None => FitConfig::default(),
     };
-    if !cfg.init.enabled {
+    let (mut problem, _) = load_problem(a)?;
+    // The settings that run (the automatic strategy's), which the shard's record holds for
+    // `r4d merge`.
+    let run_cfg = r4d_optim::video::strategy::resolve(&cfg, &problem.config.parts)?.config;
+    if !run_cfg.init.enabled {
         bail!("--shard splits the initialisation's candidates, and [init] enabled = false in the fit settings");
     }
-    let (mut problem, _) = load_problem(a)?;
     problem.compute = a.backend.compute()?;
     let dir = out.join(format!("shard-{}-of-{}", shard.i, shard.n));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -480,8 +483,8 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
         "names": search.names,
         "bounds": search.bounds,
         "total": total,
-        "top_k": cfg.init.top_k,
-        "fit_config": cfg,
+        "top_k": run_cfg.init.top_k,
+        "fit_config": run_cfg,
         "candidates": candidates,
     });
     write_json(&dir.join("shard.json"), &rec)?;
@@ -496,7 +499,8 @@ fn run_init_shard(a: &FitArgs, spec: &str) -> Result<()> {
         candidates.len(),
         total,
         best.map_or(String::new(), |(s, i)| format!(
-            ", best #{i} MS-SSIM {s:.4}"
+            ", best #{i} {}",
+            super::run_hooks::score_text(s)
         )),
         out.display()
     );
@@ -574,7 +578,16 @@ pub fn run(a: FitArgs) -> Result<()> {
         if let Ok(text) = r4d_fsio::read_to_string_bounded(&saved, r4d_fsio::MAX_TEXT_BYTES) {
             let was: FitConfig = serde_json::from_str(&text)
                 .with_context(|| format!("{}: not a fit configuration", saved.display()))?;
-            let (now_v, was_v) = (serde_json::to_value(&cfg)?, serde_json::to_value(&was)?);
+            // Pinning `iters` (writing it where the automatic strategy chose it) is part of
+            // raising it.
+            let unpin_iters = |c: &FitConfig| {
+                let mut c = c.clone();
+                if let Some(p) = &mut c.pinned {
+                    p.retain(|k| k != "iters");
+                }
+                serde_json::to_value(&c)
+            };
+            let (now_v, was_v) = (unpin_iters(&cfg)?, unpin_iters(&was)?);
             let differ: Vec<String> = match (now_v.as_object(), was_v.as_object()) {
                 (Some(n), Some(w)) => n
                     .iter()
@@ -601,6 +614,7 @@ pub fn run(a: FitArgs) -> Result<()> {
             }
             cfg = FitConfig {
                 iters: cfg.iters,
+                pinned: cfg.pinned.clone(),
                 ..was
             };
         }

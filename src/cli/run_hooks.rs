@@ -117,7 +117,7 @@ impl FitHooks for RunHooks {
 
 /// An initialisation score as printed: its MS-SSIM, or the loss of a negated-loss score
 /// (`[init] score = "loss"`).
-fn score_text(s: f64) -> String {
+pub(super) fn score_text(s: f64) -> String {
     if s < 0.0 {
         format!("loss {:.4}", -s)
     } else {

@@ -91,7 +91,7 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
         std::fs::write(
             &cfg,
             format!(
-                "iters = {iters}\nfree = [\"E\"]\nprecision = \"f32\"\nframes = 5\n[init]\ncandidates = 3\nframes = 3\n[loss.spectral]\npatch = [16, 16]\nphase_mask = 1e-3\n"
+                "iters = {iters}\noptimizer = \"adam\"\nmulti_start = 1\nfree = [\"E\"]\nprecision = \"f32\"\nframes = 5\n[init]\ncandidates = 3\nrounds = 1\nframes = 3\n[loss.spectral]\npatch = [16, 16]\nphase_mask = 1e-3\n"
             ),
         )
         .unwrap()
@@ -121,10 +121,22 @@ fn quick_demo_then_fit_and_resume_on_its_inputs() {
     let o = r4d(&args);
     ok(&o);
     let err = String::from_utf8_lossy(&o.stderr);
+    // The automatic strategy (the default) keeps what the file writes and decides the rest.
     assert!(
-        err.contains("fit: init (3 candidates x 3 frames) -> descent (1 iterations, adam)"),
+        err.contains("fit: init (3 candidates x 3 frames) -> descent (1 iterations, adam, restarted after 8 iterations without progress) (strategy = \"auto\")")
+            && err.contains("iters = 1: as written (pinned)")
+            && err.contains("init.rounds = 1: as written (pinned)")
+            && err.contains("init.score = loss")
+            && err.contains("stall = 8"),
         "the plan is printed: {err}"
     );
+    let summary = json(&run.join("summary.json"));
+    assert_eq!(summary["strategy"], "auto");
+    assert!(summary["decisions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|d| d["setting"] == "init.sampler" && d["value"] == "natural"));
     let params = json(&run.join("params.json"));
     assert_eq!(params["parts"].as_array().unwrap().len(), 2);
     assert_eq!(json(&run.join("checkpoint.json"))["iters_done"], 1);
@@ -357,7 +369,7 @@ fn physgaussian_fit_jelly_arch_recovers_e_over_density() {
     let cfg = d.join("fit.toml");
     std::fs::write(
         &cfg,
-        "iters = 25\nlr = 0.15\nbeta1 = 0.6\nprecision = \"f32\"\nfree = [\"E\", \"density\"]\n[init]\ncandidates = 16\n[loss.spectral]\nphase_mask = 1e-3\n[[parts]]\nid = 0\nbounds = { E = [1e4, 1e7], density = [100.0, 3000.0] }\n",
+        "strategy = \"fixed\"\niters = 25\nlr = 0.15\nbeta1 = 0.6\nprecision = \"f32\"\nfree = [\"E\", \"density\"]\n[init]\ncandidates = 16\n[loss.spectral]\nphase_mask = 1e-3\n[[parts]]\nid = 0\nbounds = { E = [1e4, 1e7], density = [100.0, 3000.0] }\n",
     )
     .unwrap();
     let s = |n: &str| f.join(n).to_str().unwrap().to_string();

@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use r4d_mpm::{PartParams, ParticleSet, SimConfig};
-use resonance4d::video_fit::{FitConfig, Objective, VideoProblem, View};
+use resonance4d::video_fit::{FitConfig, Objective, Strategy, VideoProblem, View};
 use std::path::Path;
 
 /// A small elastic block (one part, or two stacked parts) clamped at its base and pushed
@@ -116,6 +116,8 @@ pub fn jelly(e: f64, rho: f64) -> PartParams {
 
 pub fn fit_config(iters: usize) -> FitConfig {
     let mut c = FitConfig {
+        // As written here: the automatic strategy would decide the stages and their budgets.
+        strategy: Strategy::Fixed,
         iters,
         lr: 0.1,
         beta1: 0.6,

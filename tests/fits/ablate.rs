@@ -43,7 +43,7 @@ fn ablations_shard_merge_and_refuse_broken_shard_sets() {
     let cfg = base.join("fit.toml");
     std::fs::write(
         &cfg,
-        "iters = 1\nlr = 0.1\n[init]\ncandidates = 2\nframes = 2\n",
+        "strategy = \"fixed\"\niters = 1\nlr = 0.1\n[init]\ncandidates = 2\nframes = 2\n",
     )
     .unwrap();
     let cfg = cfg.to_str().unwrap();
@@ -190,7 +190,7 @@ fn sharded_initialisation_merges_and_resumes_to_the_unsharded_fit() {
     let cfg = base.join("fit.toml");
     std::fs::write(
         &cfg,
-        "iters = 2\nlr = 0.1\n[init]\ncandidates = 5\nframes = 2\n",
+        "strategy = \"fixed\"\niters = 2\nlr = 0.1\n[init]\ncandidates = 5\nframes = 2\n",
     )
     .unwrap();
     let cfg = cfg.to_str().unwrap();
@@ -243,7 +243,11 @@ fn sharded_initialisation_merges_and_resumes_to_the_unsharded_fit() {
     );
     // A shard of another fit's settings is refused.
     let other = base.join("other.toml");
-    std::fs::write(&other, "iters = 2\n[init]\ncandidates = 5\nframes = 3\n").unwrap();
+    std::fs::write(
+        &other,
+        "strategy = \"fixed\"\niters = 2\n[init]\ncandidates = 5\nframes = 3\n",
+    )
+    .unwrap();
     let mixed = base.join("mixed");
     let m = mixed.to_str().unwrap();
     ok(&[
@@ -315,7 +319,7 @@ fn runs_trust_nothing_another_run_wrote() {
     .unwrap();
     std::fs::write(
         base.join("fit.toml"),
-        "iters = 1\nlr = 0.1\n[init]\ncandidates = 2\nframes = 2\n",
+        "strategy = \"fixed\"\niters = 1\nlr = 0.1\n[init]\ncandidates = 2\nframes = 2\n",
     )
     .unwrap();
     // Fits run from `base` with paths relative to it.

@@ -375,7 +375,11 @@ fn broken_folders_are_typed_errors_naming_the_file() {
     // A fit that asks for more frames than the video has, and nothing written before.
     let out_dir = base.join("run");
     let cfg = base.join("fit.toml");
-    std::fs::write(&cfg, "iters = 1\nframes = 40\n[init]\nenabled = false\n").unwrap();
+    std::fs::write(
+        &cfg,
+        "strategy = \"fixed\"\niters = 1\nframes = 40\n[init]\nenabled = false\n",
+    )
+    .unwrap();
     let out = r4d(&[
         "fit",
         "--dataset",
@@ -446,7 +450,7 @@ fn multi_view_fit_from_a_pacnerf_folder_recovers_youngs_modulus() {
     let fit_toml = base.join("fit.toml");
     std::fs::write(
         &fit_toml,
-        "iters = 25\nlr = 0.15\nfree = [\"E\"]\n[init]\nenabled = false\n",
+        "strategy = \"fixed\"\niters = 25\nlr = 0.15\nfree = [\"E\"]\n[init]\nenabled = false\n",
     )
     .unwrap();
     let run = base.join("run");

@@ -60,7 +60,11 @@ fn release_folder(scene: &str, root: &Path) -> PathBuf {
 /// `r4d fit --dataset` holding the config's parameters (no initialisation, no iteration).
 fn fit_truth(dir: &Path, run: &Path) {
     let toml = run.with_extension("toml");
-    std::fs::write(&toml, "iters = 0\n[init]\nenabled = false\n").unwrap();
+    std::fs::write(
+        &toml,
+        "strategy = \"fixed\"\niters = 0\n[init]\nenabled = false\n",
+    )
+    .unwrap();
     run_ok(&[
         "fit",
         "--dataset",

@@ -212,11 +212,15 @@ impl SceneSpec {
     /// The fit settings of this scene with `opts` applied.
     pub fn fit_config(&self, opts: &DemoOptions) -> FitConfig {
         let mut c = self.fit.clone();
+        // Asked for: kept by the automatic strategy too.
+        let pin = |c: FitConfig, key| if c.strategy.is_auto() { c.pin(key) } else { c };
         if let Some(i) = opts.iters {
             c.iters = i;
+            c = pin(c, "iters");
         }
         if let Some(n) = opts.candidates {
             c.init.candidates = n;
+            c = pin(c, "init.candidates");
         }
         c.init.seed = opts.seed;
         c.init.frames = c.init.frames.min(self.config.time.frames);

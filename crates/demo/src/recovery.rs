@@ -151,7 +151,9 @@ pub fn run_scene(
         description: spec.description.clone(),
         particles: spec.particles.x.len(),
         views: spec.cameras.len(),
-        plan: cfg.describe_plan(),
+        plan: r4d_optim::video::strategy::resolve(&cfg, &spec.config.parts)?
+            .config
+            .describe_plan(),
         params: Vec::new(),
         loss_truth: None,
         loss_fit: None,

@@ -741,6 +741,7 @@ pub fn run_init(
         })
         .collect();
     let cfg = r4d_optim::video::FitConfig {
+        strategy: r4d_optim::video::Strategy::Fixed,
         precision: Precision::F32,
         free: Some(vec!["E".to_string()]),
         parts,

@@ -51,6 +51,8 @@ pub fn main() -> Result<(), Box<dyn std::error::Error>> {
         .camera(camera)
         .rendered_from(&truth)?;
     let mut fit = FitConfig {
+        // As written here: the automatic strategy would decide the stages and their budgets.
+        strategy: Strategy::Fixed,
         iters: 4,
         free: Some(vec!["E".into()]),
         ..Default::default()

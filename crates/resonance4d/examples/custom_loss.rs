@@ -62,6 +62,8 @@ pub fn main() -> Result<(), Box<dyn std::error::Error>> {
         .background([0.93, 0.92, 0.86])
         .rendered_from(&truth)?;
     let mut fit = FitConfig {
+        // As written here: the automatic strategy would decide the stages and their budgets.
+        strategy: Strategy::Fixed,
         iters: 25,
         free: Some(vec!["E".into()]),
         ..Default::default()

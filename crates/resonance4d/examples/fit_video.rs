@@ -25,6 +25,8 @@ pub fn main() -> Result<(), Box<dyn std::error::Error>> {
         .rendered_from(&truth)?;
 
     let mut fit = FitConfig {
+        // As written here: the automatic strategy would decide the stages and their budgets.
+        strategy: Strategy::Fixed,
         iters: 20,
         free: Some(vec!["E".into()]),
         ..Default::default()

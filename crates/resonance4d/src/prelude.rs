@@ -20,7 +20,7 @@ pub use r4d_mpm::{
 };
 pub use r4d_optim::video::fit::NoHooks;
 pub use r4d_optim::video::{
-    run_fit, run_fit_with_loss, FitConfig, FitOutcome, Objective, VideoProblem, View,
+    run_fit, run_fit_with_loss, FitConfig, FitOutcome, Objective, Strategy, VideoProblem, View,
 };
 pub use r4d_optim::{FitError, Initializer, LatinHypercubeInit, LogGridInit, ParamKind};
 pub use r4d_splat::{

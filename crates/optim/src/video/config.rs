@@ -255,15 +255,53 @@ impl StageKind {
     }
 }
 
+/// The settings the automatic strategy decides (`strategy = "auto"`), each named as in
+/// `FIT.toml`; `pinned` keeps any of them as written.
+pub const AUTO_KEYS: &[&str] = &[
+    "iters",
+    "optimizer",
+    "flat_probe",
+    "multi_start",
+    "multi_start_iters",
+    "spread",
+    "stall",
+    "init.enabled",
+    "init.candidates",
+    "init.rounds",
+    "init.sampler",
+    "init.score",
+];
+
+/// The keys of [`AUTO_KEYS`] that `table` (a `FIT.toml`) writes.
+fn written_keys(table: &toml::Table) -> Vec<String> {
+    AUTO_KEYS
+        .iter()
+        .filter(|k| match k.split_once('.') {
+            Some((t, key)) => table
+                .get(t)
+                .and_then(|v| v.as_table())
+                .is_some_and(|t| t.contains_key(key)),
+            None => table.contains_key(**k),
+        })
+        .map(|k| k.to_string())
+        .collect()
+}
+
 /// Settings of a video fit.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct FitConfig {
-    /// `fixed` (default): the stages and settings as written; `auto`: decided from the
-    /// problem ([`crate::video::strategy`]; `stages` must then be absent). Not part of the
-    /// checkpoint's fingerprint while `fixed`.
-    #[serde(skip_serializing_if = "super::strategy::Strategy::is_fixed")]
+    /// `auto` (default): the settings of [`AUTO_KEYS`] are decided from the problem
+    /// ([`crate::video::strategy`]), except those `pinned`; `fixed`: every setting as
+    /// written. Not part of the checkpoint's fingerprint while `auto`.
+    #[serde(skip_serializing_if = "super::strategy::Strategy::is_auto")]
     pub strategy: super::strategy::Strategy,
+    /// Under `strategy = "auto"`: the settings (of [`AUTO_KEYS`]) kept as written instead of
+    /// decided. [`FitConfig::load`] sets it to those the file writes, unless the file lists
+    /// `pinned` itself (a saved config does); `None` (a config built in code): none. Not
+    /// part of the checkpoint's fingerprint while `None`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pinned: Option<Vec<String>>,
     /// The stages that run, in order: `init`, `multi_start`, `descent` (in that order when
     /// listed), then any of `valley`, `shear_restarts`, `gradient_sampling` in the order
     /// listed. Unlisted stages do not run; a listed one must be able to (its budget above
@@ -387,6 +425,7 @@ impl Default for FitConfig {
     fn default() -> Self {
         FitConfig {
             strategy: Default::default(),
+            pinned: None,
             stages: None,
             budget: None,
             evals: None,
@@ -673,11 +712,36 @@ impl FitConfig {
     pub fn load(path: &Path) -> Result<FitConfig, FitError> {
         let text = r4d_fsio::read_to_string_bounded(path, r4d_fsio::MAX_TEXT_BYTES)
             .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
-        let c: FitConfig = r4d_mpm::strict::decode(&text, r4d_mpm::strict::Format::Toml)
+        let mut c: FitConfig = r4d_mpm::strict::decode(&text, r4d_mpm::strict::Format::Toml)
             .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
+        if !c.strategy.is_fixed() && c.pinned.is_none() {
+            // Decoded above, so the text is valid TOML.
+            let table: toml::Table = text
+                .parse()
+                .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
+            c.pinned = Some(written_keys(&table));
+        }
         c.validate()
             .map_err(|e| FitError::Input(format!("{}: {e}", path.display())))?;
         Ok(c)
+    }
+
+    /// Whether the automatic strategy keeps `key` (one of [`AUTO_KEYS`]) as written.
+    pub fn is_pinned(&self, key: &str) -> bool {
+        self.pinned
+            .as_ref()
+            .is_some_and(|p| p.iter().any(|k| k == key))
+    }
+
+    /// The config with `key` (one of [`AUTO_KEYS`]) added to `pinned`: the automatic
+    /// strategy keeps its value as set.
+    pub fn pin(mut self, key: &str) -> Self {
+        let p = self.pinned.get_or_insert_with(Vec::new);
+        if !p.iter().any(|k| k == key) {
+            p.push(key.to_string());
+            p.sort();
+        }
+        self
     }
 
     /// Checks the values.
@@ -696,10 +760,10 @@ impl FitConfig {
         if self.checkpoint_every == 0 {
             return bad("checkpoint_every must be at least 1".into());
         }
-        if !self.strategy.is_fixed() && self.stages.is_some() {
-            return bad(
-                "strategy = \"auto\" with stages = [...]: the automatic strategy decides the stages; remove `stages` or set strategy = \"fixed\"".into(),
-            );
+        for k in self.pinned.iter().flatten() {
+            if !AUTO_KEYS.contains(&k.as_str()) {
+                return bad(r4d_mpm::strict::unknown_value("pinned", k, AUTO_KEYS));
+            }
         }
         self.check_stages()?;
         if let Some(b) = &self.budget {
@@ -1113,6 +1177,51 @@ mod tests {
         assert!(!toml::to_string(&FitConfig::default())
             .unwrap()
             .contains("stages"));
+    }
+
+    /// Under the automatic strategy, the decided settings a file writes are pinned, a saved
+    /// config's own `pinned` list survives a round trip, and a fixed file pins nothing.
+    #[test]
+    fn a_loaded_file_pins_the_decided_settings_it_writes() {
+        let dir = std::env::temp_dir().join(format!("r4d-pins-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let load = |name: &str, text: &str| {
+            let p = dir.join(name);
+            std::fs::write(&p, text).unwrap();
+            FitConfig::load(&p)
+        };
+        let c = load(
+            "a.toml",
+            "iters = 5
+lr = 0.2
+[init]
+candidates = 9
+frames = 4
+",
+        )
+        .unwrap();
+        assert_eq!(
+            c.pinned.as_deref(),
+            Some(&["iters".to_string(), "init.candidates".to_string()][..])
+        );
+        assert!(c.is_pinned("iters") && !c.is_pinned("init.rounds"));
+        // A saved config: its list, not its keys (toml writes every key).
+        let saved = toml::to_string(&c).unwrap();
+        assert!(!saved.contains("strategy"), "auto is the default: {saved}");
+        assert_eq!(load("b.toml", &saved).unwrap().pinned, c.pinned);
+        let fixed = load("c.toml", "strategy = \"fixed\"\niters = 5\n").unwrap();
+        assert_eq!(fixed.pinned, None);
+        assert!(toml::to_string(&fixed)
+            .unwrap()
+            .contains("strategy = \"fixed\""));
+        let e = load("d.toml", "pinned = [\"iter\"]\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("d.toml") && e.contains("`iter`") && e.contains("iters"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

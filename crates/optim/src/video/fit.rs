@@ -488,12 +488,15 @@ fn score_candidate(
 /// simulated for `init.frames` frames and scored by MS-SSIM against the reference. With
 /// `[init] rounds = R > 1`, each further round samples as many Latin hypercube candidates
 /// again inside the box of the best ones so far ([`narrowed`]); the outcome ranks every
-/// round's candidates together (indices continue across rounds).
+/// round's candidates together (indices continue across rounds). The settings are those
+/// [`run_fit`] runs with ([`super::strategy::resolve`]).
 pub fn initialize(
     problem: &VideoProblem,
     cfg: &FitConfig,
     hooks: &mut dyn FitHooks,
 ) -> Result<(ParamSpace, InitOutcome), FitError> {
+    let resolved = super::strategy::resolve(cfg, &problem.config.parts)?;
+    let cfg = &resolved.config;
     let (space, obj, search, init) = init_setup(problem, cfg)?;
     let evaluate =
         |_i: usize, theta: &[f64]| score_candidate(problem, &obj, &space, theta, cfg.init.score);
@@ -645,12 +648,19 @@ pub fn initialize_shard(
             "shard {shard} of {of}: need 0 <= I < N"
         )));
     }
+    let resolved = super::strategy::resolve(cfg, &problem.config.parts)?;
+    let cfg = &resolved.config;
     if cfg.init.rounds > 1 {
         return Err(FitError::Input(format!(
-            "[init] rounds = {}: a further round samples around the best candidates of the \
-             earlier ones, so the initialisation cannot be split into shards; use rounds = 1 \
-             with --shard",
-            cfg.init.rounds
+            "[init] rounds = {}{}: a further round samples around the best candidates of the \
+             earlier ones, so the initialisation cannot be split into shards; write rounds = 1 \
+             in the fit settings' [init] table to use --shard",
+            cfg.init.rounds,
+            if cfg.strategy.is_auto() && !cfg.is_pinned("init.rounds") {
+                " (the automatic strategy's)"
+            } else {
+                ""
+            }
         )));
     }
     let (space, obj, search, init) = init_setup(problem, cfg)?;
@@ -678,7 +688,8 @@ pub fn initialize_shard(
 /// The fingerprint of a video fit ([`FitState::fingerprint`]): the simulation settings and
 /// starting parameters, the particles and their parts, the scene, the link, the render
 /// settings, every view's camera and reference video, the frame rate, and every fit setting
-/// but `iters` (raising it extends a finished run). The backend is not part of it.
+/// as the automatic strategy resolves them ([`super::strategy::resolve`]) but `iters`
+/// (raising it extends a finished run). The backend is not part of it.
 pub fn fingerprint(problem: &VideoProblem, cfg: &FitConfig) -> String {
     let mut f = Fingerprint::new();
     f.text("video fit");
@@ -711,10 +722,15 @@ pub fn fingerprint(problem: &VideoProblem, cfg: &FitConfig) -> String {
         }
     }
     f.word(problem.fps.to_bits());
-    let mut settings = cfg.clone();
+    // The settings that run (resolving is idempotent, so a resolved config prints the same).
+    let mut settings = super::strategy::resolve(cfg, &problem.config.parts)
+        .map_or_else(|_| cfg.clone(), |r| r.config);
     settings.iters = 0;
     settings.budget = None;
     settings.evals = None;
+    if let Some(p) = &mut settings.pinned {
+        p.retain(|k| k != "iters");
+    }
     mix_json(&mut f, &settings);
     f.finish()
 }

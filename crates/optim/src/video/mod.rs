@@ -22,7 +22,9 @@ pub use crate::restarts::{Restart, RestartsConfig, ShearRestarts};
 pub use crate::sampling::{GradientSampling, SamplingConfig, SamplingRound};
 pub use crate::space::{Granularity, ParamSpace};
 pub use crate::valley::{ValleyConfig, ValleyRound, ValleySearch};
-pub use config::{FitConfig, InitConfig, InitSampler, InitScore, OptimizerKind, StageKind};
+pub use config::{
+    FitConfig, InitConfig, InitSampler, InitScore, OptimizerKind, StageKind, AUTO_KEYS,
+};
 pub use fit::{
     fingerprint, run_fit, run_fit_with_loss, FitEvent, FitHooks, FitOutcome, FitState, IterRecord,
     StartResult,
@@ -31,3 +33,4 @@ pub use problem::{
     Evaluation, Objective, ObjectiveBuilder, StageProfile, TimeMap, VideoProblem, View,
     INIT_MEMORY_BUDGET_BYTES,
 };
+pub use strategy::Strategy;
