@@ -136,7 +136,12 @@ pub fn run(a: BenchRecoveryArgs) -> Result<()> {
         .as_deref()
         .map(super::ablate::parse_shard)
         .transpose()?;
+    let strategy = fit.as_ref().map_or_else(
+        || r4d_optim::video::FitConfig::default().strategy,
+        |c| c.strategy,
+    );
     let settings = BenchSettings {
+        strategy,
         size: if a.small { Size::Small } else { Size::Full },
         budget,
         evals: a.evals,

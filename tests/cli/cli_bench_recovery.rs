@@ -112,6 +112,22 @@ fn bench_recovery_fits_scenes_resumes_and_refuses_other_settings() {
     ]);
     assert!(!o.status.success());
     assert!(text(&o).contains("bench.json"), "{}", text(&o));
+    // A folder from before the automatic strategy was the default (its bench.json records
+    // no strategy: the fixed defaults) is not continued with the automatic one.
+    let bench_json = out.join("bench.json");
+    let saved = std::fs::read_to_string(&bench_json).unwrap();
+    let mut old: serde_json::Value = serde_json::from_str(&saved).unwrap();
+    assert_eq!(old["settings"]["strategy"], "auto");
+    old["settings"].as_object_mut().unwrap().remove("strategy");
+    std::fs::write(&bench_json, old.to_string()).unwrap();
+    let o = bench(&out, &["--resume"]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("bench.json") && text(&o).contains("\"fixed\""),
+        "{}",
+        text(&o)
+    );
+    std::fs::write(&bench_json, saved).unwrap();
     // A result file that is not one is named.
     std::fs::write(out.join("scenes/foam-0.json"), b"{not json").unwrap();
     let o = r4d(&["bench-recovery", "--out", out.to_str().unwrap(), "--report"]);

@@ -16,7 +16,7 @@ use crate::random::{self, Class, Load};
 use crate::{profiles, FitHooks, Size};
 use r4d_optim::space::get;
 use r4d_optim::video::fit::run_fit;
-use r4d_optim::video::FitConfig;
+use r4d_optim::video::{FitConfig, Strategy};
 use r4d_optim::{Compute, FitError, ParamKind};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -41,6 +41,16 @@ pub struct BenchSettings {
     /// are the materials' defaults, and the budget is the one above.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fit: Option<FitConfig>,
+    /// The strategy of the settings that run (`fit`'s, else the default's): a run folder
+    /// made while the default was another is not continued with this one. Folders that do
+    /// not record it were made with the fixed defaults.
+    #[serde(default = "fixed")]
+    pub strategy: Strategy,
+}
+
+/// What a `bench.json` without `strategy` was made with.
+fn fixed() -> Strategy {
+    Strategy::Fixed
 }
 
 /// One free parameter's recovery.
