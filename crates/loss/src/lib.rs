@@ -58,6 +58,7 @@
 pub mod banded_loss;
 pub mod bands;
 pub mod dms;
+mod entries;
 mod error;
 /// PNG folders and `.npy` videos ([`r4d_frames::io`]).
 pub use r4d_frames::io;

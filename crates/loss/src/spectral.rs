@@ -50,10 +50,12 @@
 //! Memory: the videos are read band by band; the only temporaries are a band's gray frames
 //! and a few `(T - 1) x ph x pw` buffers per worker.
 
+use crate::entries::{entries, EntryOut, EntryParams};
 use crate::error::{Input, LossError};
 use crate::par;
 use crate::real::Real;
 use crate::real_fft::RealFft;
+use crate::rows::Isa;
 use crate::video::{check_grad_len, check_pair, Video};
 use rustfft::num_complex::Complex;
 use rustfft::{Fft, FftPlanner};
@@ -167,6 +169,8 @@ pub struct Spectral {
     /// Real-input DFTs along `w`.
     rfft_w: RealFft,
     scratch: usize,
+    /// The instruction set of the per-entry pass.
+    isa: Isa,
 }
 
 impl std::fmt::Debug for Spectral {
@@ -246,6 +250,7 @@ impl Spectral {
             ifft_h,
             rfft_w,
             scratch,
+            isa: Isa::detect(),
         })
     }
 
@@ -426,7 +431,7 @@ impl Spectral {
             self.forward(&ws.dr, &mut ws.z, &mut ws.tmp, &mut ws.scratch);
             self.forward(&ws.dg, &mut ws.zg, &mut ws.tmp, &mut ws.scratch);
             let gw = grad.as_ref().map(|(w, _)| *w);
-            let s = self.entries_pass(&ws.z, &ws.zg, gw.map(|w| (w, &mut ws.g[..])));
+            let s = self.entries_pass(&ws.z, &ws.zg, gw.map(|w| (w, &mut ws.g[..])), &mut ws.ev);
             sums.mag += s.mag;
             sums.phase += s.phase;
             sums.masked += s.masked;
@@ -511,87 +516,77 @@ impl Spectral {
 
     /// Values of every entry of the spectrum whose half is `zr` (layout `(kh, kw, kt)`,
     /// `kw <= pw / 2`); with `grad`, also the half of `G` of the rendered spectrum into `g`
-    /// (same layout).
+    /// (same layout). The per-entry arithmetic runs lane-wise over the whole half
+    /// ([`entries`]); this pass weighs the Hermitian pairs and sums in entry order.
     fn entries_pass(
         &self,
         zr: &[C64],
         zg: &[C64],
         grad: Option<(GradWeights, &mut [C64])>,
+        ev: &mut EntryBufs,
     ) -> BandSums {
         let [ph, pw] = self.cfg.patch;
         let (td, nw) = (self.frames - 1, self.rfft_w.bins());
-        let s = match self.cfg.norm {
+        let len = td * ph * nw;
+        let scale = match self.cfg.norm {
             FftNorm::Backward => 1.0,
             FftNorm::Ortho => 1.0 / ((td * ph * pw) as f64).sqrt(),
         };
-        let eps = self.cfg.eps;
-        let mask = self.cfg.phase_mask;
-        let mut sums = BandSums::default();
-        let (gw, mut g) = match grad {
-            Some((w, g)) => (Some(w), Some(g)),
-            None => (None, None),
+        let params = EntryParams {
+            scale,
+            eps: self.cfg.eps,
+            mask: self.cfg.phase_mask,
         };
+        let mut g = grad.map(|(w, g)| ((w.mag, w.phase), &mut g[..len]));
+        entries(
+            self.isa,
+            &zr[..len],
+            &zg[..len],
+            params,
+            EntryOut {
+                abs_dm: &mut ev.abs_dm[..len],
+                cos: &mut ev.cos[..len],
+                keep: &mut ev.keep[..len],
+                grad: g.as_mut().map(|(w, g)| (*w, &mut **g)),
+            },
+        );
+        let (abs_dm, cos, keep) = (&ev.abs_dm[..len], &ev.cos[..len], &ev.keep[..len]);
+        let mut sums = BandSums::default();
+        let mut kept = 0.0;
         for kh in 0..ph {
             let mh = (ph - kh) % ph;
             for kw in 0..nw {
+                let row = (kh * nw + kw) * td;
                 // The planes kw = 0 and kw = pw / 2 hold their own conjugates (kw = -kw mod
                 // pw); every other entry stands for itself and its conjugate in the half
                 // that is not stored.
-                let self_conjugate = kw == 0 || 2 * kw == pw;
-                let row = (kh * nw + kw) * td;
+                if kw != 0 && 2 * kw != pw {
+                    for e in row..row + td {
+                        sums.mag += 2.0 * abs_dm[e];
+                        sums.phase += 2.0 * cos[e];
+                        kept += 2.0 * keep[e];
+                    }
+                    continue;
+                }
                 let mrow = (mh * nw + kw) * td;
                 for kt in 0..td {
                     let e = row + kt;
-                    let m = if self_conjugate {
-                        mrow + if kt == 0 { 0 } else { td - kt }
-                    } else {
-                        usize::MAX
-                    };
+                    let m = mrow + if kt == 0 { 0 } else { td - kt };
                     if m < e {
                         continue;
                     }
                     let weight = if m == e { 1.0 } else { 2.0 };
-                    let fr = zr[e] * s;
-                    let fg = zg[e] * s;
-                    let rr = (fr.re * fr.re + fr.im * fr.im).sqrt();
-                    let rg = (fg.re * fg.re + fg.im * fg.im).sqrt();
-                    // ln(1 + rr) - ln(1 + rg) with one logarithm (exactly 0 when rr = rg).
-                    let dm = ((rr - rg) / (1.0 + rg)).ln_1p();
-                    sums.mag += weight * dm.abs();
-                    let keep = mask.is_none_or(|t| rr >= t && rg >= t);
-                    let qr = 1.0 / (rr + eps);
-                    let pg = fg * (1.0 / (rg + eps));
-                    if keep {
-                        let pr = fr * qr;
-                        sums.phase += weight * (pr.re * pg.re + pr.im * pg.im);
-                    } else {
-                        sums.masked += if m == e { 1 } else { 2 };
-                    }
-                    if let (Some(w), Some(g)) = (gw, g.as_deref_mut()) {
-                        let mut ge = C64::default();
-                        if rr > 0.0 {
-                            let unit = fr * (1.0 / rr);
-                            if dm != 0.0 {
-                                ge += unit * (w.mag * dm.signum() / (1.0 + rr));
-                            }
-                            if keep {
-                                // G_F = q G_P - q^2 Re(conj(G_P) F) F / r, G_P = w.phase P_g.
-                                let gp = pg * w.phase;
-                                let proj = gp.re * unit.re + gp.im * unit.im;
-                                ge += gp * qr - unit * (qr * qr * proj * rr);
-                            }
-                        } else if keep {
-                            ge = pg * (w.phase * qr);
-                        }
-                        ge *= s;
-                        g[e] = ge;
-                        if self_conjugate {
-                            g[m] = ge.conj();
-                        }
+                    sums.mag += weight * abs_dm[e];
+                    sums.phase += weight * cos[e];
+                    kept += weight * keep[e];
+                    if let Some((_, g)) = g.as_mut() {
+                        g[m] = g[e].conj();
                     }
                 }
             }
         }
+        // Every entry of the full spectrum counted once: `kept` of them kept.
+        sums.masked = td * ph * pw - kept as usize;
         sums
     }
 
@@ -636,6 +631,11 @@ impl Workspace {
             tmp: vec![C64::default(); half.max(td * ph * sp.rfft_w.buffer_len())],
             g: vec![C64::default(); half],
             scratch: vec![C64::default(); sp.scratch],
+            ev: EntryBufs {
+                abs_dm: vec![0.0; half],
+                cos: vec![0.0; half],
+                keep: vec![0.0; half],
+            },
         }
     }
 }
@@ -665,6 +665,15 @@ struct Workspace {
     /// Transposes and the real-input DFTs' work buffer.
     tmp: Vec<C64>,
     scratch: Vec<C64>,
+    /// The per-entry values of one patch's half spectrum.
+    ev: EntryBufs,
+}
+
+/// Per-entry values of one half spectrum (see [`entries`]).
+struct EntryBufs {
+    abs_dm: Vec<f64>,
+    cos: Vec<f64>,
+    keep: Vec<f64>,
 }
 
 /// Transposes the `rows x cols` matrix `src` into `dst` (`cols x rows`).
