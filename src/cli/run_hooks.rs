@@ -105,6 +105,29 @@ impl FitHooks for RunHooks {
                  than 0.01% over the last `stall` iterations): restarting from seed {seed}: {}",
                 named_values(names, theta).join(" ")
             ),
+            FitEvent::Diverged {
+                iter,
+                error,
+                retreat,
+                ends,
+                names,
+            } => {
+                let then = match retreat {
+                    Some(t) => format!(
+                        "back to the best point {} with half the learning rate",
+                        named_values(names, t).join(" ")
+                    ),
+                    None => "the trust region shrinks".to_string(),
+                };
+                eprintln!("descent: iteration {iter} diverged ({error}): step rejected, {then}");
+                if ends {
+                    eprintln!(
+                        "descent: {} iterations in a row diverged: the descent ends at the best \
+                         point",
+                        resonance4d::video_fit::fit::MAX_DIVERGED
+                    );
+                }
+            }
             _ => {}
         }
     }

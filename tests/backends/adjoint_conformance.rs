@@ -352,69 +352,34 @@ fn particles_leaving_the_grid_match_the_cpu_adjoint(ctx: &Gpu) {
     }
 }
 
-/// The suite on each GPU engine (ignored where the build finds no GPU driver).
-macro_rules! on_engine {
-    ($engine:ident) => {
-        mod $engine {
-            #[test]
-            #[cfg_attr(
-                not(r4d_gpu),
-                ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
-            )]
-            fn device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly() {
-                if let Some(b) = super::Gpu::$engine(stringify!(
-                    device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly
-                )) {
-                    super::device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly(&b);
-                    b.check(stringify!(
-                        device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly
-                    ));
-                }
-            }
-            #[test]
-            #[cfg_attr(
-                not(r4d_gpu),
-                ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
-            )]
-            fn per_particle_gradients_are_reduced_per_slot() {
-                if let Some(b) =
-                    super::Gpu::$engine(stringify!(per_particle_gradients_are_reduced_per_slot))
-                {
-                    super::per_particle_gradients_are_reduced_per_slot(&b);
-                    b.check(stringify!(per_particle_gradients_are_reduced_per_slot));
-                }
-            }
-            #[test]
-            #[cfg_attr(
-                not(r4d_gpu),
-                ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
-            )]
-            fn device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials() {
-                if let Some(b) = super::Gpu::$engine(stringify!(
-                    device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials
-                )) {
-                    super::device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials(&b);
-                    b.check(stringify!(
-                        device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials
-                    ));
-                }
-            }
-            #[test]
-            #[cfg_attr(
-                not(r4d_gpu),
-                ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
-            )]
-            fn particles_leaving_the_grid_match_the_cpu_adjoint() {
-                if let Some(b) = super::Gpu::$engine(stringify!(
-                    particles_leaving_the_grid_match_the_cpu_adjoint
-                )) {
-                    super::particles_leaving_the_grid_match_the_cpu_adjoint(&b);
-                    b.check(stringify!(particles_leaving_the_grid_match_the_cpu_adjoint));
-                }
+/// Each check on each GPU engine (ignored where the build finds no GPU driver), as
+/// `CHECK::wgpu` and `CHECK::vulkan`: the test harness takes tests in name order, so the two
+/// engines' runs of a check sit side by side and run at the same time (each engine serves
+/// one test at a time; their first pipeline compilations on lavapipe, tens of seconds each,
+/// then overlap).
+macro_rules! on_engines {
+    ($check:ident) => {
+        mod $check {
+            on_engines!(@engine $check wgpu);
+            on_engines!(@engine $check vulkan);
+        }
+    };
+    (@engine $check:ident $engine:ident) => {
+        #[test]
+        #[cfg_attr(
+            not(r4d_gpu),
+            ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
+        )]
+        fn $engine() {
+            if let Some(b) = super::Gpu::$engine(stringify!($check)) {
+                super::$check(&b);
+                b.check(stringify!($check));
             }
         }
     };
 }
 
-on_engine!(wgpu);
-on_engine!(vulkan);
+on_engines!(device_adjoint_matches_the_parallel_cpu_adjoint_on_jelly);
+on_engines!(per_particle_gradients_are_reduced_per_slot);
+on_engines!(device_adjoint_matches_the_parallel_cpu_adjoint_on_plastic_materials);
+on_engines!(particles_leaving_the_grid_match_the_cpu_adjoint);

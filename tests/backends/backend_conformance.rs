@@ -262,7 +262,7 @@ type = "bounding_box"
     not(r4d_gpu),
     ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
 )]
-fn wgpu_jelly_beam_with_every_boundary_condition_matches_cpu() {
+fn elastic_jelly_beam_with_every_boundary_condition_matches_cpu_on_wgpu() {
     let Some(ctx) = gpu::wgpu("wgpu_jelly_beam") else {
         return;
     };
@@ -279,7 +279,7 @@ fn wgpu_jelly_beam_with_every_boundary_condition_matches_cpu() {
     not(r4d_gpu),
     ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
 )]
-fn wgpu_compare_exchange_scatter_matches_cpu() {
+fn compare_exchange_scatter_matches_cpu_on_wgpu() {
     let Some(c) = gpu_or_skip_with("wgpu_cas", false) else {
         return;
     };
@@ -297,7 +297,7 @@ fn wgpu_compare_exchange_scatter_matches_cpu() {
     not(r4d_gpu),
     ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
 )]
-fn wgpu_two_part_object_matches_cpu() {
+fn elastic_two_part_object_matches_cpu_on_wgpu() {
     let Some(ctx) = gpu::wgpu("wgpu_two_part") else {
         return;
     };
@@ -368,7 +368,7 @@ fn path_dependent_materials_match_cpu<B: MpmKernels>(engine: &str, make: impl Fn
     not(r4d_gpu),
     ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
 )]
-fn wgpu_path_dependent_materials_match_cpu() {
+fn path_dependent_materials_match_cpu_on_wgpu() {
     let Some(ctx) = gpu::wgpu("wgpu_plastic") else {
         return;
     };
@@ -380,7 +380,7 @@ fn wgpu_path_dependent_materials_match_cpu() {
     not(r4d_gpu),
     ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
 )]
-fn vulkan_elastic_scenes_match_cpu() {
+fn elastic_scenes_match_cpu_on_vulkan() {
     let Some(e) = gpu::vulkan("vulkan_elastic") else {
         return;
     };
@@ -405,7 +405,7 @@ fn vulkan_elastic_scenes_match_cpu() {
     not(r4d_gpu),
     ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
 )]
-fn vulkan_compare_exchange_scatter_matches_cpu() {
+fn compare_exchange_scatter_matches_cpu_on_vulkan() {
     let Some(e) = r4d_backend_vulkan::testing::vulkan_or_skip_with("vulkan_cas", false) else {
         return;
     };
@@ -424,7 +424,7 @@ fn vulkan_compare_exchange_scatter_matches_cpu() {
     not(r4d_gpu),
     ignore = "no GPU adapter expected here (no Vulkan driver found at build time): install mesa-vulkan-drivers libvulkan1, or build with R4D_REQUIRE_GPU=1"
 )]
-fn vulkan_path_dependent_materials_match_cpu() {
+fn path_dependent_materials_match_cpu_on_vulkan() {
     let Some(e) = gpu::vulkan("vulkan_plastic") else {
         return;
     };

@@ -903,3 +903,119 @@ fn streamed_ms_ssim_equals_the_score_of_the_rendered_videos() {
         assert_ne!(obj.ms_ssim(&truth).unwrap(), streamed);
     }
 }
+
+/// A descent step onto parameters whose simulation explodes is a rejected step, not the end
+/// of the fit: AdamW goes back to the best point with half the learning rate and goes on (and
+/// a fit killed after the divergence resumes to the same end); a descent whose every point
+/// diverges ends after `MAX_DIVERGED` in a row instead of looping.
+#[test]
+fn a_diverging_step_is_rejected_and_the_fit_goes_on() {
+    use resonance4d::video_fit::fit::MAX_DIVERGED;
+    use resonance4d::video_fit::FitEvent;
+    #[derive(Default)]
+    struct Diverged {
+        inner: Collect,
+        lrs: Vec<(usize, f64)>,
+        diverged: Vec<(usize, Option<Vec<f64>>, bool)>,
+    }
+    impl FitHooks for Diverged {
+        fn on_event(&mut self, e: &FitEvent<'_>) {
+            self.inner.on_event(e);
+            match e {
+                FitEvent::Iter(r) => self.lrs.push((r.iter, r.lr)),
+                FitEvent::Diverged {
+                    iter,
+                    retreat,
+                    ends,
+                    ..
+                } => self
+                    .diverged
+                    .push((*iter, retreat.map(<[f64]>::to_vec), *ends)),
+                _ => {}
+            }
+        }
+        fn on_checkpoint(&mut self, s: &FitState) {
+            self.inner.on_checkpoint(s);
+        }
+    }
+    let truth = [jelly(2e4, 800.0)];
+    let mut p = small_problem(&truth, 4);
+    let mut cfg = fit_config(4);
+    cfg.free = Some(vec!["E".into()]);
+    cfg.parts.push(resonance4d::video_fit::config::PartFit {
+        id: 0,
+        free: None,
+        bounds: [("E".to_string(), [1e3, 1e9])].into(),
+    });
+    cfg.lr_schedule = resonance4d::video_fit::config::LrSchedule::Constant;
+    cfg.flat_probe = 0;
+    // The stiffness at which this scene's explicit substeps explode (dt 1e-3, dx 1/16).
+    let obj = Objective::new(&p, None, &cfg.loss, false).unwrap();
+    let explodes = (1..16)
+        .map(|k| 2e4 * 2f64.powi(k))
+        .find(|&e| match obj.value(&[jelly(e, 800.0)]) {
+            Ok(_) => false,
+            Err(err) => {
+                assert!(err.is_divergence(), "{err}");
+                true
+            }
+        })
+        .expect("a stiffness below 1e9 that explodes");
+    drop(obj);
+    // From a third of the truth the gradient raises E; AdamW's first step is the learning
+    // rate in log units: past the explosion.
+    let start = 2e4 / 3.0;
+    p.config.parts = vec![jelly(start, 800.0)];
+    cfg.lr = (explodes / start).ln() + 0.3;
+    let mut all = Diverged::default();
+    let full = run_fit(&p, &cfg, None, &mut all).unwrap();
+    assert_eq!(all.diverged.len(), 1, "{:?}", all.diverged);
+    let (iter, retreat, ends) = all.diverged[0].clone();
+    assert_eq!(iter, 1);
+    assert!(!ends);
+    // Back to the best point (the start, the only point evaluated), half the rate after.
+    let back = retreat.expect("AdamW goes back to the best point");
+    assert!((back[0] - start).abs() <= 1e-9 * start, "{back:?}");
+    assert_eq!(all.lrs.iter().map(|r| r.0).collect::<Vec<_>>(), [0, 2, 3]);
+    assert_eq!(all.lrs[0].1, cfg.lr);
+    assert_eq!(all.lrs[1].1, 0.5 * cfg.lr);
+    let last = all.inner.states.last().unwrap();
+    assert_eq!(last.diverged, [1]);
+    assert_eq!(last.iters_done, 4);
+    // Iteration 2 evaluates the best point again (its gradient starts the new descent) and
+    // iteration 3 the step from there.
+    let losses = &all.inner.losses;
+    assert_eq!(losses[1], losses[0]);
+    assert!(
+        losses[2].is_finite() && losses[2] != losses[0],
+        "{losses:?}"
+    );
+    let lowest = losses.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+    assert_eq!(full.best_loss, Some(lowest));
+    // Killed right after the divergence, the fit resumes to the same end.
+    let ck = all
+        .inner
+        .states
+        .iter()
+        .find(|s| s.iters_done == 2)
+        .unwrap()
+        .clone();
+    let ck: FitState = serde_json::from_str(&serde_json::to_string(&ck).unwrap()).unwrap();
+    let mut rest = Collect::default();
+    let resumed = run_fit(&p, &cfg, Some(ck), &mut rest).unwrap();
+    assert_eq!(rest.losses, all.inner.losses[1..]);
+    assert_eq!(resumed.parts, full.parts);
+
+    // Every point diverges (the start itself): the descent ends after MAX_DIVERGED.
+    p.config.parts = vec![jelly(explodes, 800.0)];
+    let mut none = Diverged::default();
+    let o = run_fit(&p, &cfg, None, &mut none).unwrap();
+    assert_eq!(none.diverged.len(), MAX_DIVERGED);
+    assert!(
+        none.diverged.last().unwrap().2,
+        "the last one ends the descent"
+    );
+    assert!(none.inner.losses.is_empty());
+    assert_eq!(o.best_loss, None);
+    assert_eq!(none.inner.states.last().unwrap().iters_done, MAX_DIVERGED);
+}

@@ -76,6 +76,11 @@ pub struct FitState {
     /// The descent's run since its last restart on a stall (`stall > 0`), once begun.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub descent: Option<DescentRun>,
+    /// The descent's iterations whose evaluation diverged (the simulation exploded, a value
+    /// became non-finite), in order: each was a rejected step (see
+    /// `crate::video::fit::MAX_DIVERGED`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub diverged: Vec<usize>,
     /// The valley search after the iterations (`valley.evals > 0`), once begun.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub valley: Option<ValleySearch>,
@@ -120,6 +125,7 @@ impl FitState {
             trust: None,
             starts: Vec::new(),
             descent: None,
+            diverged: Vec::new(),
             valley: None,
             sampling: None,
             restarts: None,

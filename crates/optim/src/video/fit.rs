@@ -67,10 +67,11 @@ fn iterate(
     opt: &mut Stepper,
     cfg: &FitConfig,
     (iter, iters): (usize, usize),
+    lr_scale: f64,
 ) -> Result<Step, FitError> {
     let rate = Rate {
         schedule: cfg.lr_schedule,
-        base: cfg.lr,
+        base: cfg.lr * lr_scale,
         iters,
     };
     let it = descent::iterate(space, base_slots, opt, rate, iter, |slots| {
@@ -304,6 +305,21 @@ pub enum FitEvent<'a> {
         seed: usize,
         /// The seed's parameters (in the order of `names`).
         theta: &'a [f64],
+        /// The fit's free parameters.
+        names: &'a [String],
+    },
+    /// An iteration's evaluation diverged (the simulation exploded, a value became
+    /// non-finite): the step is rejected ([`MAX_DIVERGED`]).
+    Diverged {
+        /// The iteration.
+        iter: usize,
+        /// What diverged.
+        error: &'a str,
+        /// The point the descent goes on from, when it went back to the best point (in the
+        /// order of the fit's free parameters); `None`: the trust region shrank instead.
+        retreat: Option<&'a [f64]>,
+        /// Whether this was the last divergence the descent takes in a row: it ends here.
+        ends: bool,
         /// The fit's free parameters.
         names: &'a [String],
     },
@@ -851,6 +867,7 @@ pub fn run_fit_with_loss(
                     &mut o,
                     cfg,
                     (it, cfg.multi_start_iters),
+                    1.0,
                 ) {
                     Ok(st) => keep_best(&mut best, st.ev.total, &st.theta),
                     Err(e) if e.is_divergence() => {
@@ -923,8 +940,49 @@ pub fn run_fit_with_loss(
             }
             break;
         }
+        if consecutive_divergences(&state.diverged, iter) >= MAX_DIVERGED {
+            // Nothing near the best point evaluates: the refining stages go on from there.
+            break;
+        }
         let start = Instant::now();
-        let st = iterate(&obj, &space, &base_slots, &mut opt, cfg, (iter, cfg.iters))?;
+        let lr_scale = 0.5f64.powi(state.diverged.len().min(60) as i32);
+        let st = match iterate(
+            &obj,
+            &space,
+            &base_slots,
+            &mut opt,
+            cfg,
+            (iter, cfg.iters),
+            lr_scale,
+        ) {
+            Ok(st) => st,
+            Err(e) if e.is_divergence() => {
+                // A rejected step, not the end of the fit.
+                state.diverged.push(iter);
+                let retreat = reject_diverged(&mut opt, &state, cfg, &space, &base_slots)?;
+                let run = consecutive_divergences(&state.diverged, iter + 1);
+                hooks.on_event(&FitEvent::Diverged {
+                    iter,
+                    error: &e.to_string(),
+                    retreat: retreat.as_deref(),
+                    ends: run >= MAX_DIVERGED,
+                    names: &names,
+                });
+                state.iters_done = iter + 1;
+                if state.iters_done % cfg.checkpoint_every == 0
+                    || state.iters_done == iters
+                    || run >= MAX_DIVERGED
+                {
+                    save(&opt, &mut state);
+                    budget.stamp(&mut state, obj.evaluations());
+                    hooks.on_checkpoint(&state);
+                    state.optimizer = None;
+                    state.trust = None;
+                }
+                continue;
+            }
+            Err(e) => return Err(e),
+        };
         let (ev, theta, gtheta) = (&st.ev, &st.theta, &st.gtheta);
         keep_best(&mut state.best, ev.total, theta);
         let restart = if cfg.stall > 0 {
@@ -1010,6 +1068,53 @@ pub fn run_fit_with_loss(
         decisions: resolved.decisions,
         space,
     })
+}
+
+/// Consecutive diverged iterations of the descent after which it ends (the refining stages
+/// go on from the best point). Each divergence is a rejected step: AdamW goes back to the
+/// best point with its learning rate halved for the rest of the descent; the trust region
+/// shrinks its radius (or, when its accepted point itself diverged, starts again at the best
+/// point).
+pub const MAX_DIVERGED: usize = 3;
+
+/// How many of the iterations just before `iter` diverged in a row (`diverged` in order).
+fn consecutive_divergences(diverged: &[usize], iter: usize) -> usize {
+    let mut n = 0;
+    for &d in diverged.iter().rev() {
+        if d + n + 1 == iter {
+            n += 1;
+        } else {
+            break;
+        }
+    }
+    n
+}
+
+/// Rejects the step whose evaluation diverged: AdamW restarts at the best point so far (its
+/// learning rate follows from the count of divergences); the trust region counts a rejected
+/// trial, unless the point that diverged is its accepted one (moved there by a probe or a
+/// restart), when it restarts at the best point. Returns the point the descent goes on
+/// from when it moved there.
+fn reject_diverged(
+    opt: &mut Stepper,
+    state: &FitState,
+    cfg: &FitConfig,
+    space: &ParamSpace,
+    base_slots: &[PartParams],
+) -> Result<Option<Vec<f64>>, FitError> {
+    let best = match &state.best {
+        Some((_, t)) => t.clone(),
+        None => space.values(base_slots),
+    };
+    if let Stepper::Trust(o) = opt {
+        if o.theta() != o.accepted_theta() {
+            let n = best.len();
+            o.step(f64::INFINITY, &vec![f64::NAN; n]);
+            return Ok(None);
+        }
+    }
+    *opt = new_stepper(cfg, space, best.clone())?;
+    Ok(Some(best))
 }
 
 /// Records the descent's iteration `iter` at loss `loss` in its current run; the run's
