@@ -240,7 +240,8 @@ pub struct LpipsValue {
     pub mean: f64,
 }
 
-/// Winograd-domain weights up to this size are kept between frames.
+/// Winograd-domain weights up to this size are kept between calls (larger ones between the
+/// frames and bands of one call).
 const MAX_CACHED_WEIGHTS: usize = 64 << 20;
 
 /// Rows of the first layer's output made at a time (bounds its input copies): about this
@@ -260,7 +261,8 @@ pub struct Lpips {
     /// The Winograd transform of each convolution (of the first as it runs).
     transforms: Vec<winograd::Transform>,
     /// The Winograd-domain weights, kept once made when all of them together are small
-    /// (AlexNet: 36 MB; VGG16's 235 MB are made per band instead).
+    /// (AlexNet: 36 MB; VGG16's 235 MB are made once per call of [`Lpips::stream`] with
+    /// more than one band to evaluate, and dropped at its end).
     cached: Option<Vec<std::sync::OnceLock<Vec<f32>>>>,
     band_budget: usize,
 }
@@ -496,8 +498,19 @@ impl Lpips {
                 .map(|k| sums.iter().map(|s| s[k]).sum::<f64>() / norm[k])
                 .sum()
         };
+        // Weights too large to keep between calls (VGG16's) are made once for this call when
+        // it has more than one band to evaluate, and dropped at its end.
+        let call_cache: Option<Vec<std::sync::OnceLock<Vec<f32>>>> =
+            (self.cached.is_none() && frames * plans.len() > 1).then(|| {
+                self.arch
+                    .convs
+                    .iter()
+                    .map(|_| std::sync::OnceLock::new())
+                    .collect()
+            });
+        let cache = self.cached.as_deref().or(call_cache.as_deref());
         let eval = |a: &[P], b: &[P], plan: &arch::BandPlan| {
-            self.band(a, b, height, width, &rows, &cols, plan)
+            self.band(a, b, height, width, &rows, &cols, plan, cache)
         };
         let per_frame: Vec<f64> = if frames >= par::threads() || bands == 1 {
             par::map((0..frames).collect(), |t| {
@@ -575,6 +588,7 @@ impl Lpips {
         rows: &[usize],
         cols: &[usize],
         plan: &arch::BandPlan,
+        cache: Option<&[std::sync::OnceLock<Vec<f32>>]>,
     ) -> [f64; 5] {
         let mut sums = [0.0; 5];
         let mut cur: Option<(Band, Band)> = None;
@@ -590,7 +604,7 @@ impl Lpips {
                     let weights = |spec: &arch::ConvSpec,
                                    w: &[f32]|
                      -> std::borrow::Cow<'_, [f32]> {
-                        match &self.cached {
+                        match cache {
                             Some(c) => std::borrow::Cow::Borrowed(
                                 c[conv].get_or_init(|| layers::winograd_weights(spec, w, tf)),
                             ),
