@@ -109,9 +109,9 @@ fn save(opt: &Stepper, state: &mut FitState) {
     }
 }
 
-/// Persists the state after a round of a stage that follows the iterations (the valley
-/// search, the restarts, gradient sampling): the optimiser goes into the checkpoint for it
-/// and out again, as after an iteration.
+/// Persists the state after an iteration or a round of a later stage (the valley search, the
+/// restarts, gradient sampling): the optimiser goes into the checkpoint for it and out
+/// again.
 fn checkpoint_stage(
     opt: &Stepper,
     state: &mut FitState,
@@ -932,11 +932,7 @@ pub fn run_fit_with_loss(
         {
             // The iterations since the last checkpoint are kept.
             if state.iters_done % cfg.checkpoint_every != 0 {
-                save(&opt, &mut state);
-                budget.stamp(&mut state, obj.evaluations());
-                hooks.on_checkpoint(&state);
-                state.optimizer = None;
-                state.trust = None;
+                checkpoint_stage(&opt, &mut state, hooks, (&budget, obj.evaluations()));
             }
             break;
         }
@@ -973,11 +969,7 @@ pub fn run_fit_with_loss(
                     || state.iters_done == iters
                     || run >= MAX_DIVERGED
                 {
-                    save(&opt, &mut state);
-                    budget.stamp(&mut state, obj.evaluations());
-                    hooks.on_checkpoint(&state);
-                    state.optimizer = None;
-                    state.trust = None;
+                    checkpoint_stage(&opt, &mut state, hooks, (&budget, obj.evaluations()));
                 }
                 continue;
             }
@@ -1022,11 +1014,7 @@ pub fn run_fit_with_loss(
         }
         state.iters_done = iter + 1;
         if state.iters_done % cfg.checkpoint_every == 0 || state.iters_done == iters {
-            save(&opt, &mut state);
-            budget.stamp(&mut state, obj.evaluations());
-            hooks.on_checkpoint(&state);
-            state.optimizer = None;
-            state.trust = None;
+            checkpoint_stage(&opt, &mut state, hooks, (&budget, obj.evaluations()));
         }
     }
     // The refining stages in the plan's order; a finished stage's state is in the
